@@ -1,0 +1,250 @@
+//! The network shape, shared by the f32 reference path and the int8 path.
+//!
+//! ```text
+//! points (n x 3) --[encoder: per-point dense + ReLU, widths e1..ek]--> (n x ek)
+//!                --[max over points]--> source feature (F = ek)
+//! [template feature (F) | source feature (F)] (2F)
+//!                --[head: dense + ReLU, widths h1..hm]--> --[dense, no ReLU]--> 7
+//! ```
+//!
+//! The 7 outputs are `[qw, qx, qy, qz, tx, ty, tz]`: a quaternion (scalar
+//! first, normalised after the network, see [`crate::pose`]) and a translation.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Dimension of an input point (x, y, z).
+pub const INPUT_DIM: usize = 3;
+/// Number of head outputs: quaternion (4) then translation (3).
+pub const POSE_DIM: usize = 7;
+/// Most layers the encoder or the head may have.
+pub const MAX_LAYERS: usize = 8;
+/// Most points the int8 encoder pushes through the layers together (see [`crate::int8`]).
+pub const MAX_TILE: usize = 8;
+
+/// Encoder widths of the paper (PointNet 64-64-64-128-1024).
+pub const PAPER_ENCODER: &[u16] = &[64, 64, 64, 128, 1024];
+/// Head widths of the paper's single-pass PCRNet (then 7 outputs).
+pub const PCRNET_HEAD: &[u16] = &[1024, 1024, 512, 512, 256];
+/// Head widths of the paper's iterative i-PCRNet (then 7 outputs).
+pub const IPCRNET_HEAD: &[u16] = &[1024, 512, 256];
+
+/// Layer widths of a PCRNet: the encoder's and the head's hidden layers.
+///
+/// The input (3) and the output (7) are fixed and not listed. Every encoder
+/// layer and every hidden head layer is followed by ReLU; the output layer is
+/// linear.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Arch {
+    /// Encoder output widths, first to last; the last one is the feature size.
+    pub encoder: heapless::Vec<u16, MAX_LAYERS>,
+    /// Hidden head widths, first to last (may be empty).
+    pub head: heapless::Vec<u16, MAX_LAYERS>,
+}
+
+/// One dense layer of the network, as seen by both paths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LayerShape {
+    /// Input width.
+    pub inputs: usize,
+    /// Output width.
+    pub outputs: usize,
+    /// Whether ReLU follows.
+    pub relu: bool,
+}
+
+impl LayerShape {
+    /// Multiply-accumulates per evaluation (per point for the encoder).
+    pub const fn macs(&self) -> usize {
+        self.inputs * self.outputs
+    }
+    /// Number of weights plus biases.
+    pub const fn parameters(&self) -> usize {
+        self.inputs * self.outputs + self.outputs
+    }
+}
+
+impl Arch {
+    /// Builds an architecture from width lists, checking the limits
+    /// (1..=`MAX_LAYERS` encoder layers, 0..=`MAX_LAYERS` head layers, widths >= 1).
+    pub fn new(encoder: &[u16], head: &[u16]) -> Result<Self> {
+        let too_many = Error::InconsistentDimensions {
+            what: "more layers than MAX_LAYERS",
+        };
+        let arch = Arch {
+            encoder: heapless::Vec::from_slice(encoder).map_err(|_| too_many)?,
+            head: heapless::Vec::from_slice(head).map_err(|_| too_many)?,
+        };
+        arch.validate()?;
+        Ok(arch)
+    }
+
+    /// The paper's PCRNet: encoder 64-64-64-128-1024, head 1024-1024-512-512-256.
+    pub fn paper_pcrnet() -> Self {
+        Self::new(PAPER_ENCODER, PCRNET_HEAD).unwrap_or_else(|_| unreachable!())
+    }
+
+    /// Checks the limits an [`Arch`] read from a blob must respect.
+    pub fn validate(&self) -> Result<()> {
+        if self.encoder.is_empty() {
+            return Err(Error::InconsistentDimensions {
+                what: "encoder has no layer",
+            });
+        }
+        if self.encoder.iter().chain(self.head.iter()).any(|&w| w == 0) {
+            return Err(Error::InconsistentDimensions {
+                what: "layer of width 0",
+            });
+        }
+        Ok(())
+    }
+
+    /// Size of the global feature (last encoder width).
+    pub fn feature_dim(&self) -> usize {
+        self.encoder.last().map_or(0, |&w| w as usize)
+    }
+
+    /// The encoder layers in order.
+    pub fn encoder_layers(&self) -> impl Iterator<Item = LayerShape> + '_ {
+        chain_layers(INPUT_DIM, &self.encoder, true)
+    }
+
+    /// The head layers in order, the linear 7-wide output layer last.
+    pub fn head_layers(&self) -> impl Iterator<Item = LayerShape> + '_ {
+        let hidden = chain_layers(2 * self.feature_dim(), &self.head, true);
+        let last_in = self
+            .head
+            .last()
+            .map_or(2 * self.feature_dim(), |&w| w as usize);
+        hidden.chain(core::iter::once(LayerShape {
+            inputs: last_in,
+            outputs: POSE_DIM,
+            relu: false,
+        }))
+    }
+
+    /// Encoder multiply-accumulates per point.
+    pub fn encoder_macs_per_point(&self) -> usize {
+        self.encoder_layers().map(|l| l.macs()).sum()
+    }
+
+    /// Head multiply-accumulates per registration.
+    pub fn head_macs(&self) -> usize {
+        self.head_layers().map(|l| l.macs()).sum()
+    }
+
+    /// Weights plus biases of the whole network.
+    pub fn parameters(&self) -> usize {
+        self.encoder_layers()
+            .chain(self.head_layers())
+            .map(|l| l.parameters())
+            .sum()
+    }
+
+    /// Bytes of int8 scratch the int8 path needs with `tile` points per pass.
+    pub fn int8_scratch_len(&self, tile: usize) -> usize {
+        int8_scratch_len(&self.encoder, &self.head, tile)
+    }
+
+    /// Elements of f32 scratch the f32 path needs.
+    pub fn f32_scratch_len(&self) -> usize {
+        f32_scratch_len(&self.encoder, &self.head)
+    }
+}
+
+fn chain_layers(
+    first_in: usize,
+    widths: &[u16],
+    relu: bool,
+) -> impl Iterator<Item = LayerShape> + '_ {
+    let mut inputs = first_in;
+    widths.iter().map(move |&w| {
+        let l = LayerShape {
+            inputs,
+            outputs: w as usize,
+            relu,
+        };
+        inputs = w as usize;
+        l
+    })
+}
+
+const fn max_of(widths: &[u16], skip_last: bool) -> usize {
+    let n = if skip_last && !widths.is_empty() {
+        widths.len() - 1
+    } else {
+        widths.len()
+    };
+    let mut i = 0;
+    let mut m = 0;
+    while i < n {
+        if widths[i] as usize > m {
+            m = widths[i] as usize;
+        }
+        i += 1;
+    }
+    m
+}
+
+/// Bytes of int8 scratch needed by an architecture, usable in a `const`
+/// to size a `static` buffer:
+///
+/// ```
+/// const SCRATCH: usize = pcrnet_core::int8_scratch_len(&[32, 64, 256], &[128, 64], 4);
+/// static mut BUF: [i8; SCRATCH] = [0; SCRATCH];
+/// # assert_eq!(SCRATCH, 256 + 2 * 4 * 64);
+/// ```
+///
+/// Layout: the source feature (F bytes), then an area used first by the
+/// encoder (two ping-pong tiles of `tile` x widest hidden encoder layer; the
+/// last encoder layer feeds the max-pool directly and needs no buffer) and
+/// then by the head (two ping-pong vectors of the widest hidden head layer;
+/// the head's first layer reads the template feature from the blob and the
+/// source feature in place, so the `2F` input is never copied).
+pub const fn int8_scratch_len(encoder: &[u16], head: &[u16], tile: usize) -> usize {
+    let feature = last_or_zero(encoder);
+    let enc = 2 * tile * max_of(encoder, true);
+    let hd = 2 * max_of(head, false);
+    feature + if enc > hd { enc } else { hd }
+}
+
+/// Elements of f32 scratch needed by an architecture (the f32 path runs one
+/// point at a time; same layout as [`int8_scratch_len`] with tile 1).
+pub const fn f32_scratch_len(encoder: &[u16], head: &[u16]) -> usize {
+    int8_scratch_len(encoder, head, 1)
+}
+
+const fn last_or_zero(widths: &[u16]) -> usize {
+    match widths.last() {
+        Some(&w) => w as usize,
+        None => 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_figures() {
+        let a = Arch::paper_pcrnet();
+        assert_eq!(a.feature_dim(), 1024);
+        // 3*64 + 64*64*2 + 64*128 + 128*1024
+        assert_eq!(a.encoder_macs_per_point(), 192 + 8192 + 8192 + 131072);
+        let head: usize = 2048 * 1024 + 1024 * 1024 + 1024 * 512 + 512 * 512 + 512 * 256 + 256 * 7;
+        assert_eq!(a.head_macs(), head);
+        assert_eq!(a.int8_scratch_len(8), 1024 + 2048);
+    }
+
+    #[test]
+    fn rejects_bad_shapes() {
+        assert!(Arch::new(&[], &[4]).is_err());
+        assert!(Arch::new(&[4, 0], &[4]).is_err());
+        assert!(Arch::new(&[1; 9], &[]).is_err());
+        let a = Arch::new(&[8], &[]).unwrap();
+        assert_eq!(a.head_layers().count(), 1);
+        assert_eq!(a.head_layers().next().unwrap().inputs, 16);
+        assert_eq!(a.int8_scratch_len(4), 8);
+    }
+}

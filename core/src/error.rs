@@ -1,0 +1,149 @@
+//! The one error type of the crate.
+
+use core::fmt;
+
+use crate::format::ModelKind;
+
+/// Everything that can go wrong when loading a model or running inference.
+///
+/// Every fallible function in this crate returns this type; none of them
+/// panics. Variants carry just enough context to act on the error without
+/// allocating.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Error {
+    /// The blob does not start with the magic bytes `PCRN`.
+    BadMagic,
+    /// The blob's format version is not one this build reads.
+    UnsupportedVersion {
+        /// Version found in the blob.
+        found: u16,
+    },
+    /// The blob holds a different kind of model (e.g. an f32 blob given to the int8 loader).
+    WrongKind {
+        /// Kind the caller asked for.
+        expected: ModelKind,
+        /// Raw kind byte found in the blob.
+        found: u8,
+    },
+    /// The blob ends before the length its header announces.
+    Truncated {
+        /// Bytes the header says the blob has.
+        needed: usize,
+        /// Bytes actually given.
+        available: usize,
+    },
+    /// Bytes follow the CRC at the end of the blob.
+    TrailingData {
+        /// Number of unexpected bytes.
+        extra: usize,
+    },
+    /// The CRC-32 stored in the blob does not match its contents.
+    BadCrc {
+        /// CRC stored in the blob.
+        stored: u32,
+        /// CRC computed over the blob.
+        computed: u32,
+    },
+    /// The payload passed the CRC but does not decode as a model description.
+    Malformed,
+    /// Layer sizes in the payload do not agree with the architecture or with each other.
+    InconsistentDimensions {
+        /// Which part disagrees.
+        what: &'static str,
+    },
+    /// A parameter is outside its documented range (non-finite scale, shift
+    /// outside `-31..=31`, bias that could overflow the accumulator, ...).
+    InvalidParameter {
+        /// Which parameter.
+        what: &'static str,
+    },
+    /// The caller's scratch buffer cannot hold the working memory of this model.
+    ScratchTooSmall {
+        /// Elements required.
+        needed: usize,
+        /// Elements provided.
+        available: usize,
+    },
+    /// An output buffer (e.g. for writing a blob) is too small.
+    BufferTooSmall {
+        /// Bytes required.
+        needed: usize,
+        /// Bytes provided.
+        available: usize,
+    },
+    /// The point cloud has no points.
+    EmptyCloud,
+    /// A coordinate is NaN or infinite.
+    NonFiniteCoordinate {
+        /// Index of the offending point.
+        index: usize,
+    },
+    /// A coordinate does not fit the model's int16 input range
+    /// (`|x| > 32767 * input_scale`). Such points are rejected, not saturated,
+    /// because clamping would silently move them.
+    CoordinateOutOfRange {
+        /// Index of the offending point.
+        index: usize,
+    },
+    /// The network's quaternion output has zero (or non-finite) norm, so no
+    /// rotation can be formed from it.
+    DegeneratePose,
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Error::BadMagic => write!(f, "not a model blob: magic bytes `PCRN` missing"),
+            Error::UnsupportedVersion { found } => {
+                write!(
+                    f,
+                    "unsupported model format version {found} (this build reads {})",
+                    crate::format::FORMAT_VERSION
+                )
+            }
+            Error::WrongKind { expected, found } => {
+                write!(f, "expected a {expected:?} model, blob holds kind {found}")
+            }
+            Error::Truncated { needed, available } => {
+                write!(f, "model blob truncated: {available} of {needed} bytes")
+            }
+            Error::TrailingData { extra } => {
+                write!(f, "{extra} unexpected bytes after the model blob's CRC")
+            }
+            Error::BadCrc { stored, computed } => write!(
+                f,
+                "model blob CRC mismatch: stored {stored:#010x}, computed {computed:#010x}"
+            ),
+            Error::Malformed => write!(f, "model payload does not decode"),
+            Error::InconsistentDimensions { what } => {
+                write!(f, "inconsistent model dimensions: {what}")
+            }
+            Error::InvalidParameter { what } => write!(f, "invalid model parameter: {what}"),
+            Error::ScratchTooSmall { needed, available } => write!(
+                f,
+                "scratch too small: model needs {needed} elements, {available} given"
+            ),
+            Error::BufferTooSmall { needed, available } => {
+                write!(
+                    f,
+                    "output buffer too small: {needed} bytes needed, {available} given"
+                )
+            }
+            Error::EmptyCloud => write!(f, "point cloud is empty"),
+            Error::NonFiniteCoordinate { index } => {
+                write!(f, "point {index} has a NaN or infinite coordinate")
+            }
+            Error::CoordinateOutOfRange { index } => {
+                write!(f, "point {index} lies outside the model's input range")
+            }
+            Error::DegeneratePose => write!(f, "network output has a zero quaternion"),
+        }
+    }
+}
+
+impl core::error::Error for Error {}
+
+/// Shorthand for `Result<T, pcrnet_core::Error>`.
+pub type Result<T> = core::result::Result<T, Error>;

@@ -1,0 +1,256 @@
+//! Fixed-point primitives shared by every int8 kernel.
+//!
+//! # Rounding
+//!
+//! Requantization uses **single rounding, half toward +infinity**, the
+//! `CMSIS_NN_USE_SINGLE_ROUNDING` variant of CMSIS-NN's `arm_nn_requantize`:
+//!
+//! ```text
+//! r      = 31 - shift                       (0 ..= 62)
+//! result = (acc * multiplier + 2^(r-1)) >> r   (in i64, arithmetic shift)
+//! ```
+//!
+//! which is exactly `floor(acc * multiplier / 2^r + 1/2)`: the exact product
+//! rounded once to the nearest integer, ties upward. We chose it over
+//! TFLite's double rounding (`SaturatingRoundingDoublingHighMul` followed by
+//! `RoundingDivideByPOT`) because
+//! - it has one rounding step, so the error is at most half an LSB, and the
+//!   whole definition can be checked against a plain `i128` reference;
+//! - on Cortex-M4 it is `SMULL` + a 64-bit add + a shift, cheaper than
+//!   emulating `SQRDMULH`;
+//! - it matches CMSIS-NN's single-rounding build, so outputs can be
+//!   cross-checked against those kernels.
+//!
+//! All arithmetic here is integer; the results are bit-identical on every
+//! target.
+
+/// Smallest accepted requantization shift (multiply by `2^-31` on top of the Q31 multiplier).
+pub const MIN_SHIFT: i8 = -31;
+/// Largest accepted requantization shift.
+pub const MAX_SHIFT: i8 = 31;
+
+/// Rescales an `i32` accumulator by `multiplier * 2^(shift - 31)`.
+///
+/// `multiplier` is a Q31 fixed-point number (normally in `[2^30, 2^31)`, see
+/// [`quantize_multiplier`]). `shift` outside `MIN_SHIFT..=MAX_SHIFT` is
+/// clamped to that range (model loading rejects such shifts, so this only
+/// keeps the function total). The result is rounded once, half toward +inf,
+/// and saturated to the `i32` range.
+#[inline(always)]
+pub fn requantize(acc: i32, multiplier: i32, shift: i8) -> i32 {
+    let shift = shift.clamp(MIN_SHIFT, MAX_SHIFT);
+    // 0 ..= 62
+    let r = (31 - shift as i32) as u32;
+    // |acc * multiplier| <= 2^62, so adding 2^61 cannot overflow i64.
+    let prod = acc as i64 * multiplier as i64;
+    let rounded = if r == 0 {
+        prod
+    } else {
+        (prod + (1i64 << (r - 1))) >> r
+    };
+    saturate_i32(rounded)
+}
+
+/// Clamps an `i64` into the `i32` range.
+#[inline(always)]
+fn saturate_i32(v: i64) -> i32 {
+    if v > i32::MAX as i64 {
+        i32::MAX
+    } else if v < i32::MIN as i64 {
+        i32::MIN
+    } else {
+        v as i32
+    }
+}
+
+/// Turns a requantized value into an int8 activation: adds the output zero
+/// point and clamps to `[act_min, 127]`. With `act_min = max(zero_point, -128)`
+/// the clamp is the fused ReLU.
+#[inline(always)]
+pub fn to_activation(scaled: i32, zero_point: i8, act_min: i8) -> i8 {
+    let v = scaled.saturating_add(zero_point as i32);
+    if v < act_min as i32 {
+        act_min
+    } else if v > i8::MAX as i32 {
+        i8::MAX
+    } else {
+        v as i8
+    }
+}
+
+/// Splits a positive real scale into a Q31 multiplier and a shift so that
+/// `scale ~= multiplier * 2^(shift - 31)` with `multiplier` in `[2^30, 2^31)`.
+///
+/// Returns `None` for non-positive, non-finite, or too large scales
+/// (`scale >= 2^31`). Scales below `2^-32` cannot be represented with
+/// `shift >= -31`; they return multiplier 0 (every output is then the zero point).
+/// Used by the host when quantizing; the device only reads the results.
+pub fn quantize_multiplier(scale: f64) -> Option<(i32, i8)> {
+    if !scale.is_finite() || scale <= 0.0 {
+        return None;
+    }
+    let (mantissa, exp) = libm::frexp(scale); // scale = mantissa * 2^exp, mantissa in [0.5, 1)
+    let mut q = libm::round(mantissa * (1u64 << 31) as f64) as i64;
+    let mut exp = exp;
+    if q == 1i64 << 31 {
+        q /= 2;
+        exp += 1;
+    }
+    if exp > MAX_SHIFT as i32 {
+        return None;
+    }
+    if exp < MIN_SHIFT as i32 {
+        return Some((0, 0));
+    }
+    Some((q as i32, exp as i8))
+}
+
+/// The largest magnitude of a quantized input coordinate.
+pub const INPUT_QMAX: i16 = i16::MAX;
+
+/// Quantizes one input coordinate to int16 with zero point 0:
+/// `q = round_half_away_from_zero(x / scale)`.
+///
+/// The division is a single IEEE-754 f32 operation and the rounding is
+/// `libm::roundf`, so the result is identical on every target. Returns
+/// `None` when `x` is not finite or `|x / scale| > 32767` (the caller
+/// reports which point).
+#[inline]
+pub fn quantize_coordinate(x: f32, scale: f32) -> Option<i16> {
+    let r = libm::roundf(x / scale);
+    if r.is_finite() && libm::fabsf(r) <= INPUT_QMAX as f32 {
+        Some(r as i16)
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Plain i128 reference of [`requantize`]: floor(acc*m/2^r + 1/2), saturated.
+    fn requantize_ref(acc: i32, m: i32, shift: i8) -> i32 {
+        let shift = shift.clamp(MIN_SHIFT, MAX_SHIFT);
+        let r = 31 - shift as i32;
+        let num = acc as i128 * m as i128;
+        let den = 1i128 << r;
+        // floor((2*num + den) / (2*den))
+        let v = (2 * num + den).div_euclid(2 * den);
+        v.clamp(i32::MIN as i128, i32::MAX as i128) as i32
+    }
+
+    const EXTREMES: [i32; 9] = [
+        i32::MIN,
+        i32::MIN + 1,
+        -65536,
+        -1,
+        0,
+        1,
+        65535,
+        i32::MAX - 1,
+        i32::MAX,
+    ];
+
+    #[test]
+    fn requantize_extremes_every_shift() {
+        for &acc in &EXTREMES {
+            for &m in &EXTREMES {
+                for shift in -40i8..=40 {
+                    assert_eq!(
+                        requantize(acc, m, shift),
+                        requantize_ref(acc, m, shift),
+                        "acc {acc} m {m} shift {shift}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn requantize_exhaustive_small_accumulators() {
+        // Every accumulator in +-2^12 for a spread of multipliers and all shifts.
+        let ms = [1 << 30, (1 << 30) + 12345, i32::MAX, 1_518_500_250];
+        for &m in &ms {
+            for shift in MIN_SHIFT..=MAX_SHIFT {
+                for acc in -4096..=4096 {
+                    assert_eq!(requantize(acc, m, shift), requantize_ref(acc, m, shift));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn ties_round_up() {
+        // multiplier 2^30 with shift 0 halves: 3/2 -> 2, -3/2 -> -1, 1/2 -> 1, -1/2 -> 0.
+        assert_eq!(requantize(3, 1 << 30, 0), 2);
+        assert_eq!(requantize(-3, 1 << 30, 0), -1);
+        assert_eq!(requantize(1, 1 << 30, 0), 1);
+        assert_eq!(requantize(-1, 1 << 30, 0), 0);
+        // shift 31 is a pure multiply by the (integer) multiplier, saturated.
+        assert_eq!(requantize(2, 7, 31), 14);
+        assert_eq!(requantize(i32::MIN, i32::MAX, 31), i32::MIN);
+    }
+
+    #[test]
+    fn activation_exhaustive() {
+        for zp in i8::MIN..=i8::MAX {
+            for act_min in [i8::MIN, zp] {
+                for v in -300..=300 {
+                    let want = (v + zp as i32).clamp(act_min as i32, 127) as i8;
+                    assert_eq!(to_activation(v, zp, act_min), want);
+                }
+                assert_eq!(to_activation(i32::MAX, zp, act_min), 127);
+                assert_eq!(to_activation(i32::MIN, zp, act_min), act_min);
+            }
+        }
+    }
+
+    #[test]
+    fn quantize_multiplier_edges() {
+        assert_eq!(quantize_multiplier(0.0), None);
+        assert_eq!(quantize_multiplier(-1.0), None);
+        assert_eq!(quantize_multiplier(f64::NAN), None);
+        assert_eq!(quantize_multiplier(f64::INFINITY), None);
+        assert_eq!(quantize_multiplier(0.5), Some((1 << 30, 0)));
+        assert_eq!(quantize_multiplier(1.0), Some((1 << 30, 1)));
+        // Mantissa rounding up to 2^31 renormalises.
+        assert_eq!(quantize_multiplier(1.0 - 1e-12), Some((1 << 30, 1)));
+        assert_eq!(quantize_multiplier(1e-12), Some((0, 0)));
+        assert_eq!(quantize_multiplier(3e9), None);
+    }
+
+    #[test]
+    fn quantize_coordinate_edges() {
+        assert_eq!(quantize_coordinate(0.0, 0.001), Some(0));
+        assert_eq!(quantize_coordinate(0.0005, 0.001), Some(1)); // half away from zero
+        assert_eq!(quantize_coordinate(-0.0005, 0.001), Some(-1));
+        assert_eq!(quantize_coordinate(32.767, 0.001), Some(32767));
+        assert_eq!(quantize_coordinate(-32.767, 0.001), Some(-32767));
+        assert_eq!(quantize_coordinate(32.768, 0.001), None);
+        assert_eq!(quantize_coordinate(f32::NAN, 0.001), None);
+        assert_eq!(quantize_coordinate(f32::INFINITY, 0.001), None);
+    }
+
+    proptest! {
+        #[test]
+        fn requantize_matches_reference(acc in any::<i32>(), m in any::<i32>(), shift in -35i8..=35) {
+            prop_assert_eq!(requantize(acc, m, shift), requantize_ref(acc, m, shift));
+        }
+
+        #[test]
+        fn quantize_multiplier_is_accurate(scale in 1e-9f64..1e9) {
+            let (m, s) = quantize_multiplier(scale).unwrap();
+            prop_assert!((1 << 30..=i32::MAX).contains(&m));
+            let back = m as f64 * libm::pow(2.0, s as f64 - 31.0);
+            prop_assert!(((back - scale) / scale).abs() <= 1.0 / (1u64 << 30) as f64);
+        }
+
+        #[test]
+        fn quantize_coordinate_within_half_step(x in -30.0f32..30.0) {
+            let q = quantize_coordinate(x, 0.001).unwrap();
+            prop_assert!((q as f64 * 0.001 - x as f64).abs() <= 0.0005 + 1e-6);
+        }
+    }
+}

@@ -1,0 +1,325 @@
+//! The f32 reference network: the same shape as the int8 path ([`Arch`]),
+//! in plain f32 arithmetic.
+//!
+//! It serves the host (training, validation, measuring quantization error)
+//! and is available on the device too. The weights are generic over
+//! [`Params`], so the same forward runs on a blob (little-endian bytes,
+//! [`LeF32`]) and on the trainer's `&[f32]` arrays. Sums run over inputs in
+//! ascending order, one IEEE-754 operation at a time, so results are
+//! deterministic (but not bit-identical to the int8 path, of course).
+
+use crate::arch::{Arch, INPUT_DIM, POSE_DIM};
+use crate::error::{Error, Result};
+use crate::format::{self, F32Layer, F32Payload, ModelKind, expect_len};
+use crate::pose::Pose;
+
+/// Read access to an array of f32 parameters.
+pub trait Params: Copy {
+    /// Number of values.
+    fn len(self) -> usize;
+    /// Whether there are no values.
+    fn is_empty(self) -> bool {
+        self.len() == 0
+    }
+    /// The value at `i` (0.0 past the end; sizes are validated beforehand).
+    fn get(self, i: usize) -> f32;
+}
+
+impl Params for &[f32] {
+    fn len(self) -> usize {
+        <[f32]>::len(self)
+    }
+    #[inline(always)]
+    fn get(self, i: usize) -> f32 {
+        <[f32]>::get(self, i).copied().unwrap_or(0.0)
+    }
+}
+
+/// f32 values stored little-endian in bytes (as in a blob; no alignment needed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LeF32<'a>(pub &'a [u8]);
+
+impl Params for LeF32<'_> {
+    fn len(self) -> usize {
+        self.0.len() / 4
+    }
+    #[inline(always)]
+    fn get(self, i: usize) -> f32 {
+        match self.0.get(4 * i..4 * i + 4) {
+            Some(&[a, b, c, d]) => f32::from_le_bytes([a, b, c, d]),
+            _ => 0.0,
+        }
+    }
+}
+
+/// One dense layer: `outputs x inputs` weights (row-major by output) and biases.
+#[derive(Debug, Clone, Copy)]
+pub struct Layer<P> {
+    /// Weights.
+    pub weights: P,
+    /// Biases.
+    pub bias: P,
+}
+
+/// An f32 network: weights and the template feature, over any [`Params`].
+#[derive(Debug, Clone)]
+pub struct F32Network<P> {
+    arch: Arch,
+    layers: heapless::Vec<Layer<P>, { 2 * crate::arch::MAX_LAYERS + 1 }>,
+    template: P,
+}
+
+/// The f32 model read from a blob.
+pub type F32Model<'a> = F32Network<LeF32<'a>>;
+
+impl<'a> F32Model<'a> {
+    /// Parses and validates an f32 blob. Weights stay in `blob`.
+    pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
+        Self::from_payload(format::decode(format::open(blob, ModelKind::F32)?)?)
+    }
+
+    /// Validates an already decoded payload.
+    pub fn from_payload(p: F32Payload<'a>) -> Result<Self> {
+        let mut layers = heapless::Vec::new();
+        for l in &p.layers {
+            check_bytes(l)?;
+            // Same capacity as `p.layers`: cannot overflow.
+            let _ = layers.push(Layer {
+                weights: LeF32(l.weights),
+                bias: LeF32(l.bias),
+            });
+        }
+        expect_len(
+            p.template_feature,
+            p.arch.feature_dim(),
+            4,
+            "template feature",
+        )?;
+        F32Network::new(p.arch, layers, LeF32(p.template_feature))
+    }
+}
+
+fn check_bytes(l: &F32Layer<'_>) -> Result<()> {
+    if !l.weights.len().is_multiple_of(4) || !l.bias.len().is_multiple_of(4) {
+        return Err(Error::InconsistentDimensions {
+            what: "f32 array length not a multiple of 4",
+        });
+    }
+    Ok(())
+}
+
+impl<P: Params> F32Network<P> {
+    /// Builds a network from its layers (encoder first, then head, output
+    /// last) and the template feature, checking every size against `arch`.
+    pub fn new(
+        arch: Arch,
+        layers: heapless::Vec<Layer<P>, { 2 * crate::arch::MAX_LAYERS + 1 }>,
+        template: P,
+    ) -> Result<Self> {
+        arch.validate()?;
+        let shapes = arch.encoder_layers().chain(arch.head_layers());
+        if arch.encoder_layers().count() + arch.head_layers().count() != layers.len() {
+            return Err(Error::InconsistentDimensions {
+                what: "layer count differs from architecture",
+            });
+        }
+        for (s, l) in shapes.zip(layers.iter()) {
+            if l.weights.len() != s.inputs * s.outputs || l.bias.len() != s.outputs {
+                return Err(Error::InconsistentDimensions {
+                    what: "layer weights",
+                });
+            }
+        }
+        if template.len() != arch.feature_dim() {
+            return Err(Error::InconsistentDimensions {
+                what: "template feature",
+            });
+        }
+        Ok(F32Network {
+            arch,
+            layers,
+            template,
+        })
+    }
+
+    /// The network shape.
+    pub fn arch(&self) -> &Arch {
+        &self.arch
+    }
+
+    /// The template feature.
+    pub fn template(&self) -> P {
+        self.template
+    }
+
+    /// Elements of f32 scratch needed.
+    pub fn scratch_len(&self) -> usize {
+        self.arch.f32_scratch_len()
+    }
+
+    /// Registers `source` to the template (pose maps source onto template).
+    pub fn register(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<Pose> {
+        let raw = self.infer(source, scratch)?;
+        Pose::from_head_output(&raw)
+    }
+
+    /// Encodes the source and runs the head, returning the raw 7 outputs.
+    /// The feature is left in `scratch[..F]`.
+    pub fn infer(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<[f32; POSE_DIM]> {
+        let (feature, work) = self.split(scratch)?;
+        self.encode_into(source, feature, work)?;
+        self.head(feature, work)
+    }
+
+    /// Encodes `source` into its global feature (a view into `scratch`).
+    pub fn encode<'s>(&self, source: &[[f32; 3]], scratch: &'s mut [f32]) -> Result<&'s [f32]> {
+        let (feature, work) = self.split(scratch)?;
+        self.encode_into(source, feature, work)?;
+        Ok(feature)
+    }
+
+    fn split<'s>(&self, scratch: &'s mut [f32]) -> Result<(&'s mut [f32], &'s mut [f32])> {
+        let needed = self.scratch_len();
+        let available = scratch.len();
+        let s = scratch
+            .get_mut(..needed)
+            .ok_or(Error::ScratchTooSmall { needed, available })?;
+        Ok(s.split_at_mut(self.arch.feature_dim()))
+    }
+
+    fn encode_into(
+        &self,
+        source: &[[f32; 3]],
+        feature: &mut [f32],
+        work: &mut [f32],
+    ) -> Result<()> {
+        if source.is_empty() {
+            return Err(Error::EmptyCloud);
+        }
+        feature.fill(f32::NEG_INFINITY);
+        let n_enc = self.arch.encoder.len();
+        let half = work.len() / 2;
+        let (mut a, mut b) = work.split_at_mut(half);
+        for (index, p) in source.iter().enumerate() {
+            if p.iter().any(|x| !x.is_finite()) {
+                return Err(Error::NonFiniteCoordinate { index });
+            }
+            let mut inputs = INPUT_DIM;
+            for (l, (layer, shape)) in self.layers[..n_enc]
+                .iter()
+                .zip(self.arch.encoder_layers())
+                .enumerate()
+            {
+                let x: &[f32] = if l == 0 { p } else { &a[..inputs] };
+                if l + 1 == n_enc {
+                    dense(layer, x, shape.outputs, true, |o, v| {
+                        if let Some(f) = feature.get_mut(o) {
+                            if v > *f {
+                                *f = v;
+                            }
+                        }
+                    });
+                } else {
+                    dense(layer, x, shape.outputs, true, |o, v| {
+                        if let Some(y) = b.get_mut(o) {
+                            *y = v;
+                        }
+                    });
+                    core::mem::swap(&mut a, &mut b);
+                }
+                inputs = shape.outputs;
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs the head on a source feature, returning the raw 7 outputs.
+    pub fn head(&self, source_feature: &[f32], work: &mut [f32]) -> Result<[f32; POSE_DIM]> {
+        let f = self.arch.feature_dim();
+        if source_feature.len() != f {
+            return Err(Error::InconsistentDimensions {
+                what: "source feature length",
+            });
+        }
+        let widest = self
+            .arch
+            .head
+            .iter()
+            .map(|&w| w as usize)
+            .max()
+            .unwrap_or(0);
+        let available = work.len();
+        let work = work.get_mut(..2 * widest).ok_or(Error::ScratchTooSmall {
+            needed: 2 * widest,
+            available,
+        })?;
+        let (mut a, mut b) = work.split_at_mut(widest);
+        // The first layer reads (template, source) in place.
+        let n_enc = self.arch.encoder.len();
+        let mut raw = [0f32; POSE_DIM];
+        let mut len = 0usize;
+        for (layer, shape) in self.layers[n_enc..].iter().zip(self.arch.head_layers()) {
+            let relu = shape.relu;
+            let mut emit = |o: usize, v: f32| {
+                let slot = if relu { b.get_mut(o) } else { raw.get_mut(o) };
+                if let Some(y) = slot {
+                    *y = v;
+                }
+            };
+            if len == 0 {
+                dense_concat(
+                    layer,
+                    self.template,
+                    source_feature,
+                    shape.outputs,
+                    relu,
+                    &mut emit,
+                );
+            } else {
+                dense(layer, &a[..len], shape.outputs, relu, &mut emit);
+            }
+            if relu {
+                len = shape.outputs;
+                core::mem::swap(&mut a, &mut b);
+            }
+        }
+        Ok(raw)
+    }
+}
+
+/// `y[o] = b[o] + sum_i w[o][i] x[i]` (then ReLU), passed to `emit(o, y)`.
+#[inline]
+pub fn dense<P: Params>(
+    layer: &Layer<P>,
+    x: &[f32],
+    outputs: usize,
+    relu: bool,
+    emit: impl FnMut(usize, f32),
+) {
+    dense_concat(layer, &[][..], x, outputs, relu, emit)
+}
+
+/// As [`dense`] with the input being the concatenation `a ++ x`.
+#[inline]
+fn dense_concat<P: Params, A: Params>(
+    layer: &Layer<P>,
+    a: A,
+    x: &[f32],
+    outputs: usize,
+    relu: bool,
+    mut emit: impl FnMut(usize, f32),
+) {
+    let inputs = a.len() + x.len();
+    for o in 0..outputs {
+        let base = o * inputs;
+        let mut acc = layer.bias.get(o);
+        for i in 0..a.len() {
+            acc += layer.weights.get(base + i) * a.get(i);
+        }
+        let base = base + a.len();
+        for (i, &xi) in x.iter().enumerate() {
+            acc += layer.weights.get(base + i) * xi;
+        }
+        emit(o, if relu && acc < 0.0 { 0.0 } else { acc });
+    }
+}

@@ -1,0 +1,241 @@
+//! The model blob: a fixed header, a postcard payload and a CRC.
+//!
+//! ```text
+//! offset  size  field
+//! 0       4     magic  b"PCRN"
+//! 4       2     format version, u16 little-endian (currently 1)
+//! 6       1     kind: 0 = int8 (device), 1 = f32 (host reference)
+//! 7       4     payload length P, u32 little-endian
+//! 11      P     payload: postcard encoding of Int8Payload or F32Payload
+//! 11+P    4     CRC-32 (ISO-HDLC, as zlib) of bytes 0 .. 11+P, little-endian
+//! ```
+//!
+//! The payload starts with the architecture ([`Arch`]) and, for int8, the
+//! quantization parameters, followed by the layers. Every multi-byte number
+//! inside the weight arrays is little-endian and read with `from_le_bytes`,
+//! so a blob needs **no alignment** and is used in place: the parsed model
+//! borrows its weights from the blob (e.g. a `&'static [u8]` from
+//! `include_bytes!` in flash) and nothing is copied into RAM.
+//!
+//! Checks happen in that order — magic, version, kind, length, CRC, payload
+//! decoding, then dimensions and parameter ranges — so every corruption gives
+//! the most specific [`Error`] available.
+
+use serde::{Deserialize, Serialize};
+
+use crate::arch::{Arch, MAX_LAYERS};
+use crate::error::{Error, Result};
+
+/// First four bytes of every blob.
+pub const MAGIC: [u8; 4] = *b"PCRN";
+/// Format version written and read by this build.
+pub const FORMAT_VERSION: u16 = 1;
+/// Bytes before the payload.
+pub const HEADER_LEN: usize = 11;
+/// Bytes after the payload.
+pub const CRC_LEN: usize = 4;
+
+const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// What the payload holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ModelKind {
+    /// Quantized int8 network for the device ([`Int8Payload`]).
+    Int8 = 0,
+    /// f32 reference network ([`F32Payload`]).
+    F32 = 1,
+}
+
+/// One quantized hidden layer (encoder or head).
+///
+/// `y = clamp(requantize(bias[o] + sum_i w[o][i] * x[i], multiplier[o], shift[o]) + out_zero_point, act_min, 127)`
+/// with `act_min = max(out_zero_point, -128)` (fused ReLU). The input zero
+/// point is folded into the bias by the exporter:
+/// `bias[o] = round(b[o] / (s_x s_w[o])) - z_x * sum_i w[o][i]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Int8Layer<'a> {
+    /// Real value of one output step (informational: dequantizing features).
+    pub out_scale: f32,
+    /// Output zero point.
+    pub out_zero_point: i8,
+    /// Weights, `outputs x inputs` int8 (stored as bytes), row-major by output.
+    pub weights: &'a [u8],
+    /// Biases, `outputs` x i32 little-endian, input zero point folded in.
+    pub bias: &'a [u8],
+    /// Q31 multipliers, `outputs` x i32 little-endian.
+    pub multiplier: &'a [u8],
+    /// Shifts, `outputs` x i8 in `-31..=31`.
+    pub shift: &'a [u8],
+}
+
+/// The linear output layer of the int8 head: its i32 accumulators are the
+/// raw head output and are not requantized to int8 (which would cost the
+/// pose precision); they are turned into reals by a per-output scale.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Int8Output<'a> {
+    /// Weights, `7 x inputs` int8, row-major by output.
+    pub weights: &'a [u8],
+    /// Biases, 7 x i32 little-endian, input zero point folded in.
+    pub bias: &'a [u8],
+    /// Real value of one accumulator step per output, 7 x f32 little-endian.
+    pub scale: &'a [u8],
+}
+
+/// Payload of an int8 blob.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Int8Payload<'a> {
+    /// Network shape.
+    pub arch: Arch,
+    /// Real value of one step of the int16 input coordinates (zero point 0).
+    pub input_scale: f32,
+    /// Encoder layers, in order; the last one's output parameters are the feature's.
+    #[serde(borrow)]
+    pub encoder: heapless::Vec<Int8Layer<'a>, MAX_LAYERS>,
+    /// Hidden head layers, in order.
+    #[serde(borrow)]
+    pub head: heapless::Vec<Int8Layer<'a>, MAX_LAYERS>,
+    /// Output layer.
+    #[serde(borrow)]
+    pub output: Int8Output<'a>,
+    /// The template's feature, computed by the int8 encoder on the host, F int8.
+    pub template_feature: &'a [u8],
+}
+
+/// One f32 layer: weights `outputs x inputs` then biases, f32 little-endian.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct F32Layer<'a> {
+    /// Weights, row-major by output, f32 little-endian.
+    pub weights: &'a [u8],
+    /// Biases, f32 little-endian.
+    pub bias: &'a [u8],
+}
+
+/// Payload of an f32 blob.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct F32Payload<'a> {
+    /// Network shape.
+    pub arch: Arch,
+    /// Encoder layers then head layers (hidden and output), in order.
+    #[serde(borrow)]
+    pub layers: heapless::Vec<F32Layer<'a>, { 2 * MAX_LAYERS + 1 }>,
+    /// The template's feature, F x f32 little-endian.
+    pub template_feature: &'a [u8],
+}
+
+/// Checks the envelope of a blob and returns its payload bytes.
+pub fn open(blob: &[u8], expected: ModelKind) -> Result<&[u8]> {
+    let header = blob.get(..HEADER_LEN).ok_or(Error::Truncated {
+        needed: HEADER_LEN + CRC_LEN,
+        available: blob.len(),
+    });
+    // A blob shorter than the magic is judged by what it has.
+    if blob.len() < MAGIC.len() {
+        return if MAGIC.starts_with(blob) {
+            Err(Error::Truncated {
+                needed: HEADER_LEN + CRC_LEN,
+                available: blob.len(),
+            })
+        } else {
+            Err(Error::BadMagic)
+        };
+    }
+    if blob[..4] != MAGIC {
+        return Err(Error::BadMagic);
+    }
+    let header = header?;
+    let version = u16::from_le_bytes([header[4], header[5]]);
+    if version != FORMAT_VERSION {
+        return Err(Error::UnsupportedVersion { found: version });
+    }
+    if header[6] != expected as u8 {
+        return Err(Error::WrongKind {
+            expected,
+            found: header[6],
+        });
+    }
+    let payload_len = u32::from_le_bytes([header[7], header[8], header[9], header[10]]) as usize;
+    let total = HEADER_LEN
+        .saturating_add(payload_len)
+        .saturating_add(CRC_LEN);
+    if blob.len() < total {
+        return Err(Error::Truncated {
+            needed: total,
+            available: blob.len(),
+        });
+    }
+    if blob.len() > total {
+        return Err(Error::TrailingData {
+            extra: blob.len() - total,
+        });
+    }
+    let (body, crc) = blob.split_at(total - CRC_LEN);
+    let stored = u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]);
+    let computed = CRC32.checksum(body);
+    if stored != computed {
+        return Err(Error::BadCrc { stored, computed });
+    }
+    Ok(&body[HEADER_LEN..])
+}
+
+/// Decodes a payload, requiring that it is consumed exactly.
+pub fn decode<'a, T: Deserialize<'a>>(payload: &'a [u8]) -> Result<T> {
+    match postcard::take_from_bytes::<T>(payload) {
+        Ok((value, [])) => Ok(value),
+        _ => Err(Error::Malformed),
+    }
+}
+
+/// Bytes a blob of this payload takes.
+pub fn blob_len<T: Serialize>(payload: &T) -> Result<usize> {
+    let p = postcard::serialize_with_flavor(payload, postcard::ser_flavors::Size::default())
+        .map_err(|_| Error::Malformed)?;
+    Ok(HEADER_LEN + p + CRC_LEN)
+}
+
+/// Writes a blob (header, payload, CRC) into `out`, returning its length.
+pub fn write_blob<T: Serialize>(kind: ModelKind, payload: &T, out: &mut [u8]) -> Result<usize> {
+    let needed = blob_len(payload)?;
+    let available = out.len();
+    let out = out
+        .get_mut(..needed)
+        .ok_or(Error::BufferTooSmall { needed, available })?;
+    let payload_len = needed - HEADER_LEN - CRC_LEN;
+    let (header, rest) = out.split_at_mut(HEADER_LEN);
+    header[..4].copy_from_slice(&MAGIC);
+    header[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+    header[6] = kind as u8;
+    header[7..11].copy_from_slice(&(payload_len as u32).to_le_bytes());
+    postcard::to_slice(payload, &mut rest[..payload_len]).map_err(|_| Error::Malformed)?;
+    let crc = CRC32.checksum(&out[..needed - CRC_LEN]);
+    out[needed - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
+    Ok(needed)
+}
+
+/// Iterates over little-endian i32 values.
+pub(crate) fn le_i32s(bytes: &[u8]) -> impl Iterator<Item = i32> + '_ {
+    bytes
+        .chunks_exact(4)
+        .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+}
+
+/// Iterates over little-endian f32 values.
+pub(crate) fn le_f32s(bytes: &[u8]) -> impl Iterator<Item = f32> + '_ {
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+}
+
+/// Checks that a byte array holds `count` elements of `size` bytes.
+pub(crate) fn expect_len(
+    bytes: &[u8],
+    count: usize,
+    size: usize,
+    what: &'static str,
+) -> Result<()> {
+    if count.checked_mul(size) == Some(bytes.len()) {
+        Ok(())
+    } else {
+        Err(Error::InconsistentDimensions { what })
+    }
+}

@@ -1,0 +1,427 @@
+//! The quantized int8 network: points -> quantize -> encode -> head -> pose.
+//!
+//! Integer-only from the int16 input coordinates to the head's i32 outputs:
+//! - input: `q = round(x / input_scale)` as int16, zero point 0 (see
+//!   [`crate::fixed::quantize_coordinate`]); int16 rather than int8 because
+//!   the input has only 3 channels (the first layer's cost is negligible)
+//!   and int8 coordinates measurably cost pose accuracy (see the README);
+//! - every layer: int8 weights (symmetric, per output channel), i32 bias,
+//!   i32 accumulation, Q31 requantization ([`crate::fixed`]), ReLU fused as
+//!   the lower clamp, int8 activations with per-tensor scale and zero point;
+//! - max-pool over points on the int8 values of the last encoder layer,
+//!   kept as a running max, so working memory does not depend on the number
+//!   of points;
+//! - head: the first layer reads the template feature (stored in the blob)
+//!   and the source feature in place; the output layer's i32 accumulators
+//!   are the raw head output.
+//!
+//! Points go through the encoder in tiles of up to [`MAX_TILE`] points; a
+//! weight row is then read once per tile. The result does not depend on the
+//! tile size (bit for bit).
+
+use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM};
+use crate::error::{Error, Result};
+use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, quantize_coordinate};
+use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
+use crate::kernel::{QValue, Requant, dense_tile, dot};
+use crate::pose::Pose;
+
+/// A validated int8 model borrowing its weights from a blob.
+#[derive(Debug, Clone)]
+pub struct Int8Model<'a> {
+    p: Int8Payload<'a>,
+}
+
+/// Everything one inference produces besides the pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Int8Inference<'s> {
+    /// The source's int8 global feature (a view into the scratch).
+    pub feature: &'s [i8],
+    /// The head's raw i32 outputs `[qw, qx, qy, qz, tx, ty, tz]`.
+    pub head: [i32; POSE_DIM],
+}
+
+impl<'a> Int8Model<'a> {
+    /// Parses and validates an int8 blob. Weights stay in `blob`.
+    pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
+        let payload: Int8Payload<'a> = format::decode(format::open(blob, ModelKind::Int8)?)?;
+        Self::from_payload(payload)
+    }
+
+    /// Parses a blob and checks that `scratch` can run it (one point per tile at least).
+    pub fn load(blob: &'a [u8], scratch: &[i8]) -> Result<Self> {
+        let model = Self::from_bytes(blob)?;
+        model.tile_for(scratch.len())?;
+        Ok(model)
+    }
+
+    /// Validates an already decoded payload (dimensions, parameter ranges,
+    /// accumulator bounds).
+    pub fn from_payload(p: Int8Payload<'a>) -> Result<Self> {
+        let arch = &p.arch;
+        arch.validate()?;
+        if !(p.input_scale.is_finite() && p.input_scale > 0.0) {
+            return Err(Error::InvalidParameter {
+                what: "input scale",
+            });
+        }
+        if p.encoder.len() != arch.encoder.len() || p.head.len() != arch.head.len() {
+            return Err(Error::InconsistentDimensions {
+                what: "layer count differs from architecture",
+            });
+        }
+        for (i, (shape, layer)) in arch.encoder_layers().zip(p.encoder.iter()).enumerate() {
+            let xmax = if i == 0 { INPUT_QMAX as i64 } else { 128 };
+            check_layer(layer, shape.inputs, shape.outputs, xmax)?;
+        }
+        for (shape, layer) in arch.head_layers().zip(p.head.iter()) {
+            check_layer(layer, shape.inputs, shape.outputs, 128)?;
+        }
+        let out = &p.output;
+        let out_in = arch.head_layers().last().map_or(0, |l| l.inputs);
+        expect_len(out.weights, POSE_DIM, out_in, "output weights")?;
+        expect_len(out.bias, POSE_DIM, 4, "output bias")?;
+        expect_len(out.scale, POSE_DIM, 4, "output scale")?;
+        if le_f32s(out.scale).any(|s| !s.is_finite()) {
+            return Err(Error::InvalidParameter {
+                what: "output scale",
+            });
+        }
+        check_accumulator(out.weights, out.bias, out_in, 128)?;
+        expect_len(
+            p.template_feature,
+            arch.feature_dim(),
+            1,
+            "template feature",
+        )?;
+        Ok(Int8Model { p })
+    }
+
+    /// The network shape.
+    pub fn arch(&self) -> &Arch {
+        &self.p.arch
+    }
+
+    /// The decoded payload (quantization parameters and weight views).
+    pub fn payload(&self) -> &Int8Payload<'a> {
+        &self.p
+    }
+
+    /// Bytes of scratch needed with `tile` points per pass.
+    pub fn scratch_len(&self, tile: usize) -> usize {
+        self.p.arch.int8_scratch_len(tile)
+    }
+
+    /// The largest tile (up to [`MAX_TILE`]) that fits `available` bytes.
+    fn tile_for(&self, available: usize) -> Result<usize> {
+        (1..=MAX_TILE)
+            .rev()
+            .find(|&t| self.scratch_len(t) <= available)
+            .ok_or(Error::ScratchTooSmall {
+                needed: self.scratch_len(1),
+                available,
+            })
+    }
+
+    /// Registers `source` to the model's template: the pose that maps the
+    /// source onto the template.
+    pub fn register(&self, source: &[[f32; 3]], scratch: &mut [i8]) -> Result<Pose> {
+        let inference = self.infer(source, scratch)?;
+        self.pose(&inference.head)
+    }
+
+    /// Encodes `source` and runs the head, returning the raw results.
+    /// Uses the largest tile the scratch allows.
+    pub fn infer<'s>(
+        &self,
+        source: &[[f32; 3]],
+        scratch: &'s mut [i8],
+    ) -> Result<Int8Inference<'s>> {
+        let tile = self.tile_for(scratch.len())?;
+        self.infer_tiled(source, tile, scratch)
+    }
+
+    /// As [`Self::infer`] with an explicit tile size (`1..=MAX_TILE`).
+    pub fn infer_tiled<'s>(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        scratch: &'s mut [i8],
+    ) -> Result<Int8Inference<'s>> {
+        let (feature, work) = self.split_scratch(tile, scratch)?;
+        self.encode_into(source, tile, feature, work)?;
+        let head = self.head(feature, work)?;
+        Ok(Int8Inference { feature, head })
+    }
+
+    /// Encodes `source` into its int8 global feature (a view into `scratch`).
+    pub fn encode<'s>(&self, source: &[[f32; 3]], scratch: &'s mut [i8]) -> Result<&'s [i8]> {
+        let tile = self.tile_for(scratch.len())?;
+        self.encode_tiled(source, tile, scratch)
+    }
+
+    /// As [`Self::encode`] with an explicit tile size (`1..=MAX_TILE`).
+    pub fn encode_tiled<'s>(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        scratch: &'s mut [i8],
+    ) -> Result<&'s [i8]> {
+        let (feature, work) = self.split_scratch(tile, scratch)?;
+        self.encode_into(source, tile, feature, work)?;
+        Ok(feature)
+    }
+
+    fn split_scratch<'s>(
+        &self,
+        tile: usize,
+        scratch: &'s mut [i8],
+    ) -> Result<(&'s mut [i8], &'s mut [i8])> {
+        if !(1..=MAX_TILE).contains(&tile) {
+            return Err(Error::InvalidParameter {
+                what: "tile outside 1..=MAX_TILE",
+            });
+        }
+        let needed = self.scratch_len(tile);
+        let available = scratch.len();
+        let scratch = scratch
+            .get_mut(..needed)
+            .ok_or(Error::ScratchTooSmall { needed, available })?;
+        Ok(scratch.split_at_mut(self.p.arch.feature_dim()))
+    }
+
+    /// Quantizes one point to the model's int16 input grid.
+    pub fn quantize_point(&self, index: usize, p: &[f32; 3]) -> Result<[i16; 3]> {
+        let mut q = [0i16; 3];
+        for (q, &x) in q.iter_mut().zip(p) {
+            if !x.is_finite() {
+                return Err(Error::NonFiniteCoordinate { index });
+            }
+            *q = quantize_coordinate(x, self.p.input_scale)
+                .ok_or(Error::CoordinateOutOfRange { index })?;
+        }
+        Ok(q)
+    }
+
+    fn encode_into(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        feature: &mut [i8],
+        work: &mut [i8],
+    ) -> Result<()> {
+        if source.is_empty() {
+            return Err(Error::EmptyCloud);
+        }
+        feature.fill(i8::MIN);
+        let widths = &self.p.arch.encoder;
+        let last = widths.len() - 1;
+        let hidden = widths[..last]
+            .iter()
+            .map(|&w| w as usize)
+            .max()
+            .unwrap_or(0);
+        let (mut a, mut b) = work.split_at_mut(tile * hidden);
+        for (chunk_index, chunk) in source.chunks(tile).enumerate() {
+            let mut q = [[0i16; INPUT_DIM]; MAX_TILE];
+            for (i, (q, p)) in q.iter_mut().zip(chunk).enumerate() {
+                *q = self.quantize_point(chunk_index * tile + i, p)?;
+            }
+            let x0 = q[..chunk.len()].as_flattened();
+            let mut inputs = INPUT_DIM;
+            for (l, layer) in self.p.encoder.iter().enumerate() {
+                let outputs = widths[l] as usize;
+                let rq = requant(layer, true);
+                if l == last {
+                    let pool = |_t: usize, o: usize, v: i8| {
+                        if let Some(f) = feature.get_mut(o) {
+                            if v > *f {
+                                *f = v;
+                            }
+                        }
+                    };
+                    if l == 0 {
+                        dense_tile(layer.weights, inputs, rq, x0, pool);
+                    } else {
+                        dense_tile(layer.weights, inputs, rq, &a[..chunk.len() * inputs], pool);
+                    }
+                } else {
+                    let store = |t: usize, o: usize, v: i8| {
+                        if let Some(y) = b.get_mut(t * outputs + o) {
+                            *y = v;
+                        }
+                    };
+                    if l == 0 {
+                        dense_tile(layer.weights, inputs, rq, x0, store);
+                    } else {
+                        dense_tile(layer.weights, inputs, rq, &a[..chunk.len() * inputs], store);
+                    }
+                    core::mem::swap(&mut a, &mut b);
+                }
+                inputs = outputs;
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs the head on a source feature: returns the output layer's raw
+    /// i32 accumulators. `work` needs `2 x` the widest hidden head layer.
+    pub fn head(&self, source_feature: &[i8], work: &mut [i8]) -> Result<[i32; POSE_DIM]> {
+        let f = self.p.arch.feature_dim();
+        if source_feature.len() != f {
+            return Err(Error::InconsistentDimensions {
+                what: "source feature length",
+            });
+        }
+        let widest = self
+            .p
+            .arch
+            .head
+            .iter()
+            .map(|&w| w as usize)
+            .max()
+            .unwrap_or(0);
+        let available = work.len();
+        let work = work.get_mut(..2 * widest).ok_or(Error::ScratchTooSmall {
+            needed: 2 * widest,
+            available,
+        })?;
+        let (mut a, mut b) = work.split_at_mut(widest);
+        let template = self.p.template_feature;
+        // Current input: the concatenation (template, source) for the first
+        // layer, then the previous layer's output in `a`.
+        let mut len = 0usize;
+        for (layer, &width) in self.p.head.iter().zip(self.p.arch.head.iter()) {
+            let rq = requant(layer, true);
+            let store = |_t: usize, o: usize, v: i8| {
+                if let Some(y) = b.get_mut(o) {
+                    *y = v;
+                }
+            };
+            if len == 0 {
+                head_first_layer(layer.weights, f, rq, template, source_feature, store);
+            } else {
+                dense_tile(layer.weights, len, rq, &a[..len], store);
+            }
+            len = width as usize;
+            core::mem::swap(&mut a, &mut b);
+        }
+        let out = &self.p.output;
+        let mut raw = [0i32; POSE_DIM];
+        let in_dim = if len == 0 { 2 * f } else { len };
+        let rows = out.weights.chunks_exact(in_dim).zip(le_i32s(out.bias));
+        for (r, (row, bias)) in raw.iter_mut().zip(rows) {
+            *r = if len == 0 {
+                bias.wrapping_add(split_dot(row, template, source_feature))
+            } else {
+                bias.wrapping_add(dot(row, &a[..len]))
+            };
+        }
+        Ok(raw)
+    }
+
+    /// Converts raw head accumulators to reals with the output scales.
+    pub fn head_to_real(&self, raw: &[i32; POSE_DIM]) -> [f32; POSE_DIM] {
+        let mut out = [0f32; POSE_DIM];
+        for ((o, &r), s) in out.iter_mut().zip(raw).zip(le_f32s(self.p.output.scale)) {
+            *o = r as f32 * s;
+        }
+        out
+    }
+
+    /// The pose for raw head accumulators.
+    pub fn pose(&self, raw: &[i32; POSE_DIM]) -> Result<Pose> {
+        Pose::from_head_output(&self.head_to_real(raw))
+    }
+
+    /// Dequantizes an int8 feature to reals (for comparison with the f32 path).
+    pub fn dequantize_feature(&self, feature: &[i8], out: &mut [f32]) {
+        if let Some(last) = self.p.encoder.last() {
+            for (o, &q) in out.iter_mut().zip(feature) {
+                *o = (q as i32 - last.out_zero_point as i32) as f32 * last.out_scale;
+            }
+        }
+    }
+}
+
+/// The first head layer: input is `template ++ source`, both F wide, read in place.
+fn head_first_layer(
+    weights: &[u8],
+    f: usize,
+    q: Requant<'_>,
+    template: &[u8],
+    source: &[i8],
+    mut emit: impl FnMut(usize, usize, i8),
+) {
+    let rows = weights
+        .chunks_exact(2 * f)
+        .zip(le_i32s(q.bias))
+        .zip(le_i32s(q.multiplier))
+        .zip(q.shift);
+    for (o, (((row, bias), m), &s)) in rows.enumerate() {
+        let acc = bias.wrapping_add(split_dot(row, template, source));
+        let v = crate::fixed::to_activation(
+            crate::fixed::requantize(acc, m, s as i8),
+            q.zero_point,
+            q.act_min,
+        );
+        emit(0, o, v);
+    }
+}
+
+/// Dot product of a weight row with the concatenation `a ++ b`.
+fn split_dot<A: QValue, B: QValue>(row: &[u8], a: &[A], b: &[B]) -> i32 {
+    let (wa, wb) = row.split_at(a.len().min(row.len()));
+    dot(wa, a).wrapping_add(dot(wb, b))
+}
+
+fn requant<'l>(layer: &Int8Layer<'l>, relu: bool) -> Requant<'l> {
+    Requant {
+        bias: layer.bias,
+        multiplier: layer.multiplier,
+        shift: layer.shift,
+        zero_point: layer.out_zero_point,
+        act_min: if relu { layer.out_zero_point } else { i8::MIN },
+    }
+}
+
+fn check_layer(layer: &Int8Layer<'_>, inputs: usize, outputs: usize, xmax: i64) -> Result<()> {
+    expect_len(layer.weights, outputs, inputs, "layer weights")?;
+    expect_len(layer.bias, outputs, 4, "layer bias")?;
+    expect_len(layer.multiplier, outputs, 4, "layer multiplier")?;
+    expect_len(layer.shift, outputs, 1, "layer shift")?;
+    if !(layer.out_scale.is_finite() && layer.out_scale > 0.0) {
+        return Err(Error::InvalidParameter {
+            what: "output scale",
+        });
+    }
+    if le_i32s(layer.multiplier).any(|m| m < 0) {
+        return Err(Error::InvalidParameter {
+            what: "negative multiplier",
+        });
+    }
+    if layer
+        .shift
+        .iter()
+        .any(|&s| !(MIN_SHIFT..=MAX_SHIFT).contains(&(s as i8)))
+    {
+        return Err(Error::InvalidParameter {
+            what: "shift outside -31..=31",
+        });
+    }
+    check_accumulator(layer.weights, layer.bias, inputs, xmax)
+}
+
+/// Proves that no accumulator can leave the i32 range:
+/// `|bias| + sum_i |w_i| * xmax <= i32::MAX` for every output row.
+fn check_accumulator(weights: &[u8], bias: &[u8], inputs: usize, xmax: i64) -> Result<()> {
+    for (row, b) in weights.chunks_exact(inputs).zip(le_i32s(bias)) {
+        let sum: i64 = row.iter().map(|&w| (w as i8 as i64).abs()).sum();
+        if (b as i64).abs() + sum * xmax > i32::MAX as i64 {
+            return Err(Error::InvalidParameter {
+                what: "bias and weights can overflow the i32 accumulator",
+            });
+        }
+    }
+    Ok(())
+}

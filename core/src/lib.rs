@@ -1,0 +1,69 @@
+//! # pcrnet-core
+//!
+//! `no_std`, allocation-free point cloud registration with a quantized
+//! PointNet encoder and a PCRNet pose head (Sarode et al., *One Framework to
+//! Register Them All*, AAAI 2020), for microcontrollers.
+//!
+//! Data flows **points -> quantize -> encode -> head -> pose**:
+//!
+//! | step | where | what |
+//! |---|---|---|
+//! | points | caller | `&[[f32; 3]]`, any count from 1 |
+//! | quantize | [`fixed::quantize_coordinate`] | int16 coordinates, scale stored in the model |
+//! | encode | [`Int8Model::encode`] | per-point MLP, streamed in tiles, running max-pool -> int8 feature |
+//! | head | [`Int8Model::head`] | FC layers over (template feature, source feature) -> 7 i32 |
+//! | pose | [`Pose::from_head_output`] | unit quaternion + translation (f32, `libm`) |
+//!
+//! The model is a blob ([`format`]) whose weights are used in place (flash),
+//! and all working memory is a caller-owned scratch slice, so the crate
+//! never allocates. Sizes are known up front ([`int8_scratch_len`]).
+//!
+//! ```
+//! # fn main() -> Result<(), pcrnet_core::Error> {
+//! # let (mut arena, mut out) = ([0u8; 16384], [0u8; 16384]);
+//! # let blob = pcrnet_core::testing::random_int8_blob_into(7, &[16, 32], &[32], &mut arena, &mut out)?;
+//! use pcrnet_core::{Int8Model, int8_scratch_len};
+//!
+//! // Sized at compile time for the architecture (here encoder 16-32, head 32, tile 8).
+//! const SCRATCH: usize = int8_scratch_len(&[16, 32], &[32], 8);
+//! let mut scratch = [0i8; SCRATCH];
+//!
+//! let model = Int8Model::load(blob, &scratch)?; // checks magic, version, CRC, sizes, scratch
+//! let source = [[0.1, 0.2, 0.3], [0.0, -0.1, 0.25], [-0.2, 0.05, 0.0]];
+//! let pose = model.register(&source, &mut scratch)?;
+//! let m = pose.matrix(); // 4x4, maps the source onto the template
+//! # let _ = m;
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! The f32 reference of the same network is [`F32Model`] (blob kind
+//! `F32`), or [`float::F32Network`] over the trainer's own arrays.
+//!
+//! ## Guarantees
+//! - No allocation, no panic reachable from any blob or any cloud: every
+//!   failure is an [`Error`].
+//! - The int8 path is integer-only up to the head output; the pose uses
+//!   single f32 operations and `libm`, so the device and the host agree bit
+//!   for bit.
+//! - Encoder output is invariant to the order of the points and to the tile
+//!   size, bit for bit.
+#![no_std]
+#![cfg_attr(docsrs, feature(doc_cfg))]
+
+pub mod arch;
+mod error;
+pub mod fixed;
+pub mod float;
+pub mod format;
+pub mod int8;
+mod kernel;
+pub mod pose;
+#[doc(hidden)]
+pub mod testing;
+
+pub use arch::{Arch, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch_len};
+pub use error::{Error, Result};
+pub use float::F32Model;
+pub use int8::{Int8Inference, Int8Model};
+pub use pose::Pose;

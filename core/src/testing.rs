@@ -1,0 +1,241 @@
+//! Seeded random models for tests, examples and the QEMU harness.
+//!
+//! Not part of the stable API. Everything here is `no_std` and allocation
+//! free: the caller lends an arena for the weights and an output buffer for
+//! the blob, so the same generator runs on the host and on a device.
+
+use crate::arch::{Arch, MAX_LAYERS, POSE_DIM};
+use crate::error::{Error, Result};
+use crate::fixed::quantize_multiplier;
+use crate::format::{
+    F32Layer, F32Payload, Int8Layer, Int8Output, Int8Payload, ModelKind, write_blob,
+};
+use crate::int8::Int8Model;
+
+/// SplitMix64: a tiny, well-mixed, seedable generator.
+#[derive(Debug, Clone)]
+pub struct SplitMix64(pub u64);
+
+impl SplitMix64 {
+    /// Next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in `[0, 1)`.
+    pub fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+    /// Uniform in `[lo, hi)`.
+    pub fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.unit()
+    }
+    /// Uniform integer in `[lo, hi]`.
+    pub fn int(&mut self, lo: i32, hi: i32) -> i32 {
+        let span = (hi as i64 - lo as i64 + 1) as u64;
+        (lo as i64 + (self.next_u64() % span) as i64) as i32
+    }
+}
+
+/// Carves `n` bytes off the front of an arena.
+fn take<'a>(arena: &mut &'a mut [u8], n: usize) -> Result<&'a mut [u8]> {
+    let available = arena.len();
+    if n > available {
+        return Err(Error::BufferTooSmall {
+            needed: n,
+            available,
+        });
+    }
+    let (head, tail) = core::mem::take(arena).split_at_mut(n);
+    *arena = tail;
+    Ok(head)
+}
+
+/// Input scale of the random int8 models: coordinates up to +-4.
+pub const RANDOM_INPUT_SCALE: f32 = 4.0 / 32767.0;
+
+/// Fills an int8 layer with random weights and parameters that keep the
+/// activations spread over the int8 range. `x_std` is the typical magnitude
+/// of `x - z_x` at the layer's input, `in_zp` the input zero point.
+fn random_int8_layer<'a>(
+    rng: &mut SplitMix64,
+    arena: &mut &'a mut [u8],
+    inputs: usize,
+    outputs: usize,
+    in_zp: i32,
+    x_std: f32,
+) -> Result<Int8Layer<'a>> {
+    let weights = take(arena, inputs * outputs)?;
+    let bias = take(arena, 4 * outputs)?;
+    let multiplier = take(arena, 4 * outputs)?;
+    let shift = take(arena, outputs)?;
+    let acc_std = libm::sqrtf(inputs as f32) * 73.0 * x_std;
+    for o in 0..outputs {
+        let row = &mut weights[o * inputs..(o + 1) * inputs];
+        let mut sum = 0i32;
+        for w in row.iter_mut() {
+            let v = rng.int(-127, 127);
+            sum += v;
+            *w = v as i8 as u8;
+        }
+        let b = rng.uniform(-0.5, 0.5) * acc_std;
+        let folded = libm::roundf(b) as i32 - in_zp * sum;
+        bias[4 * o..4 * o + 4].copy_from_slice(&folded.to_le_bytes());
+        let real = rng.uniform(60.0, 140.0) / acc_std;
+        let (m, s) = quantize_multiplier(real as f64).ok_or(Error::InvalidParameter {
+            what: "random multiplier",
+        })?;
+        multiplier[4 * o..4 * o + 4].copy_from_slice(&m.to_le_bytes());
+        shift[o] = s as u8;
+    }
+    Ok(Int8Layer {
+        out_scale: 0.05,
+        out_zero_point: -128,
+        weights,
+        bias,
+        multiplier,
+        shift,
+    })
+}
+
+static ZEROS: [u8; 4096] = [0; 4096];
+
+/// A random point cloud in `[-1, 1)^3`.
+pub fn random_cloud<const N: usize>(rng: &mut SplitMix64) -> [[f32; 3]; N] {
+    let mut pts = [[0f32; 3]; N];
+    for p in pts.iter_mut() {
+        for x in p.iter_mut() {
+            *x = rng.uniform(-1.0, 1.0);
+        }
+    }
+    pts
+}
+
+/// Writes a random int8 model blob into `out` (weights generated into
+/// `arena`). Its template feature is the int8 encoding of a random 64-point
+/// cloud. Feature size must be at most 4096.
+pub fn random_int8_blob_into<'o>(
+    seed: u64,
+    encoder: &[u16],
+    head: &[u16],
+    arena: &mut [u8],
+    out: &'o mut [u8],
+) -> Result<&'o [u8]> {
+    let arch = Arch::new(encoder, head)?;
+    let f = arch.feature_dim();
+    if f > ZEROS.len() {
+        return Err(Error::InvalidParameter {
+            what: "random model feature wider than 4096",
+        });
+    }
+    let mut rng = SplitMix64(seed);
+    let mut arena = arena;
+    let template = take(&mut arena, f)?;
+    let mut enc = heapless::Vec::<Int8Layer<'_>, MAX_LAYERS>::new();
+    for (i, s) in arch.encoder_layers().enumerate() {
+        let (zp, x_std) = if i == 0 {
+            (0, 0.5 / RANDOM_INPUT_SCALE)
+        } else {
+            (-128, 80.0)
+        };
+        let layer = random_int8_layer(&mut rng, &mut arena, s.inputs, s.outputs, zp, x_std)?;
+        let _ = enc.push(layer);
+    }
+    let mut hd = heapless::Vec::<Int8Layer<'_>, MAX_LAYERS>::new();
+    let mut last_in = 2 * f;
+    for s in arch.head_layers().filter(|s| s.relu) {
+        let layer = random_int8_layer(&mut rng, &mut arena, s.inputs, s.outputs, -128, 80.0)?;
+        let _ = hd.push(layer);
+        last_in = s.outputs;
+    }
+    let out_layer = random_int8_layer(&mut rng, &mut arena, last_in, POSE_DIM, -128, 80.0)?;
+    let scale = take(&mut arena, 4 * POSE_DIM)?;
+    for c in scale.chunks_exact_mut(4) {
+        c.copy_from_slice(&rng.uniform(1e-5, 1e-4).to_le_bytes());
+    }
+    let mut payload = Int8Payload {
+        arch,
+        input_scale: RANDOM_INPUT_SCALE,
+        encoder: enc,
+        head: hd,
+        output: Int8Output {
+            weights: out_layer.weights,
+            bias: out_layer.bias,
+            scale,
+        },
+        template_feature: &ZEROS[..f],
+    };
+    // Encode a random template with the model itself, as the exporter does.
+    let cloud: [[f32; 3]; 64] = random_cloud(&mut rng);
+    let mut buf = [0i8; 3 * 4096];
+    let model = Int8Model::from_payload(payload.clone())?;
+    let needed = model.scratch_len(1);
+    let available = buf.len();
+    let scratch = buf
+        .get_mut(..needed)
+        .ok_or(Error::BufferTooSmall { needed, available })?;
+    let feature = model.encode_tiled(&cloud, 1, scratch)?;
+    for (t, &v) in template.iter_mut().zip(feature) {
+        *t = v as u8;
+    }
+    payload.template_feature = template;
+    let n = write_blob(ModelKind::Int8, &payload, out)?;
+    Ok(&out[..n])
+}
+
+/// Writes a random f32 model blob (He-style uniform weights) into `out`,
+/// with its template feature the f32 encoding of a random 64-point cloud.
+pub fn random_f32_blob_into<'o>(
+    seed: u64,
+    encoder: &[u16],
+    head: &[u16],
+    arena: &mut [u8],
+    out: &'o mut [u8],
+) -> Result<&'o [u8]> {
+    let arch = Arch::new(encoder, head)?;
+    let f = arch.feature_dim();
+    let mut rng = SplitMix64(seed);
+    let mut arena = arena;
+    let mut layers = heapless::Vec::<F32Layer<'_>, { 2 * MAX_LAYERS + 1 }>::new();
+    for s in arch.encoder_layers().chain(arch.head_layers()) {
+        let w = take(&mut arena, 4 * s.inputs * s.outputs)?;
+        let b = take(&mut arena, 4 * s.outputs)?;
+        let bound = libm::sqrtf(6.0 / s.inputs as f32);
+        for c in w.chunks_exact_mut(4) {
+            c.copy_from_slice(&rng.uniform(-bound, bound).to_le_bytes());
+        }
+        for c in b.chunks_exact_mut(4) {
+            c.copy_from_slice(&rng.uniform(-0.1, 0.1).to_le_bytes());
+        }
+        let _ = layers.push(F32Layer {
+            weights: w,
+            bias: b,
+        });
+    }
+    let template = take(&mut arena, 4 * f)?;
+    let zeros = take(&mut arena, 4 * f)?;
+    zeros.fill(0);
+    let mut payload = F32Payload {
+        arch,
+        layers,
+        template_feature: zeros,
+    };
+    let cloud: [[f32; 3]; 64] = random_cloud(&mut rng);
+    let model = crate::F32Model::from_payload(payload.clone())?;
+    let mut scratch = [0f32; 3 * 4096];
+    let needed = model.scratch_len();
+    let available = scratch.len();
+    let scratch = scratch
+        .get_mut(..needed)
+        .ok_or(Error::BufferTooSmall { needed, available })?;
+    let feature = model.encode(&cloud, scratch)?;
+    for (c, &v) in template.chunks_exact_mut(4).zip(feature) {
+        c.copy_from_slice(&v.to_le_bytes());
+    }
+    payload.template_feature = template;
+    let n = write_blob(ModelKind::F32, &payload, out)?;
+    Ok(&out[..n])
+}

@@ -1,0 +1,1 @@
+//! QEMU harness (work in progress, see issue 4).

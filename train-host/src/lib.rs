@@ -1,0 +1,1 @@
+//! Host-side training, quantization and export (work in progress, see issue 3).
