@@ -84,7 +84,7 @@ fn random_int8_layer<'a>(
         let b = rng.uniform(-0.5, 0.5) * acc_std;
         let folded = libm::roundf(b) as i32 - in_zp * sum;
         bias[4 * o..4 * o + 4].copy_from_slice(&folded.to_le_bytes());
-        let real = rng.uniform(60.0, 140.0) / acc_std;
+        let real = rng.uniform(30.0, 60.0) / acc_std;
         let (m, s) = quantize_multiplier(real as f64).ok_or(Error::InvalidParameter {
             what: "random multiplier",
         })?;
@@ -139,7 +139,7 @@ pub fn random_int8_blob_into<'o>(
         let (zp, x_std) = if i == 0 {
             (0, 0.5 / RANDOM_INPUT_SCALE)
         } else {
-            (-128, 80.0)
+            (-128, 40.0)
         };
         let layer = random_int8_layer(&mut rng, &mut arena, s.inputs, s.outputs, zp, x_std)?;
         let _ = enc.push(layer);
@@ -147,11 +147,11 @@ pub fn random_int8_blob_into<'o>(
     let mut hd = heapless::Vec::<Int8Layer<'_>, MAX_LAYERS>::new();
     let mut last_in = 2 * f;
     for s in arch.head_layers().filter(|s| s.relu) {
-        let layer = random_int8_layer(&mut rng, &mut arena, s.inputs, s.outputs, -128, 80.0)?;
+        let layer = random_int8_layer(&mut rng, &mut arena, s.inputs, s.outputs, -128, 40.0)?;
         let _ = hd.push(layer);
         last_in = s.outputs;
     }
-    let out_layer = random_int8_layer(&mut rng, &mut arena, last_in, POSE_DIM, -128, 80.0)?;
+    let out_layer = random_int8_layer(&mut rng, &mut arena, last_in, POSE_DIM, -128, 40.0)?;
     let scale = take(&mut arena, 4 * POSE_DIM)?;
     for c in scale.chunks_exact_mut(4) {
         c.copy_from_slice(&rng.uniform(1e-5, 1e-4).to_le_bytes());

@@ -1,0 +1,229 @@
+//! The model blob: round trips, and every kind of corruption gives an error, never a panic.
+
+use pcrnet_core::format::{self, CRC_LEN, FORMAT_VERSION, HEADER_LEN, ModelKind};
+use pcrnet_core::testing::{SplitMix64, random_f32_blob_into, random_int8_blob_into};
+use pcrnet_core::{Error, F32Model, Int8Model};
+use proptest::prelude::*;
+
+fn int8_blob() -> Vec<u8> {
+    let (mut arena, mut out) = (vec![0u8; 1 << 16], vec![0u8; 1 << 16]);
+    random_int8_blob_into(5, &[8, 16], &[12], &mut arena, &mut out)
+        .unwrap()
+        .to_vec()
+}
+
+fn f32_blob() -> Vec<u8> {
+    let (mut arena, mut out) = (vec![0u8; 1 << 16], vec![0u8; 1 << 16]);
+    random_f32_blob_into(6, &[8, 16], &[12], &mut arena, &mut out)
+        .unwrap()
+        .to_vec()
+}
+
+/// Recomputes the CRC so corruption reaches the payload checks.
+fn reseal(blob: &mut [u8]) {
+    let n = blob.len() - CRC_LEN;
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&blob[..n]);
+    blob[n..].copy_from_slice(&crc.to_le_bytes());
+}
+
+#[test]
+fn header_errors_are_specific() {
+    let good = int8_blob();
+    assert!(Int8Model::from_bytes(&good).is_ok());
+
+    let mut b = good.clone();
+    b[0] = b'X';
+    assert_eq!(Int8Model::from_bytes(&b).err(), Some(Error::BadMagic));
+    assert_eq!(
+        Int8Model::from_bytes(b"PC")
+            .err()
+            .map(|e| matches!(e, Error::Truncated { .. })),
+        Some(true)
+    );
+    assert_eq!(Int8Model::from_bytes(b"XY").err(), Some(Error::BadMagic));
+    assert!(matches!(
+        Int8Model::from_bytes(&[]),
+        Err(Error::Truncated { .. })
+    ));
+
+    let mut b = good.clone();
+    b[4..6].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    assert_eq!(
+        Int8Model::from_bytes(&b).err(),
+        Some(Error::UnsupportedVersion {
+            found: FORMAT_VERSION + 1
+        })
+    );
+
+    assert_eq!(
+        F32Model::from_bytes(&good).err(),
+        Some(Error::WrongKind {
+            expected: ModelKind::F32,
+            found: 0
+        })
+    );
+    assert_eq!(
+        Int8Model::from_bytes(&f32_blob()).err(),
+        Some(Error::WrongKind {
+            expected: ModelKind::Int8,
+            found: 1
+        })
+    );
+
+    let mut b = good.clone();
+    b.push(0);
+    assert_eq!(
+        Int8Model::from_bytes(&b).err(),
+        Some(Error::TrailingData { extra: 1 })
+    );
+
+    let mut b = good.clone();
+    let mid = HEADER_LEN + 10;
+    b[mid] ^= 0x10;
+    assert!(matches!(
+        Int8Model::from_bytes(&b),
+        Err(Error::BadCrc { .. })
+    ));
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    for good in [int8_blob(), f32_blob()] {
+        for n in 0..good.len() {
+            let r8 = Int8Model::from_bytes(&good[..n]).err();
+            let rf = F32Model::from_bytes(&good[..n]).err();
+            assert!(r8.is_some() && rf.is_some(), "prefix of {n} bytes accepted");
+            if n >= 4 {
+                assert!(
+                    matches!(
+                        r8,
+                        Some(Error::Truncated { .. }) | Some(Error::WrongKind { .. })
+                    ),
+                    "prefix {n}: {r8:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn every_single_bit_flip_is_an_error() {
+    for good in [int8_blob(), f32_blob()] {
+        let kind_int8 = good[6] == 0;
+        for byte in 0..good.len() {
+            for bit in 0..8 {
+                let mut b = good.clone();
+                b[byte] ^= 1 << bit;
+                let err = if kind_int8 {
+                    Int8Model::from_bytes(&b).err()
+                } else {
+                    F32Model::from_bytes(&b).err()
+                };
+                assert!(err.is_some(), "flip of bit {bit} in byte {byte} accepted");
+            }
+        }
+    }
+}
+
+/// With the CRC recomputed, corruption reaches the decoder and the
+/// validation: the result may be a (different) valid model, but never a panic,
+/// and a model that loads must run or fail cleanly.
+#[test]
+fn resealed_corruption_never_panics() {
+    let mut rng = SplitMix64(77);
+    let pts = [[0.1f32, 0.2, 0.3], [-0.5, 0.4, 0.0], [0.9, -0.9, 0.2]];
+    for good in [int8_blob(), f32_blob()] {
+        for _ in 0..3000 {
+            let mut b = good.clone();
+            let flips = 1 + rng.next_u64() % 4;
+            for _ in 0..flips {
+                let i = HEADER_LEN + (rng.next_u64() as usize % (b.len() - HEADER_LEN - CRC_LEN));
+                b[i] ^= 1 << (rng.next_u64() % 8);
+            }
+            reseal(&mut b);
+            if let Ok(m) = Int8Model::from_bytes(&b) {
+                let mut s = vec![0i8; m.scratch_len(8)];
+                let _ = m.register(&pts, &mut s);
+            }
+            if let Ok(m) = F32Model::from_bytes(&b) {
+                let mut s = vec![0f32; m.scratch_len()];
+                let _ = m.register(&pts, &mut s);
+            }
+        }
+    }
+}
+
+#[test]
+fn inconsistent_payloads_are_rejected() {
+    let bad_shift = vec![40u8; 8];
+    let huge_bias = [i32::MAX.to_le_bytes(); 8].concat();
+    let good = int8_blob();
+    let model = Int8Model::from_bytes(&good).unwrap();
+    let mut p = model.payload().clone();
+    p.template_feature = &p.template_feature[1..];
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InconsistentDimensions { .. })
+    ));
+    let mut p = model.payload().clone();
+    p.encoder[0].shift = &bad_shift;
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let mut p = model.payload().clone();
+    p.encoder[0].bias = &huge_bias;
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let mut p = model.payload().clone();
+    p.input_scale = f32::NAN;
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let mut p = model.payload().clone();
+    p.arch.encoder[0] = 9;
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InconsistentDimensions { .. })
+    ));
+}
+
+#[test]
+fn write_then_read_round_trips() {
+    let good = int8_blob();
+    let model = Int8Model::from_bytes(&good).unwrap();
+    let mut out = vec![0u8; good.len()];
+    let n = format::write_blob(ModelKind::Int8, model.payload(), &mut out).unwrap();
+    assert_eq!(&out[..n], &good[..]);
+    let mut short = vec![0u8; good.len() - 1];
+    assert_eq!(
+        format::write_blob(ModelKind::Int8, model.payload(), &mut short).err(),
+        Some(Error::BufferTooSmall {
+            needed: good.len(),
+            available: good.len() - 1
+        })
+    );
+}
+
+proptest! {
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+        let _ = Int8Model::from_bytes(&bytes);
+        let _ = F32Model::from_bytes(&bytes);
+        // Also behind a valid envelope, so the decoder sees them.
+        let mut b = b"PCRN".to_vec();
+        b.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        b.push(0);
+        b.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
+        b.extend_from_slice(&bytes);
+        b.extend_from_slice(&[0; 4]);
+        reseal(&mut b);
+        let _ = Int8Model::from_bytes(&b);
+        b[6] = 1;
+        reseal(&mut b);
+        let _ = F32Model::from_bytes(&b);
+    }
+}

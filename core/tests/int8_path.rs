@@ -1,0 +1,237 @@
+//! The int8 path against a plain reference, and its invariances.
+
+use pcrnet_core::fixed::{quantize_coordinate, requantize};
+use pcrnet_core::format::Int8Layer;
+use pcrnet_core::testing::{SplitMix64, random_int8_blob_into};
+use pcrnet_core::{Error, Int8Model, MAX_TILE, POSE_DIM};
+
+const SMALL_ENC: &[u16] = &[16, 24, 64];
+const SMALL_HEAD: &[u16] = &[48, 32];
+
+fn blob(seed: u64, enc: &[u16], head: &[u16]) -> Vec<u8> {
+    let mut arena = vec![0u8; 8 << 20];
+    let mut out = vec![0u8; 8 << 20];
+    random_int8_blob_into(seed, enc, head, &mut arena, &mut out)
+        .unwrap()
+        .to_vec()
+}
+
+fn cloud(seed: u64, n: usize, extent: f32) -> Vec<[f32; 3]> {
+    let mut rng = SplitMix64(seed);
+    (0..n)
+        .map(|_| [0; 3].map(|_: i32| rng.uniform(-extent, extent)))
+        .collect()
+}
+
+/// Straightforward i64 evaluation of one layer, written from the format's
+/// documentation, independent of the crate's kernels.
+fn ref_layer(l: &Int8Layer<'_>, x: &[i64], relu: bool) -> Vec<i64> {
+    let inputs = x.len();
+    let outputs = l.shift.len();
+    (0..outputs)
+        .map(|o| {
+            let b = i32::from_le_bytes(l.bias[4 * o..4 * o + 4].try_into().unwrap()) as i64;
+            let m = i32::from_le_bytes(l.multiplier[4 * o..4 * o + 4].try_into().unwrap());
+            let acc: i64 = b
+                + (0..inputs)
+                    .map(|i| l.weights[o * inputs + i] as i8 as i64 * x[i])
+                    .sum::<i64>();
+            assert!(acc >= i32::MIN as i64 && acc <= i32::MAX as i64);
+            let r = 31 - l.shift[o] as i8 as i64;
+            let scaled = ((acc as i128 * m as i128 * 2 + (1i128 << r)) >> (r + 1)) as i64;
+            let lo = if relu { l.out_zero_point as i64 } else { -128 };
+            (scaled + l.out_zero_point as i64).clamp(lo, 127)
+        })
+        .collect()
+}
+
+fn reference(model: &Int8Model<'_>, points: &[[f32; 3]]) -> (Vec<i8>, [i32; POSE_DIM]) {
+    let p = model.payload();
+    let f = model.arch().feature_dim();
+    let mut feature = vec![i64::MIN; f];
+    for pt in points {
+        let mut x: Vec<i64> = pt
+            .iter()
+            .map(|&c| quantize_coordinate(c, p.input_scale).unwrap() as i64)
+            .collect();
+        for l in &p.encoder {
+            x = ref_layer(l, &x, true);
+        }
+        for (m, v) in feature.iter_mut().zip(x) {
+            *m = (*m).max(v);
+        }
+    }
+    let mut x: Vec<i64> = p
+        .template_feature
+        .iter()
+        .map(|&b| b as i8 as i64)
+        .chain(feature.iter().copied())
+        .collect();
+    for l in &p.head {
+        x = ref_layer(l, &x, true);
+    }
+    let mut raw = [0i32; POSE_DIM];
+    for (o, r) in raw.iter_mut().enumerate() {
+        let b = i32::from_le_bytes(p.output.bias[4 * o..4 * o + 4].try_into().unwrap()) as i64;
+        let acc = b
+            + (0..x.len())
+                .map(|i| p.output.weights[o * x.len() + i] as i8 as i64 * x[i])
+                .sum::<i64>();
+        *r = i32::try_from(acc).unwrap();
+    }
+    (feature.iter().map(|&v| v as i8).collect(), raw)
+}
+
+#[test]
+fn matches_plain_reference_for_many_sizes() {
+    // requantize is re-derived in ref_layer; check the two agree on a corner first.
+    assert_eq!(requantize(-3, 1 << 30, 0), -1);
+    for (seed, enc, head) in [
+        (1u64, SMALL_ENC, SMALL_HEAD),
+        (2, &[8][..], &[][..]),
+        (3, &[32, 32, 128, 256][..], &[64][..]),
+    ] {
+        let b = blob(seed, enc, head);
+        let model = Int8Model::from_bytes(&b).unwrap();
+        let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+        for n in [1usize, 2, 7, 8, 9, 33, 1000] {
+            let pts = cloud(seed * 100 + n as u64, n, 1.5);
+            let got = model.infer(&pts, &mut scratch).unwrap();
+            let (feature, raw) = reference(&model, &pts);
+            assert_eq!(got.feature, &feature[..], "feature, seed {seed}, n {n}");
+            assert_eq!(got.head, raw, "head, seed {seed}, n {n}");
+            // The activations must not be degenerate for the test to mean anything.
+            if n < 33 {
+                continue;
+            }
+            let distinct = feature
+                .iter()
+                .collect::<std::collections::BTreeSet<_>>()
+                .len();
+            assert!(
+                distinct > feature.len().min(8) / 2,
+                "feature too uniform: seed {seed} n {n} {feature:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn permutation_invariant_bit_exact() {
+    let b = blob(11, SMALL_ENC, SMALL_HEAD);
+    let model = Int8Model::from_bytes(&b).unwrap();
+    let mut pts = cloud(12, 257, 1.0);
+    let mut s1 = vec![0i8; model.scratch_len(4)];
+    let first = model.infer_tiled(&pts, 4, &mut s1).unwrap();
+    let (f1, h1) = (first.feature.to_vec(), first.head);
+    let mut rng = SplitMix64(13);
+    for _ in 0..5 {
+        for i in (1..pts.len()).rev() {
+            let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+            pts.swap(i, j);
+        }
+        let mut s2 = vec![0i8; model.scratch_len(4)];
+        let again = model.infer_tiled(&pts, 4, &mut s2).unwrap();
+        assert_eq!(again.feature, &f1[..]);
+        assert_eq!(again.head, h1);
+    }
+}
+
+#[test]
+fn tile_size_does_not_change_anything() {
+    let b = blob(21, SMALL_ENC, SMALL_HEAD);
+    let model = Int8Model::from_bytes(&b).unwrap();
+    for n in [1usize, 5, 31, 100] {
+        let pts = cloud(22 + n as u64, n, 1.0);
+        let mut s = vec![0i8; model.scratch_len(1)];
+        let base = model.infer_tiled(&pts, 1, &mut s).unwrap();
+        let (f, h) = (base.feature.to_vec(), base.head);
+        for tile in 2..=MAX_TILE {
+            let mut s = vec![0i8; model.scratch_len(tile)];
+            let r = model.infer_tiled(&pts, tile, &mut s).unwrap();
+            assert_eq!(r.feature, &f[..], "tile {tile}, n {n}");
+            assert_eq!(r.head, h, "tile {tile}, n {n}");
+        }
+    }
+}
+
+#[test]
+fn register_gives_a_unit_quaternion() {
+    let b = blob(31, SMALL_ENC, SMALL_HEAD);
+    let model = Int8Model::from_bytes(&b).unwrap();
+    let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
+    let pose = model.register(&cloud(32, 50, 1.0), &mut s).unwrap();
+    let n: f32 = pose.rotation.iter().map(|q| q * q).sum();
+    assert!((n - 1.0).abs() < 1e-5);
+    assert!(pose.rotation[0] >= 0.0);
+}
+
+#[test]
+fn bad_clouds_are_typed_errors() {
+    let b = blob(41, SMALL_ENC, SMALL_HEAD);
+    let model = Int8Model::from_bytes(&b).unwrap();
+    let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
+    assert_eq!(model.register(&[], &mut s), Err(Error::EmptyCloud));
+    let mut pts = cloud(42, 20, 1.0);
+    pts[13][1] = f32::NAN;
+    assert_eq!(
+        model.register(&pts, &mut s),
+        Err(Error::NonFiniteCoordinate { index: 13 })
+    );
+    pts[13][1] = f32::NEG_INFINITY;
+    assert_eq!(
+        model.register(&pts, &mut s),
+        Err(Error::NonFiniteCoordinate { index: 13 })
+    );
+    pts[13][1] = 4.5; // input range is +-4
+    assert_eq!(
+        model.register(&pts, &mut s),
+        Err(Error::CoordinateOutOfRange { index: 13 })
+    );
+    // Extreme but valid coordinates work.
+    pts[13] = [3.9999, -3.9999, 0.0];
+    assert!(model.register(&pts, &mut s).is_ok());
+}
+
+#[test]
+fn scratch_is_checked_at_load_and_at_run() {
+    let b = blob(51, SMALL_ENC, SMALL_HEAD);
+    let model = Int8Model::from_bytes(&b).unwrap();
+    let need = model.scratch_len(1);
+    let small = vec![0i8; need - 1];
+    assert_eq!(
+        Int8Model::load(&b, &small).err(),
+        Some(Error::ScratchTooSmall {
+            needed: need,
+            available: need - 1
+        })
+    );
+    let mut small = small;
+    assert!(matches!(
+        model.register(&cloud(1, 3, 1.0), &mut small),
+        Err(Error::ScratchTooSmall { .. })
+    ));
+    assert!(matches!(
+        model.infer_tiled(&cloud(1, 3, 1.0), 0, &mut small),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let exact = vec![0i8; need];
+    assert!(Int8Model::load(&b, &exact).is_ok());
+}
+
+#[test]
+fn paper_architecture_runs() {
+    let b = blob(
+        61,
+        pcrnet_core::arch::PAPER_ENCODER,
+        pcrnet_core::arch::PCRNET_HEAD,
+    );
+    let model = Int8Model::from_bytes(&b).unwrap();
+    assert_eq!(model.scratch_len(8), 1024 + 2048);
+    let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
+    let pts = cloud(62, 40, 1.0);
+    let got = model.infer(&pts, &mut s).unwrap();
+    let (feature, raw) = reference(&model, &pts);
+    assert_eq!(got.feature, &feature[..]);
+    assert_eq!(got.head, raw);
+}
