@@ -1,0 +1,101 @@
+//! f32 parameters of a PCRNet held in owned arrays.
+
+use pcrnet_core::Arch;
+use pcrnet_core::float::{F32Network, Layer};
+use pcrnet_core::format::{F32Layer, F32Payload, ModelKind, write_blob};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Weights (`outputs x inputs`, row-major) and biases of every layer:
+/// encoder layers, hidden head layers, then the output layer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct F32Params {
+    /// Network shape.
+    pub arch: Arch,
+    /// `(weights, bias)` per layer, in [`Arch::encoder_layers`] then
+    /// [`Arch::head_layers`] order.
+    pub layers: Vec<(Vec<f32>, Vec<f32>)>,
+}
+
+impl F32Params {
+    /// He-uniform initial weights (`U[-sqrt(6/in), sqrt(6/in)]`) and zero
+    /// biases, fixed by `seed`.
+    pub fn init(arch: Arch, seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let layers = arch
+            .encoder_layers()
+            .chain(arch.head_layers())
+            .map(|s| {
+                let bound = (6.0 / s.inputs as f32).sqrt();
+                let w = (0..s.inputs * s.outputs)
+                    .map(|_| rng.random_range(-bound..bound))
+                    .collect();
+                (w, vec![0.0; s.outputs])
+            })
+            .collect();
+        F32Params { arch, layers }
+    }
+
+    /// A view for `pcrnet-core`'s f32 forward pass, with `template` as the
+    /// template feature.
+    pub fn network<'a>(
+        &'a self,
+        template: &'a [f32],
+    ) -> pcrnet_core::Result<F32Network<&'a [f32]>> {
+        let mut layers = heapless::Vec::new();
+        for (w, b) in &self.layers {
+            layers
+                .push(Layer {
+                    weights: &w[..],
+                    bias: &b[..],
+                })
+                .map_err(|_| pcrnet_core::Error::InconsistentDimensions {
+                    what: "too many layers",
+                })?;
+        }
+        F32Network::new(self.arch.clone(), layers, template)
+    }
+
+    /// The f32 global feature of a cloud.
+    pub fn encode(&self, cloud: &[[f32; 3]]) -> pcrnet_core::Result<Vec<f32>> {
+        let dummy = vec![0.0; self.arch.feature_dim()];
+        let net = self.network(&dummy)?;
+        let mut scratch = vec![0.0; net.scratch_len()];
+        Ok(net.encode(cloud, &mut scratch)?.to_vec())
+    }
+
+    /// Serialises an f32 blob whose template feature is `template`'s encoding.
+    pub fn to_f32_blob(&self, template: &[[f32; 3]]) -> pcrnet_core::Result<Vec<u8>> {
+        let feature = self.encode(template)?;
+        let bytes: Vec<(Vec<u8>, Vec<u8>)> = self
+            .layers
+            .iter()
+            .map(|(w, b)| (le_bytes(w), le_bytes(b)))
+            .collect();
+        let template_bytes = le_bytes(&feature);
+        let mut layers = heapless::Vec::new();
+        for (w, b) in &bytes {
+            layers
+                .push(F32Layer {
+                    weights: w,
+                    bias: b,
+                })
+                .map_err(|_| pcrnet_core::Error::InconsistentDimensions {
+                    what: "too many layers",
+                })?;
+        }
+        let payload = F32Payload {
+            arch: self.arch.clone(),
+            layers,
+            template_feature: &template_bytes,
+        };
+        let mut out = vec![0u8; pcrnet_core::format::blob_len(&payload)?];
+        write_blob(ModelKind::F32, &payload, &mut out)?;
+        Ok(out)
+    }
+}
+
+/// Little-endian bytes of f32 values.
+pub fn le_bytes(values: &[f32]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
