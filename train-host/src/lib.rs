@@ -8,9 +8,16 @@
 //! run over the arrays held here, so host and device share one network
 //! definition.
 
+pub mod inspect;
 pub mod net;
 pub mod quantize;
 pub mod shapes;
 
 pub use net::F32Params;
 pub use quantize::{CalibrationRule, QuantizeError, quantize};
+
+/// Encoder widths of the embedded default (provisional until the trained
+/// default of issue 3 fixes them by a measured size/accuracy trade-off).
+pub const EMBEDDED_ENCODER: &[u16] = &[32, 64, 128, 256];
+/// Hidden head widths of the embedded default (provisional, see above).
+pub const EMBEDDED_HEAD: &[u16] = &[256, 128, 64];

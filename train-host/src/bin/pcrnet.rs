@@ -1,0 +1,96 @@
+//! `pcrnet`: the host command line (inspect models, run the demo).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
+use pcrnet_train::shapes::{Shape, random_transform, sample};
+use pcrnet_train::{
+    CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, inspect, quantize,
+};
+
+#[derive(Parser)]
+#[command(
+    name = "pcrnet",
+    version,
+    about = "PCRNet point cloud registration: host tools"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print a model blob's layers, parameters, quantization, flash and RAM.
+    Inspect {
+        /// The blob (int8 or f32).
+        model: PathBuf,
+    },
+    /// Run points -> quantize -> encode -> head -> pose end to end on a
+    /// generated shape, int8 beside f32, with the embedded default architecture.
+    Demo {
+        /// Seed for weights, shape and transform.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Write the int8 and f32 blobs into this folder.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse().command {
+        Command::Inspect { model } => {
+            let blob =
+                std::fs::read(&model).with_context(|| format!("reading {}", model.display()))?;
+            let text = inspect::describe(&blob).with_context(|| format!("{}", model.display()))?;
+            print!("{text}");
+        }
+        Command::Demo { seed, out } => demo(seed, out)?,
+    }
+    Ok(())
+}
+
+fn demo(seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
+    let arch = Arch::new(EMBEDDED_ENCODER, EMBEDDED_HEAD)?;
+    println!("NOTE: weights are seeded random (untrained): this shows the pipeline, not accuracy.");
+    let params = F32Params::init(arch, seed);
+    let template = sample(Shape::Ell, 1024, seed);
+    let calibration: Vec<_> = (0..32)
+        .map(|i| random_transform(&template, 45.0, 1.0, seed * 1000 + i))
+        .collect();
+    let int8_blob = quantize(&params, &template, &calibration, CalibrationRule::default())?;
+    let f32_blob = params.to_f32_blob(&template)?;
+    if let Some(dir) = out {
+        std::fs::create_dir_all(&dir)?;
+        std::fs::write(dir.join("demo-int8.pcrn"), &int8_blob)?;
+        std::fs::write(dir.join("demo-f32.pcrn"), &f32_blob)?;
+    }
+    print!("{}", inspect::describe(&int8_blob)?);
+
+    let source = random_transform(&template, 45.0, 1.0, seed.wrapping_add(77));
+    let model = Int8Model::from_bytes(&int8_blob)?;
+    let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+    let pose = model.register(&source, &mut scratch)?;
+    let fmodel = F32Model::from_bytes(&f32_blob)?;
+    let mut fscratch = vec![0f32; fmodel.scratch_len()];
+    let fpose = fmodel.register(&source, &mut fscratch)?;
+    println!("source: {} points", source.len());
+    println!(
+        "int8 pose: q = {:?}, t = {:?}",
+        pose.rotation, pose.translation
+    );
+    println!(
+        "f32  pose: q = {:?}, t = {:?}",
+        fpose.rotation, fpose.translation
+    );
+    for row in pose.matrix() {
+        println!(
+            "  [{:>9.5} {:>9.5} {:>9.5} {:>9.5}]",
+            row[0], row[1], row[2], row[3]
+        );
+    }
+    Ok(())
+}

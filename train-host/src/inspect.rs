@@ -1,0 +1,124 @@
+//! Human-readable description of a model blob: layers, parameters, memory, MACs.
+
+use std::fmt::Write;
+
+use pcrnet_core::format::le_i32s;
+use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
+
+/// Describes a blob of either kind; errors if it is neither.
+pub fn describe(blob: &[u8]) -> Result<String, pcrnet_core::Error> {
+    match Int8Model::from_bytes(blob) {
+        Ok(m) => Ok(describe_int8(&m, blob.len())),
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            let m = F32Model::from_bytes(blob)?;
+            Ok(describe_f32(&m, blob.len()))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+fn shape_table(arch: &Arch, out: &mut String) {
+    let _ = writeln!(
+        out,
+        "  {:<10} {:>7} {:>7} {:>10} {:>10}",
+        "layer", "in", "out", "params", "MACs"
+    );
+    for (i, l) in arch.encoder_layers().enumerate() {
+        let _ = writeln!(
+            out,
+            "  {:<10} {:>7} {:>7} {:>10} {:>10}",
+            format!("enc{i}"),
+            l.inputs,
+            l.outputs,
+            l.parameters(),
+            format!("{}/pt", l.macs())
+        );
+    }
+    for (i, l) in arch.head_layers().enumerate() {
+        let _ = writeln!(
+            out,
+            "  {:<10} {:>7} {:>7} {:>10} {:>10}",
+            if l.relu {
+                format!("head{i}")
+            } else {
+                "output".into()
+            },
+            l.inputs,
+            l.outputs,
+            l.parameters(),
+            l.macs()
+        );
+    }
+    let _ = writeln!(
+        out,
+        "  parameters {}; encoder {} MACs/point; head {} MACs",
+        arch.parameters(),
+        arch.encoder_macs_per_point(),
+        arch.head_macs()
+    );
+}
+
+fn widths(arch: &Arch) -> String {
+    format!(
+        "encoder {:?}, head {:?} -> 7",
+        &arch.encoder[..],
+        &arch.head[..]
+    )
+}
+
+fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
+    let arch = m.arch();
+    let p = m.payload();
+    let mut s = String::new();
+    let _ = writeln!(s, "int8 model: {}", widths(arch));
+    shape_table(arch, &mut s);
+    let _ = writeln!(
+        s,
+        "  input: int16, scale {:.3e} (range +-{:.3})",
+        p.input_scale,
+        p.input_scale * 32767.0
+    );
+    let layers = p
+        .encoder
+        .iter()
+        .map(|l| ("enc", l))
+        .chain(p.head.iter().map(|l| ("head", l)));
+    for (i, (kind, l)) in layers.enumerate() {
+        let ms: Vec<i32> = le_i32s(l.multiplier).collect();
+        let (mmin, mmax) = (
+            ms.iter().min().copied().unwrap_or(0),
+            ms.iter().max().copied().unwrap_or(0),
+        );
+        let (smin, smax) = (
+            l.shift.iter().map(|&v| v as i8).min().unwrap_or(0),
+            l.shift.iter().map(|&v| v as i8).max().unwrap_or(0),
+        );
+        let _ = writeln!(
+            s,
+            "  {kind:<4} #{i}: out scale {:.3e} zero point {}; multiplier {mmin}..{mmax}, shift {smin}..{smax}",
+            l.out_scale, l.out_zero_point
+        );
+    }
+    let _ = writeln!(s, "flash (blob, weights used in place): {flash} bytes");
+    let _ = writeln!(
+        s,
+        "scratch RAM: {} bytes at tile 1, {} bytes at tile {MAX_TILE}",
+        m.scratch_len(1),
+        m.scratch_len(MAX_TILE)
+    );
+    s
+}
+
+fn describe_f32(m: &F32Model<'_>, size: usize) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "f32 model: {}", widths(m.arch()));
+    shape_table(m.arch(), &mut s);
+    let _ = writeln!(s, "size: {size} bytes");
+    let _ = writeln!(
+        s,
+        "scratch: {} f32 ({} bytes)",
+        m.scratch_len(),
+        4 * m.scratch_len()
+    );
+    s
+}
