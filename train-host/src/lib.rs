@@ -9,6 +9,7 @@
 //! definition.
 
 pub mod inspect;
+pub mod io;
 pub mod net;
 pub mod quantize;
 pub mod shapes;

@@ -37,6 +37,12 @@ enum Command {
         /// Write the int8 and f32 blobs into this folder.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Encoder widths (default: the embedded default).
+        #[arg(long, value_delimiter = ',')]
+        encoder: Option<Vec<u16>>,
+        /// Hidden head widths (default: the embedded default).
+        #[arg(long, value_delimiter = ',')]
+        head: Option<Vec<u16>>,
     },
 }
 
@@ -48,13 +54,23 @@ fn main() -> anyhow::Result<()> {
             let text = inspect::describe(&blob).with_context(|| format!("{}", model.display()))?;
             print!("{text}");
         }
-        Command::Demo { seed, out } => demo(seed, out)?,
+        Command::Demo {
+            seed,
+            out,
+            encoder,
+            head,
+        } => {
+            let arch = Arch::new(
+                encoder.as_deref().unwrap_or(EMBEDDED_ENCODER),
+                head.as_deref().unwrap_or(EMBEDDED_HEAD),
+            )?;
+            demo(arch, seed, out)?
+        }
     }
     Ok(())
 }
 
-fn demo(seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
-    let arch = Arch::new(EMBEDDED_ENCODER, EMBEDDED_HEAD)?;
+fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
     println!("NOTE: weights are seeded random (untrained): this shows the pipeline, not accuracy.");
     let params = F32Params::init(arch, seed);
     let template = sample(Shape::Ell, 1024, seed);

@@ -1,0 +1,333 @@
+//! Point cloud file readers: PCD, PLY, OFF (sampled to points) and XYZ text.
+//!
+//! [`read_cloud`] picks the format from the file extension and returns the
+//! points as `[x, y, z]` in `f32`. Each format also has a `parse` function
+//! over bytes, so callers (and tests) need no files.
+//!
+//! Common rules:
+//! - Only x, y and z are kept; every other field, property or column is read
+//!   past and dropped.
+//! - Points with a non-finite coordinate (NaN placeholders of organised PCD
+//!   clouds, stray `inf`s) are dropped, in every format. A valid file whose
+//!   points are all dropped, or that declares none, gives an empty cloud.
+//! - No input panics, and no buffer is sized from a count in the file before
+//!   the bytes that count promises have been checked to be there.
+//!
+//! Crate choices (checked against crates.io with `cargo info` and by reading
+//! the published sources):
+//! - `pcd-rs` 0.13 reads `binary_compressed` and dynamic fields, but it sizes
+//!   buffers from the untrusted `u32` compressed/uncompressed sizes
+//!   (`vec![0u8; compressed_size]`) and transposes the decompressed columns by
+//!   slicing without checking the length against `POINTS`, which panics on
+//!   malformed files; it also pulls in `regex`, `itertools` and `thiserror` 1.
+//!   So PCD is parsed here ([`pcd`]).
+//! - `lzf` 1.0 is marked DEPRECATED by its author and allocates the full
+//!   claimed output size up front; the LZF decompressor here is ~40 lines of
+//!   safe Rust with bounded allocation (see [`pcd`]).
+//! - `ply-rs` 0.1.3 is unmaintained (last release years ago, `peg` 0.6,
+//!   a `skeptic` build script) and builds a hash map per element, which is
+//!   heavy for clouds; the focused parser in [`ply`] only extracts x, y, z.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+pub mod off;
+pub mod pcd;
+pub mod ply;
+pub mod xyz;
+
+/// Number of points [`read_cloud`] samples from an OFF mesh.
+pub const DEFAULT_OFF_SAMPLES: usize = 2048;
+
+/// Seed [`read_cloud`] uses when sampling an OFF mesh.
+pub const DEFAULT_OFF_SEED: u64 = 0x5EED;
+
+/// What is wrong with the bytes of a file (independent of where they came from).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FormatError {
+    /// The header is missing, malformed, or describes a layout this reader
+    /// does not support.
+    #[error("{format} header: {message}")]
+    Header {
+        /// Format name, e.g. `"PCD"`.
+        format: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// The data ends before everything the header promises.
+    #[error("{section}: expected {expected} {unit}, found {found}")]
+    Truncated {
+        /// Part of the file being read, e.g. `"DATA binary"`.
+        section: String,
+        /// What was expected.
+        expected: u64,
+        /// Unit of `expected` and `found`, e.g. `"bytes of points"`.
+        unit: &'static str,
+        /// What was there.
+        found: u64,
+    },
+    /// A value in the data section is malformed.
+    #[error("{section}: {message}")]
+    Data {
+        /// Part of the file being read, e.g. `"DATA ascii line 12"`.
+        section: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A mesh cannot be sampled (no faces, zero area, bad indices).
+    #[error("OFF mesh: {0}")]
+    Mesh(String),
+}
+
+impl FormatError {
+    pub(crate) fn header(format: &'static str, message: impl Into<String>) -> Self {
+        FormatError::Header {
+            format,
+            message: message.into(),
+        }
+    }
+
+    pub(crate) fn data(section: impl Into<String>, message: impl Into<String>) -> Self {
+        FormatError::Data {
+            section: section.into(),
+            message: message.into(),
+        }
+    }
+
+    pub(crate) fn truncated(
+        section: impl Into<String>,
+        expected: u64,
+        unit: &'static str,
+        found: u64,
+    ) -> Self {
+        FormatError::Truncated {
+            section: section.into(),
+            expected,
+            unit,
+            found,
+        }
+    }
+}
+
+/// Failure to read a point cloud file. The message names the file and says
+/// what is wrong, e.g.
+/// `bunny.pcd: DATA binary: expected 12288 bytes of points, found 100`.
+///
+/// The cause is already part of the message, so `source()` returns `None`
+/// (error reporters would otherwise print it twice); match on the variant to
+/// get at it.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadError {
+    /// The file could not be read.
+    #[error("{}: {error}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        error: std::io::Error,
+    },
+    /// The file was read but its contents are not a valid cloud.
+    #[error("{}: {error}", path.display())]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with the contents.
+        error: FormatError,
+    },
+    /// The extension names no supported format.
+    #[error(
+        "{}: unknown point cloud format (expected extension .pcd, .ply, .off, .xyz or .txt)",
+        path.display()
+    )]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+}
+
+/// Supported file formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Format {
+    /// Point Cloud Library PCD (ascii, binary, binary_compressed).
+    Pcd,
+    /// Stanford PLY (ascii, binary little and big endian).
+    Ply,
+    /// Object File Format mesh, sampled to points.
+    Off,
+    /// Whitespace- or comma-separated text, one point per line.
+    Xyz,
+}
+
+impl Format {
+    /// Format named by the extension of `path` (case-insensitive):
+    /// `.pcd`, `.ply`, `.off`, `.xyz` or `.txt`.
+    pub fn from_path(path: &Path) -> Option<Format> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "pcd" => Some(Format::Pcd),
+            "ply" => Some(Format::Ply),
+            "off" => Some(Format::Off),
+            "xyz" | "txt" => Some(Format::Xyz),
+            _ => None,
+        }
+    }
+
+    /// Parses `bytes` in this format. OFF meshes are sampled with
+    /// [`DEFAULT_OFF_SAMPLES`] points and [`DEFAULT_OFF_SEED`].
+    pub fn parse(self, bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+        match self {
+            Format::Pcd => pcd::parse(bytes),
+            Format::Ply => ply::parse(bytes),
+            Format::Off => off::parse_sampled(bytes, DEFAULT_OFF_SAMPLES, DEFAULT_OFF_SEED),
+            Format::Xyz => xyz::parse(bytes),
+        }
+    }
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Format::Pcd => "PCD",
+            Format::Ply => "PLY",
+            Format::Off => "OFF",
+            Format::Xyz => "XYZ",
+        })
+    }
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
+    std::fs::read(path).map_err(|error| ReadError::Io {
+        path: path.to_path_buf(),
+        error,
+    })
+}
+
+fn with_path<T>(path: &Path, r: Result<T, FormatError>) -> Result<T, ReadError> {
+    r.map_err(|error| ReadError::Format {
+        path: path.to_path_buf(),
+        error,
+    })
+}
+
+/// Reads a point cloud, choosing the format by extension (see
+/// [`Format::from_path`]). OFF meshes are sampled to [`DEFAULT_OFF_SAMPLES`]
+/// points with the fixed seed [`DEFAULT_OFF_SEED`].
+pub fn read_cloud(path: &Path) -> Result<Vec<[f32; 3]>, ReadError> {
+    let format = Format::from_path(path).ok_or_else(|| ReadError::UnknownFormat {
+        path: path.to_path_buf(),
+    })?;
+    let bytes = read_bytes(path)?;
+    with_path(path, format.parse(&bytes))
+}
+
+/// Reads an OFF mesh and samples `n` points uniformly over its surface,
+/// deterministically for a given `seed` (see [`off::sample`]).
+pub fn read_off_sampled(path: &Path, n: usize, seed: u64) -> Result<Vec<[f32; 3]>, ReadError> {
+    let bytes = read_bytes(path)?;
+    with_path(path, off::parse_sampled(&bytes, n, seed))
+}
+
+/// Keeps the point if all three coordinates are finite.
+pub(crate) fn finite(p: [f32; 3]) -> Option<[f32; 3]> {
+    p.iter().all(|v| v.is_finite()).then_some(p)
+}
+
+/// Parses a text number as `f64` (accepts `nan`, `inf`, exponents).
+pub(crate) fn parse_num(tok: &str) -> Option<f64> {
+    tok.parse::<f64>().ok()
+}
+
+/// Shortens untrusted text for error messages.
+pub(crate) fn snippet(s: &str) -> String {
+    const MAX: usize = 40;
+    let s = s.trim();
+    if s.chars().count() <= MAX {
+        format!("{s:?}")
+    } else {
+        let cut: String = s.chars().take(MAX).collect();
+        format!("{cut:?}...")
+    }
+}
+
+/// Binary scalar types shared by PCD and PLY.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    I64,
+    U64,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    /// Size in bytes.
+    pub(crate) fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::I64 | Scalar::U64 | Scalar::F64 => 8,
+        }
+    }
+
+    pub(crate) fn is_integer(self) -> bool {
+        !matches!(self, Scalar::F32 | Scalar::F64)
+    }
+
+    /// Decodes a value from exactly `self.size()` bytes. Returns `None` if
+    /// `b` is too short.
+    pub(crate) fn read(self, b: &[u8], big_endian: bool) -> Option<f64> {
+        let b = b.get(..self.size())?;
+        macro_rules! num {
+            ($t:ty) => {{
+                let arr = b.try_into().ok()?;
+                if big_endian {
+                    <$t>::from_be_bytes(arr)
+                } else {
+                    <$t>::from_le_bytes(arr)
+                }
+            }};
+        }
+        Some(match self {
+            Scalar::I8 => f64::from(b[0] as i8),
+            Scalar::U8 => f64::from(b[0]),
+            Scalar::I16 => f64::from(num!(i16)),
+            Scalar::U16 => f64::from(num!(u16)),
+            Scalar::I32 => f64::from(num!(i32)),
+            Scalar::U32 => f64::from(num!(u32)),
+            Scalar::I64 => num!(i64) as f64,
+            Scalar::U64 => num!(u64) as f64,
+            Scalar::F32 => f64::from(num!(f32)),
+            Scalar::F64 => num!(f64),
+        })
+    }
+}
+
+/// Splits off the next line (without `\n` or a trailing `\r`) starting at
+/// `*pos`, advancing `*pos` past the newline. `None` at end of input.
+pub(crate) fn next_line<'a>(bytes: &'a [u8], pos: &mut usize) -> Option<&'a [u8]> {
+    let rest = bytes.get(*pos..).filter(|r| !r.is_empty())?;
+    let (line, advance) = match rest.iter().position(|&c| c == b'\n') {
+        Some(i) => (&rest[..i], i + 1),
+        None => (rest, rest.len()),
+    };
+    *pos += advance;
+    Some(line.strip_suffix(b"\r").unwrap_or(line))
+}
+
+/// Decodes the bytes of a text format; `section` names the part for errors.
+pub(crate) fn text<'a>(bytes: &'a [u8], section: &str) -> Result<&'a str, FormatError> {
+    std::str::from_utf8(bytes).map_err(|e| {
+        FormatError::data(
+            section,
+            format!("not text (invalid UTF-8 at byte {})", e.valid_up_to()),
+        )
+    })
+}

@@ -1,0 +1,39 @@
+//! Plain text point lists (`.xyz`, `.txt`): one point per line, the first
+//! three numbers being x, y and z, separated by whitespace and/or commas.
+//! Further columns (normals, colours, labels) are ignored, blank lines and
+//! `#` comments (whole-line or trailing) are skipped.
+
+use super::{FormatError, finite, parse_num, snippet, text};
+
+/// Parses an XYZ text file held in memory and returns its finite points.
+pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+    let body = text(bytes, "XYZ")?;
+    let mut out = Vec::new();
+    for (i, line) in body.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or_default();
+        let mut toks = line
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|t| !t.is_empty());
+        let Some(first) = toks.next() else { continue };
+        let section = || format!("XYZ line {}", i + 1);
+        let mut p = [0f32; 3];
+        for (k, v) in p.iter_mut().enumerate() {
+            let tok = if k == 0 { Some(first) } else { toks.next() };
+            let tok = tok.ok_or_else(|| {
+                FormatError::data(section(), format!("expected 3 numbers, found {k}"))
+            })?;
+            *v = parse_num(tok).ok_or_else(|| {
+                FormatError::data(
+                    section(),
+                    format!(
+                        "{} value {} is not a number",
+                        ["x", "y", "z"][k],
+                        snippet(tok)
+                    ),
+                )
+            })? as f32;
+        }
+        out.extend(finite(p));
+    }
+    Ok(out)
+}
