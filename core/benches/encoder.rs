@@ -1,4 +1,6 @@
 //! Benchmarks of the pcrnet-core encoder.
+// criterion_group! generates an undocumented public function.
+#![allow(missing_docs)]
 //! Host throughput of the encoder, int8 and f32, for the paper's widths and
 //! a small embedded configuration. Throughput is reported in points/s; the
 //! benchmark id carries the MACs per point, so MAC/s = points/s x MACs.

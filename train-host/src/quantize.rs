@@ -267,8 +267,7 @@ pub fn quantize(
     debug_assert_eq!(output.acc_scale.len(), POSE_DIM);
 
     let zeros = vec![0u8; arch.feature_dim()];
-    let template_feature: Vec<u8>;
-    let mut payload = Int8Payload {
+    let draft = Int8Payload {
         arch: arch.clone(),
         input_scale,
         encoder: layers[..n_enc].iter().map(QLayer::view).collect(),
@@ -280,14 +279,17 @@ pub fn quantize(
         },
         template_feature: &zeros,
     };
-    let model = Int8Model::from_payload(payload.clone())?;
+    let model = Int8Model::from_payload(draft.clone())?;
     let mut scratch = vec![0i8; model.scratch_len(pcrnet_core::MAX_TILE)];
-    template_feature = model
+    let template_feature: Vec<u8> = model
         .encode(template, &mut scratch)?
         .iter()
         .map(|&v| v as u8)
         .collect();
-    payload.template_feature = &template_feature;
+    let payload = Int8Payload {
+        template_feature: &template_feature,
+        ..draft
+    };
     let mut out = vec![0u8; blob_len(&payload)?];
     write_blob(ModelKind::Int8, &payload, &mut out)?;
     Int8Model::from_bytes(&out)?;
