@@ -79,14 +79,17 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
         .collect();
     let int8_blob = quantize(&params, &template, &calibration, CalibrationRule::default())?;
     let f32_blob = params.to_f32_blob(&template)?;
+    let source = random_transform(&template, 45.0, 1.0, seed.wrapping_add(77));
     if let Some(dir) = out {
         std::fs::create_dir_all(&dir)?;
-        std::fs::write(dir.join("demo-int8.pcrn"), &int8_blob)?;
-        std::fs::write(dir.join("demo-f32.pcrn"), &f32_blob)?;
+        std::fs::write(dir.join("demo-untrained-int8.pcrn"), &int8_blob)?;
+        std::fs::write(dir.join("demo-untrained-f32.pcrn"), &f32_blob)?;
+        let bytes: Vec<u8> = source.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        std::fs::write(dir.join("demo-source.f32"), bytes)?;
+        println!("wrote demo-untrained-int8.pcrn, demo-untrained-f32.pcrn, demo-source.f32 to {}", dir.display());
     }
     print!("{}", inspect::describe(&int8_blob)?);
 
-    let source = random_transform(&template, 45.0, 1.0, seed.wrapping_add(77));
     let model = Int8Model::from_bytes(&int8_blob)?;
     let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
     let pose = model.register(&source, &mut scratch)?;
