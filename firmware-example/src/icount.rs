@@ -8,7 +8,7 @@
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
-use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use cortex_m::peripheral::{SCB, SYST, syst::SystClkSource};
 use cortex_m_rt::exception;
 
 /// Instructions per SysTick tick under `-icount shift=0` at 25 MHz.
@@ -32,17 +32,30 @@ impl Counter {
         WRAPS.store(0, Ordering::SeqCst);
         syst.enable_interrupt();
         syst.enable_counter();
+        // The counter holds 0 until its first tick loads RELOAD (that load
+        // is not a wrap): wait for it so counting starts from a clean state.
+        while SYST::get_current() == 0 {}
+        WRAPS.store(0, Ordering::SeqCst);
         Counter { _syst: syst }
     }
 
     /// Ticks since [`Counter::start`].
+    ///
+    /// QEMU takes a pending exception only at the end of a translation
+    /// block, so the counter can have wrapped while the SysTick exception
+    /// that counts the wrap is still pending: such a wrap is added here.
     pub fn ticks(&self) -> u64 {
         loop {
-            let before = WRAPS.load(Ordering::SeqCst);
+            let wraps = WRAPS.load(Ordering::SeqCst);
             let current = SYST::get_current();
-            if WRAPS.load(Ordering::SeqCst) == before {
-                return before as u64 * (RELOAD as u64 + 1) + (RELOAD - current) as u64;
+            let pending = SCB::is_pendst_pending();
+            let again = SYST::get_current();
+            // Retry if the exception ran, or the counter wrapped between the reads.
+            if WRAPS.load(Ordering::SeqCst) != wraps || again > current {
+                continue;
             }
+            let wraps = wraps as u64 + pending as u64;
+            return wraps * (RELOAD as u64 + 1) + (RELOAD - current) as u64;
         }
     }
 

@@ -10,10 +10,22 @@
 #![no_main]
 
 use cortex_m_rt::entry;
-use cortex_m_semihosting::{debug, hprintln};
+use cortex_m_semihosting::debug;
+#[cfg(feature = "defmt")]
+use defmt_semihosting as _;
 use panic_semihosting as _;
 use pcrnet_core::{Int8Model, MAX_TILE, int8_scratch_len};
 use pcrnet_firmware_example::icount::Counter;
+
+/// Text over semihosting, or defmt frames with the `defmt` feature.
+#[cfg(not(feature = "defmt"))]
+macro_rules! log {
+    ($($t:tt)*) => { cortex_m_semihosting::hprintln!($($t)*) };
+}
+#[cfg(feature = "defmt")]
+macro_rules! log {
+    ($($t:tt)*) => { defmt::println!($($t)*) };
+}
 
 /// The int8 model, used in place from flash (no alignment needed).
 static MODEL: &[u8] = include_bytes!("../../models/demo-untrained-int8.pcrn");
@@ -47,23 +59,26 @@ fn main() -> ! {
             let used = counter.instructions() - start;
             match result {
                 Ok(pose) => {
-                    hprintln!("points: {}", POINTS);
-                    hprintln!("rotation (w, x, y, z): {:?}", pose.rotation);
-                    hprintln!("translation: {:?}", pose.translation);
-                    hprintln!("instructions: {}", used);
+                    log!("points: {}", POINTS);
+                    log!("rotation (w, x, y, z): {:?}", pose.rotation);
+                    log!("translation: {:?}", pose.translation);
+                    log!("instructions: {}", used);
                     debug::EXIT_SUCCESS
                 }
                 Err(e) => {
-                    hprintln!("registration failed: {}", e);
+                    log!("registration failed: {:?}", e);
                     debug::EXIT_FAILURE
                 }
             }
         }
         Err(e) => {
-            hprintln!("model rejected: {}", e);
+            log!("model rejected: {:?}", e);
             debug::EXIT_FAILURE
         }
     };
     debug::exit(code);
-    loop {}
+    // Not reached under QEMU (semihosting exit ends the emulator).
+    loop {
+        cortex_m::asm::wfi();
+    }
 }

@@ -19,8 +19,9 @@ fn bounds() -> (usize, usize) {
 }
 
 /// Paints the unused stack (from the end of static RAM up to just below the
-/// current stack pointer).
-pub fn paint() {
+/// current stack pointer) and returns that stack pointer, the baseline for
+/// [`used_below`].
+pub fn paint() -> usize {
     let (low, _) = bounds();
     let sp = cortex_m::register::msp::read() as usize;
     let mut p = low;
@@ -30,17 +31,30 @@ pub fn paint() {
         unsafe { core::ptr::write_volatile(p as *mut u32, PAINT) };
         p += 4;
     }
+    sp
 }
 
-/// Bytes of stack used at the deepest point since [`paint`].
-pub fn peak() -> usize {
+/// The lowest stack address written since [`paint`].
+fn deepest() -> usize {
     let (low, top) = bounds();
     let mut p = low;
     // SAFETY: reads RAM inside [low, top).
     while p < top && unsafe { core::ptr::read_volatile(p as *const u32) } == PAINT {
         p += 4;
     }
-    top - p
+    p
+}
+
+/// Bytes of stack used at the deepest point since [`paint`], counted from
+/// the top of the stack (the whole program's stack).
+pub fn peak() -> usize {
+    bounds().1 - deepest()
+}
+
+/// Bytes of stack used below `baseline` (the value [`paint`] returned) at
+/// the deepest point since: what the code called after `paint` needed.
+pub fn used_below(baseline: usize) -> usize {
+    baseline.saturating_sub(deepest())
 }
 
 /// Bytes of statically allocated RAM (`.data` + `.bss` + `.uninit`).

@@ -1,1 +1,16 @@
-//! QEMU harness (work in progress, see issue 4).
+//! The QEMU harness: test vectors computed by `pcrnet-core` on the host,
+//! run by the same code cross-compiled for a Cortex-M4F under QEMU, and
+//! compared bit for bit.
+//!
+//! 1. [`vectors`] builds models and clouds (seeded) and the container QEMU
+//!    loads into PSRAM, with the host's expected outputs;
+//! 2. [`qemu`] cross-compiles the device runner (`tests/firmware`) and runs it
+//!    with a timeout;
+//! 3. [`compare`] parses the device's lines and compares every value with
+//!    the host's, naming the first that differs;
+//! 4. [`elf`] reads flash and RAM sizes from the firmware images.
+
+pub mod compare;
+pub mod elf;
+pub mod qemu;
+pub mod vectors;

@@ -12,11 +12,20 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 const HELP: &str = "\
 cargo xtask <command>
 
-  ci          everything CI checks: fmt, clippy -D warnings, host tests,
-              core built for thumbv7em-none-eabihf (also with defmt), docs
-  demo        the main job on the embedded default (pcrnet demo)
-  bench       host benchmarks of the encoder (criterion)
-  help        this text
+  ci            everything CI checks: fmt, clippy -D warnings (host and
+                firmware crates), docs, core for thumbv7em-none-eabihf,
+                the QEMU harness, then the host tests
+  demo          the main job on the embedded default (pcrnet demo)
+  qemu-test     run core on an emulated Cortex-M4F and compare every output
+                with the host bit for bit; then prove a changed rounding on
+                the device is caught
+  firmware-run  build firmware-example and run it under QEMU
+  size          flash and static RAM of firmware-example
+  bench         host benchmarks of the encoder (criterion)
+  help          this text
+
+Missing tools are installed: the thumbv7em-none-eabihf target (rustup) and
+qemu-system-arm (apt-get).
 ";
 
 fn main() -> ExitCode {
@@ -25,6 +34,9 @@ fn main() -> ExitCode {
         Some("ci") => ci(),
         Some("demo") => demo(&args[1..]),
         Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "--bench", "encoder"]),
+        Some("qemu-test") => qemu_test(),
+        Some("firmware-run") => firmware_run(),
+        Some("size") => ensure_target().and_then(|()| harness(&["size"])),
         Some("help") | None => {
             print!("{HELP}");
             Ok(())
@@ -71,6 +83,54 @@ fn ensure_target() -> Result<(), String> {
     run("rustup", &["target", "add", TARGET])
 }
 
+/// The crates built for the device, outside the host workspace.
+const FIRMWARE_CRATES: [&str; 2] = ["firmware-example", "tests/firmware"];
+
+/// Installs qemu-system-arm through apt-get if it is not on the PATH.
+fn ensure_qemu() -> Result<(), String> {
+    let found = Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if found {
+        return Ok(());
+    }
+    run("apt-get", &["update"])?;
+    run(
+        "apt-get",
+        &[
+            "install",
+            "-y",
+            "--no-install-recommends",
+            "qemu-system-arm",
+        ],
+    )
+}
+
+/// Runs the harness binary (tests/) in release mode.
+fn harness(args: &[&str]) -> Result<(), String> {
+    let mut all = vec!["run", "--release", "-p", "pcrnet-qemu-tests", "--"];
+    all.extend_from_slice(args);
+    cargo(&all)
+}
+
+fn qemu_test() -> Result<(), String> {
+    ensure_target()?;
+    ensure_qemu()?;
+    harness(&["run"])?;
+    harness(&["run", "--mutate-device-rounding"])
+}
+
+fn firmware_run() -> Result<(), String> {
+    ensure_target()?;
+    ensure_qemu()?;
+    run_in(
+        &root().join("firmware-example"),
+        env!("CARGO"),
+        &["run", "--release"],
+    )
+}
+
 fn ci() -> Result<(), String> {
     ensure_target()?;
     cargo(&["fmt", "--all", "--", "--check"])?;
@@ -82,16 +142,21 @@ fn ci() -> Result<(), String> {
         "-D",
         "warnings",
     ])?;
+    for dir in FIRMWARE_CRATES {
+        let dir = root().join(dir);
+        run_in(&dir, env!("CARGO"), &["fmt", "--", "--check"])?;
+        run_in(
+            &dir,
+            env!("CARGO"),
+            &["clippy", "--release", "--", "-D", "warnings"],
+        )?;
+    }
+    run_in(
+        &root().join("firmware-example"),
+        env!("CARGO"),
+        &["build", "--release", "--features", "defmt"],
+    )?;
     cargo(&["build", "-p", "pcrnet-core", "--target", TARGET])?;
-    cargo(&[
-        "build",
-        "-p",
-        "pcrnet-core",
-        "--target",
-        TARGET,
-        "--features",
-        "defmt",
-    ])?;
     cargo(&[
         "clippy",
         "-p",
@@ -107,17 +172,32 @@ fn ci() -> Result<(), String> {
         &["doc", "--workspace", "--no-deps"],
         &[("RUSTDOCFLAGS", "-D warnings")],
     )?;
+    qemu_test()?;
     cargo(&["test", "--workspace"])
 }
 
 /// Runs a command in the workspace root with extra environment variables.
 fn run_with_env(program: &str, args: &[&str], env: &[(&str, &str)]) -> Result<(), String> {
+    run_in_with_env(&root(), program, args, env)
+}
+
+/// Runs a command in `dir`.
+fn run_in(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
+    run_in_with_env(dir, program, args, &[])
+}
+
+fn run_in_with_env(
+    dir: &Path,
+    program: &str,
+    args: &[&str],
+    env: &[(&str, &str)],
+) -> Result<(), String> {
     let shown: Vec<String> = env.iter().map(|(k, v)| format!("{k}={v} ")).collect();
     println!("$ {}{program} {}", shown.concat(), args.join(" "));
     let status = Command::new(program)
         .args(args)
         .envs(env.iter().copied())
-        .current_dir(root())
+        .current_dir(dir)
         .status()
         .map_err(|e| format!("cannot start {program}: {e}"))?;
     if status.success() {

@@ -84,9 +84,16 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
         std::fs::create_dir_all(&dir)?;
         std::fs::write(dir.join("demo-untrained-int8.pcrn"), &int8_blob)?;
         std::fs::write(dir.join("demo-untrained-f32.pcrn"), &f32_blob)?;
-        let bytes: Vec<u8> = source.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let bytes: Vec<u8> = source
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
         std::fs::write(dir.join("demo-source.f32"), bytes)?;
-        println!("wrote demo-untrained-int8.pcrn, demo-untrained-f32.pcrn, demo-source.f32 to {}", dir.display());
+        println!(
+            "wrote demo-untrained-int8.pcrn, demo-untrained-f32.pcrn, demo-source.f32 to {}",
+            dir.display()
+        );
     }
     print!("{}", inspect::describe(&int8_blob)?);
 

@@ -1,0 +1,207 @@
+//! Parsing the device's lines and comparing them with the host's values.
+
+use std::collections::BTreeMap;
+
+use pcrnet_core::POSE_DIM;
+
+use crate::vectors::Expected;
+
+/// What the device printed for one case.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceResult {
+    /// The outputs, in the same form as the host's.
+    pub outputs: Expected,
+    /// Instructions spent by `encode_tiled` alone (successful cases).
+    pub encode_instructions: u64,
+    /// Instructions spent by `infer_tiled` + pose (successful cases).
+    pub infer_instructions: u64,
+    /// Peak stack bytes during the case.
+    pub stack: usize,
+}
+
+/// Everything the device printed.
+#[derive(Debug, Default)]
+pub struct DeviceRun {
+    /// `(expected instructions, measured instructions)` of the calibration loop.
+    pub calibration: Option<(u64, u64)>,
+    /// Static RAM of the runner.
+    pub static_ram: Option<usize>,
+    /// Per case index.
+    pub cases: BTreeMap<usize, DeviceResult>,
+    /// Lines that were not understood (reported, and they fail the run).
+    pub unparsed: Vec<String>,
+    /// Whether the runner printed its closing `done`.
+    pub done: bool,
+}
+
+const POSE_NAMES: [&str; POSE_DIM] = ["qw", "qx", "qy", "qz", "tx", "ty", "tz"];
+
+fn parse_ok(rest: &[&str]) -> Option<DeviceResult> {
+    let [enc, total, stack, "feature", hex, "head", tail @ ..] = rest else {
+        return None;
+    };
+    let feature = (0..hex.len() / 2)
+        .map(|i| {
+            u8::from_str_radix(hex.get(2 * i..2 * i + 2)?, 16)
+                .ok()
+                .map(|b| b as i8)
+        })
+        .collect::<Option<Vec<i8>>>()?;
+    let mut head = [0i32; POSE_DIM];
+    for (h, s) in head.iter_mut().zip(tail) {
+        *h = s.parse().ok()?;
+    }
+    let tail = tail.get(POSE_DIM..)?;
+    let pose = match tail {
+        ["pose", bits @ ..] if bits.len() == POSE_DIM => {
+            let mut out = [0u32; POSE_DIM];
+            for (o, s) in out.iter_mut().zip(bits) {
+                *o = u32::from_str_radix(s, 16).ok()?;
+            }
+            Ok(out)
+        }
+        ["pose_error", e @ ..] => Err(e.join(" ")),
+        _ => return None,
+    };
+    Some(DeviceResult {
+        outputs: Expected::Ok {
+            feature,
+            head,
+            pose,
+        },
+        encode_instructions: enc.parse().ok()?,
+        infer_instructions: total.parse().ok()?,
+        stack: stack.parse().ok()?,
+    })
+}
+
+/// Parses the runner's output.
+pub fn parse(stdout: &str) -> DeviceRun {
+    let mut run = DeviceRun::default();
+    for line in stdout.lines().map(str::trim).filter(|l| !l.is_empty()) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let parsed = match words.as_slice() {
+            ["calibration", want, got] => want
+                .parse()
+                .ok()
+                .zip(got.parse().ok())
+                .map(|c| run.calibration = Some(c)),
+            ["static_ram", n] => n.parse().ok().map(|n| run.static_ram = Some(n)),
+            ["done"] => {
+                run.done = true;
+                Some(())
+            }
+            ["case", c, "ok", rest @ ..] => c.parse().ok().zip(parse_ok(rest)).map(|(c, r)| {
+                run.cases.insert(c, r);
+            }),
+            ["case", c, "error", encoded, error @ ..] => c
+                .parse()
+                .ok()
+                .zip(encoded.parse().ok())
+                .map(|(c, encoded)| {
+                    run.cases.insert(
+                        c,
+                        DeviceResult {
+                            outputs: Expected::Err {
+                                encoded,
+                                error: error.join(" "),
+                            },
+                            encode_instructions: 0,
+                            infer_instructions: 0,
+                            stack: 0,
+                        },
+                    );
+                }),
+            _ => None,
+        };
+        if parsed.is_none() {
+            run.unparsed.push(line.to_string());
+        }
+    }
+    run
+}
+
+/// The first value that differs between host and device, if any.
+pub fn first_difference(host: &Expected, device: &Expected) -> Option<String> {
+    match (host, device) {
+        (
+            Expected::Ok {
+                feature: hf,
+                head: hh,
+                pose: hp,
+            },
+            Expected::Ok {
+                feature: df,
+                head: dh,
+                pose: dp,
+            },
+        ) => {
+            if hf.len() != df.len() {
+                return Some(format!(
+                    "feature length: host {} device {}",
+                    hf.len(),
+                    df.len()
+                ));
+            }
+            if let Some(i) = (0..hf.len()).find(|&i| hf[i] != df[i]) {
+                return Some(format!("feature[{i}]: host {} device {}", hf[i], df[i]));
+            }
+            if let Some(i) = (0..POSE_DIM).find(|&i| hh[i] != dh[i]) {
+                return Some(format!("head[{i}]: host {} device {}", hh[i], dh[i]));
+            }
+            match (hp, dp) {
+                (Ok(h), Ok(d)) => (0..POSE_DIM).find(|&i| h[i] != d[i]).map(|i| {
+                    format!(
+                        "pose {}: host {:08x} ({}) device {:08x} ({})",
+                        POSE_NAMES[i],
+                        h[i],
+                        f32::from_bits(h[i]),
+                        d[i],
+                        f32::from_bits(d[i])
+                    )
+                }),
+                (h, d) if h == d => None,
+                (h, d) => Some(format!("pose: host {h:?} device {d:?}")),
+            }
+        }
+        (h, d) if h == d => None,
+        (h, d) => Some(format!("host {h:?}, device {d:?}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_and_compares() {
+        let out = "calibration 2000000 2000000\nstatic_ram 65600\n\
+                   case 0 ok 100 250 512 feature 7f80ff00 head 1 -2 3 4 5 6 7 pose 3f800000 0 0 0 0 0 0\n\
+                   case 1 error false EmptyCloud\ndone\n";
+        let run = parse(out);
+        assert!(run.done && run.unparsed.is_empty());
+        assert_eq!(run.calibration, Some((2_000_000, 2_000_000)));
+        let c0 = &run.cases[&0];
+        assert_eq!(c0.encode_instructions, 100);
+        let host = Expected::Ok {
+            feature: vec![127, -128, -1, 0],
+            head: [1, -2, 3, 4, 5, 6, 7],
+            pose: Ok([0x3f80_0000, 0, 0, 0, 0, 0, 0]),
+        };
+        assert_eq!(first_difference(&host, &c0.outputs), None);
+        let mut other = host.clone();
+        if let Expected::Ok { feature, .. } = &mut other {
+            feature[2] = 5;
+        }
+        assert_eq!(
+            first_difference(&other, &c0.outputs).as_deref(),
+            Some("feature[2]: host 5 device -1")
+        );
+        let err = Expected::Err {
+            encoded: false,
+            error: "EmptyCloud".into(),
+        };
+        assert_eq!(first_difference(&err, &run.cases[&1].outputs), None);
+        assert!(parse("case 3 ok garbage").unparsed.len() == 1);
+    }
+}
