@@ -15,7 +15,7 @@ use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 use panic_semihosting as _;
 use pcrnet_core::{Int8Model, MAX_TILE, int8_scratch_len};
-use pcrnet_firmware_example::icount::Counter;
+use pcrnet_firmware_example::{icount::Counter, stack};
 
 /// Text over semihosting, or defmt frames with the `defmt` feature.
 #[cfg(not(feature = "defmt"))]
@@ -43,6 +43,7 @@ fn main() -> ! {
     static mut SCRATCH_BUF: [i8; SCRATCH] = [0; SCRATCH];
     static mut CLOUD: [[f32; 3]; POINTS] = [[0.0; 3]; POINTS];
 
+    stack::paint();
     let core = cortex_m::Peripherals::take().unwrap();
     let counter = Counter::start(core.SYST);
 
@@ -63,6 +64,7 @@ fn main() -> ! {
                     log!("rotation (w, x, y, z): {:?}", pose.rotation);
                     log!("translation: {:?}", pose.translation);
                     log!("instructions: {}", used);
+                    log!("peak stack: {} bytes", stack::peak());
                     debug::EXIT_SUCCESS
                 }
                 Err(e) => {
