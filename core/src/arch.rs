@@ -142,6 +142,17 @@ impl Arch {
             .sum()
     }
 
+    /// Width of the widest hidden encoder layer (the last one feeds the
+    /// max-pool and needs no buffer); 0 with a single encoder layer.
+    pub fn widest_hidden_encoder(&self) -> usize {
+        max_of(&self.encoder, true)
+    }
+
+    /// Width of the widest hidden head layer (0 without hidden layers).
+    pub fn widest_hidden_head(&self) -> usize {
+        max_of(&self.head, false)
+    }
+
     /// Bytes of int8 scratch the int8 path needs with `tile` points per pass.
     pub fn int8_scratch_len(&self, tile: usize) -> usize {
         int8_scratch_len(&self.encoder, &self.head, tile)
@@ -151,6 +162,17 @@ impl Arch {
     pub fn f32_scratch_len(&self) -> usize {
         f32_scratch_len(&self.encoder, &self.head)
     }
+}
+
+/// Splits `work` into two ping-pong buffers of `half` elements each, or
+/// reports how much scratch was missing.
+pub(crate) fn ping_pong<T>(work: &mut [T], half: usize) -> Result<(&mut [T], &mut [T])> {
+    let available = work.len();
+    let needed = 2 * half;
+    let work = work
+        .get_mut(..needed)
+        .ok_or(Error::ScratchTooSmall { needed, available })?;
+    Ok(work.split_at_mut(half))
 }
 
 fn chain_layers(

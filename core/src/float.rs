@@ -8,7 +8,7 @@
 //! ascending order, one IEEE-754 operation at a time, so results are
 //! deterministic (but not bit-identical to the int8 path, of course).
 
-use crate::arch::{Arch, INPUT_DIM, POSE_DIM};
+use crate::arch::{Arch, INPUT_DIM, POSE_DIM, ping_pong};
 use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, ModelKind, expect_len};
 use crate::pose::Pose;
@@ -198,8 +198,7 @@ impl<P: Params> F32Network<P> {
         }
         feature.fill(f32::NEG_INFINITY);
         let n_enc = self.arch.encoder.len();
-        let half = work.len() / 2;
-        let (mut a, mut b) = work.split_at_mut(half);
+        let (mut a, mut b) = ping_pong(work, self.arch.widest_hidden_encoder())?;
         for (index, p) in source.iter().enumerate() {
             if p.iter().any(|x| !x.is_finite()) {
                 return Err(Error::NonFiniteCoordinate { index });
@@ -241,19 +240,7 @@ impl<P: Params> F32Network<P> {
                 what: "source feature length",
             });
         }
-        let widest = self
-            .arch
-            .head
-            .iter()
-            .map(|&w| w as usize)
-            .max()
-            .unwrap_or(0);
-        let available = work.len();
-        let work = work.get_mut(..2 * widest).ok_or(Error::ScratchTooSmall {
-            needed: 2 * widest,
-            available,
-        })?;
-        let (mut a, mut b) = work.split_at_mut(widest);
+        let (mut a, mut b) = ping_pong(work, self.arch.widest_hidden_head())?;
         // The first layer reads (template, source) in place.
         let n_enc = self.arch.encoder.len();
         let mut raw = [0f32; POSE_DIM];

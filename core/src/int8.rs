@@ -19,7 +19,7 @@
 //! weight row is then read once per tile. The result does not depend on the
 //! tile size (bit for bit).
 
-use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM};
+use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong};
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
@@ -216,12 +216,7 @@ impl<'a> Int8Model<'a> {
         feature.fill(i8::MIN);
         let widths = &self.p.arch.encoder;
         let last = widths.len() - 1;
-        let hidden = widths[..last]
-            .iter()
-            .map(|&w| w as usize)
-            .max()
-            .unwrap_or(0);
-        let (mut a, mut b) = work.split_at_mut(tile * hidden);
+        let (mut a, mut b) = ping_pong(work, tile * self.p.arch.widest_hidden_encoder())?;
         for (chunk_index, chunk) in source.chunks(tile).enumerate() {
             let mut q = [[0i16; INPUT_DIM]; MAX_TILE];
             for (i, (q, p)) in q.iter_mut().zip(chunk).enumerate() {
@@ -273,20 +268,7 @@ impl<'a> Int8Model<'a> {
                 what: "source feature length",
             });
         }
-        let widest = self
-            .p
-            .arch
-            .head
-            .iter()
-            .map(|&w| w as usize)
-            .max()
-            .unwrap_or(0);
-        let available = work.len();
-        let work = work.get_mut(..2 * widest).ok_or(Error::ScratchTooSmall {
-            needed: 2 * widest,
-            available,
-        })?;
-        let (mut a, mut b) = work.split_at_mut(widest);
+        let (mut a, mut b) = ping_pong(work, self.p.arch.widest_hidden_head())?;
         let template = self.p.template_feature;
         // Current input: the concatenation (template, source) for the first
         // layer, then the previous layer's output in `a`.

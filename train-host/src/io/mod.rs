@@ -239,6 +239,22 @@ pub(crate) fn parse_num(tok: &str) -> Option<f64> {
     tok.parse::<f64>().ok()
 }
 
+/// Parses coordinate `k` (0 = x, 1 = y, 2 = z) of a text row, naming the
+/// coordinate and the offending text in the error.
+pub(crate) fn parse_coordinate(
+    tok: &str,
+    k: usize,
+    section: impl Into<String>,
+) -> Result<f32, FormatError> {
+    parse_num(tok).map(|v| v as f32).ok_or_else(|| {
+        let name = ["x", "y", "z"].get(k).copied().unwrap_or("coordinate");
+        FormatError::data(
+            section,
+            format!("{name} value {} is not a number", snippet(tok)),
+        )
+    })
+}
+
 /// Shortens untrusted text for error messages.
 pub(crate) fn snippet(s: &str) -> String {
     const MAX: usize = 40;

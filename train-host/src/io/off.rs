@@ -22,7 +22,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{FormatError, parse_num, snippet, text};
+use super::{FormatError, parse_coordinate, parse_num, snippet, text};
 
 const FMT: &str = "OFF";
 
@@ -122,16 +122,7 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, FormatError> {
             let tok = toks
                 .next()
                 .ok_or_else(|| FormatError::data(section(), "expected 3 coordinates"))?;
-            *v = parse_num(tok).ok_or_else(|| {
-                FormatError::data(
-                    section(),
-                    format!(
-                        "{} value {} is not a number",
-                        ["x", "y", "z"][k],
-                        snippet(tok)
-                    ),
-                )
-            })? as f32;
+            *v = parse_coordinate(tok, k, section())?;
         }
         if !p.iter().all(|v| v.is_finite()) {
             return Err(FormatError::data(section(), "non-finite coordinate"));

@@ -20,7 +20,7 @@
 //! crate is deprecated by its author and allocates the claimed output size up
 //! front, and `pcd-rs` embeds its own but panics on inconsistent sizes.
 
-use super::{FormatError, Scalar, finite, next_line, parse_num, snippet, text};
+use super::{FormatError, Scalar, finite, next_line, parse_coordinate, snippet, text};
 
 const FMT: &str = "PCD";
 
@@ -335,16 +335,7 @@ fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
         let mut p = [0f32; 3];
         for (k, c) in h.xyz.iter().enumerate() {
             let tok = toks.get(c.value_index).copied().unwrap_or_default();
-            p[k] = parse_num(tok).ok_or_else(|| {
-                FormatError::data(
-                    section(),
-                    format!(
-                        "{} value {} is not a number",
-                        ["x", "y", "z"][k],
-                        snippet(tok)
-                    ),
-                )
-            })? as f32;
+            p[k] = parse_coordinate(tok, k, section())?;
         }
         seen += 1;
         out.extend(finite(p));

@@ -3,7 +3,7 @@
 //! Further columns (normals, colours, labels) are ignored, blank lines and
 //! `#` comments (whole-line or trailing) are skipped.
 
-use super::{FormatError, finite, parse_num, snippet, text};
+use super::{FormatError, finite, parse_coordinate, text};
 
 /// Parses an XYZ text file held in memory and returns its finite points.
 pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
@@ -22,16 +22,7 @@ pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
             let tok = tok.ok_or_else(|| {
                 FormatError::data(section(), format!("expected 3 numbers, found {k}"))
             })?;
-            *v = parse_num(tok).ok_or_else(|| {
-                FormatError::data(
-                    section(),
-                    format!(
-                        "{} value {} is not a number",
-                        ["x", "y", "z"][k],
-                        snippet(tok)
-                    ),
-                )
-            })? as f32;
+            *v = parse_coordinate(tok, k, section())?;
         }
         out.extend(finite(p));
     }
