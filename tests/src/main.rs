@@ -9,6 +9,7 @@
 //! the device is built with ties rounded the other way, and the command
 //! succeeds only if the comparison catches it.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -18,12 +19,10 @@ use pcrnet_qemu_tests::compare::{first_difference, parse};
 use pcrnet_qemu_tests::vectors::{Case, TestModel, clouds_for, container, expected, random_model};
 use pcrnet_qemu_tests::{elf, qemu};
 
+/// Random models covering the shapes' corners, every int8 blob shipped in
+/// `models/`, and the paper-size PCRNet (its 4.2 MB of weights go to PSRAM).
 fn models() -> anyhow::Result<Vec<(TestModel, Vec<usize>)>> {
-    let root = qemu::workspace_root();
-    let demo_path = root.join("models/demo-untrained-int8.pcrn");
-    let demo =
-        std::fs::read(&demo_path).with_context(|| format!("reading {}", demo_path.display()))?;
-    Ok(vec![
+    let mut out = vec![
         (
             random_model("random 16-24-64 / 48-32", 1, &[16, 24, 64], &[48, 32]),
             vec![1, 2, 3, 7, 8, 9, 16, 31, 257, 1024, 3000],
@@ -41,23 +40,33 @@ fn models() -> anyhow::Result<Vec<(TestModel, Vec<usize>)>> {
             ),
             vec![1, 33, 500],
         ),
-        (
-            TestModel {
-                name: "demo (embedded arch, untrained) 32-64-128-256 / 256-128-64".into(),
-                blob: demo,
-            },
-            vec![1, 100, 1024, 4096],
+    ];
+    let dir = qemu::workspace_root().join("models");
+    let mut shipped: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.to_string_lossy().ends_with("-int8.pcrn"))
+        .collect();
+    shipped.sort();
+    for path in shipped {
+        let blob = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        let name = path
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
+        out.push((TestModel { name, blob }, vec![1, 100, 1024, 4096]));
+    }
+    out.push((
+        random_model(
+            "paper PCRNet 64-64-64-128-1024 / 1024-1024-512-512-256 (PSRAM)",
+            4,
+            pcrnet_core::arch::PAPER_ENCODER,
+            pcrnet_core::arch::PCRNET_HEAD,
         ),
-        (
-            random_model(
-                "paper PCRNet 64-64-64-128-1024 / 1024-1024-512-512-256 (PSRAM)",
-                4,
-                pcrnet_core::arch::PAPER_ENCODER,
-                pcrnet_core::arch::PCRNET_HEAD,
-            ),
-            vec![1, 9, 1024],
-        ),
-    ])
+        vec![1, 9, 1024],
+    ));
+    Ok(out)
 }
 
 fn build_cases(models: &[(TestModel, Vec<usize>)]) -> (Vec<TestModel>, Vec<Case>) {
