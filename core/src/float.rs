@@ -147,6 +147,11 @@ impl<P: Params> F32Network<P> {
         &self.arch
     }
 
+    /// The layers: encoder first, then head, output last.
+    pub fn layers(&self) -> &[Layer<P>] {
+        &self.layers
+    }
+
     /// The template feature.
     pub fn template(&self) -> P {
         self.template

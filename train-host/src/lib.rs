@@ -12,6 +12,7 @@ pub mod inspect;
 pub mod io;
 pub mod net;
 pub mod quantize;
+pub mod register;
 pub mod shapes;
 
 pub use net::F32Params;

@@ -1,7 +1,7 @@
 //! f32 parameters of a PCRNet held in owned arrays.
 
 use pcrnet_core::Arch;
-use pcrnet_core::float::{F32Network, Layer};
+use pcrnet_core::float::{F32Network, Layer, Params};
 use pcrnet_core::format::{F32Layer, F32Payload, ModelKind, write_blob};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -34,6 +34,19 @@ impl F32Params {
             })
             .collect();
         F32Params { arch, layers }
+    }
+
+    /// Owned copies of a network's parameters (e.g. of an f32 blob).
+    pub fn from_network<P: Params>(net: &F32Network<P>) -> Self {
+        let values = |p: P| (0..p.len()).map(|i| p.get(i)).collect::<Vec<f32>>();
+        F32Params {
+            arch: net.arch().clone(),
+            layers: net
+                .layers()
+                .iter()
+                .map(|l| (values(l.weights), values(l.bias)))
+                .collect(),
+        }
     }
 
     /// A view for `pcrnet-core`'s f32 forward pass, with `template` as the

@@ -68,32 +68,55 @@ fn box_surface(rng: &mut ChaCha8Rng, size: [f32; 3], centre: [f32; 3]) -> [f32; 
     p
 }
 
-/// Centres a cloud on its centroid and scales it so it fits in `[-0.5, 0.5]^3`.
-pub fn normalise(pts: &mut [[f32; 3]]) {
-    if pts.is_empty() {
-        return;
-    }
-    let n = pts.len() as f32;
-    let mut c = [0f32; 3];
-    for p in pts.iter() {
-        for k in 0..3 {
-            c[k] += p[k] / n;
+/// The similarity that centres a cloud on its centroid and scales it into
+/// `[-0.5, 0.5]^3`: `p' = scale * (p - centre)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Normalisation {
+    /// Centroid of the cloud it was computed on.
+    pub centre: [f32; 3],
+    /// Scale factor (1 for an empty or single-point cloud).
+    pub scale: f32,
+}
+
+impl Normalisation {
+    /// The normalisation of `pts` (identity for an empty cloud).
+    pub fn of(pts: &[[f32; 3]]) -> Self {
+        if pts.is_empty() {
+            return Normalisation {
+                centre: [0.0; 3],
+                scale: 1.0,
+            };
+        }
+        let n = pts.len() as f32;
+        let mut c = [0f32; 3];
+        for p in pts {
+            for k in 0..3 {
+                c[k] += p[k] / n;
+            }
+        }
+        let extent = pts
+            .iter()
+            .flat_map(|p| (0..3).map(move |k| (p[k] - c[k]).abs()))
+            .fold(0f32, f32::max);
+        Normalisation {
+            centre: c,
+            scale: if extent > 0.0 { 0.5 / extent } else { 1.0 },
         }
     }
-    let mut extent = 0f32;
-    for p in pts.iter_mut() {
-        for k in 0..3 {
-            p[k] -= c[k];
-            extent = extent.max(p[k].abs());
-        }
-    }
-    if extent > 0.0 {
+
+    /// Applies it in place.
+    pub fn apply(&self, pts: &mut [[f32; 3]]) {
         for p in pts.iter_mut() {
-            for v in p.iter_mut() {
-                *v *= 0.5 / extent;
+            for (v, c) in p.iter_mut().zip(self.centre) {
+                *v = (*v - c) * self.scale;
             }
         }
     }
+}
+
+/// Centres a cloud on its centroid and scales it so it fits in `[-0.5, 0.5]^3`.
+pub fn normalise(pts: &mut [[f32; 3]]) {
+    Normalisation::of(pts).apply(pts);
 }
 
 /// A random rigid transform with Euler angles in `+-max_deg` per axis and
