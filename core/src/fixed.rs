@@ -43,8 +43,17 @@ pub fn requantize(acc: i32, multiplier: i32, shift: i8) -> i32 {
     let r = (31 - shift as i32) as u32;
     // |acc * multiplier| <= 2^62, so adding 2^61 cannot overflow i64.
     let prod = acc as i64 * multiplier as i64;
-    let rounded = if r == 0 { prod } else { (prod + half(r)) >> r };
-    saturate_i32(rounded)
+    if r >= 32 {
+        // The usual case (scales below 1/2): the same value computed as a
+        // high word and a 32-bit shift (`floor(floor(x / 2^32) / 2^(r-32))
+        // = floor(x / 2^r)`), which Cortex-M4 does with SMLAL and ASR
+        // instead of a variable 64-bit shift. |result| <= 2^30: no saturation.
+        (((prod + half(r)) >> 32) as i32) >> (r - 32)
+    } else if r == 0 {
+        saturate_i32(prod)
+    } else {
+        saturate_i32((prod + half(r)) >> r)
+    }
 }
 
 /// The rounding offset `2^(r-1)` (half toward +infinity).
