@@ -11,7 +11,7 @@
 use crate::arch::{Arch, INPUT_DIM, POSE_DIM, ping_pong};
 use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, ModelKind, expect_len};
-use crate::pose::Pose;
+use crate::pose::{self, Pose, Rigid};
 
 /// Read access to an array of f32 parameters.
 pub trait Params: Copy {
@@ -172,14 +172,30 @@ impl<P: Params> F32Network<P> {
     /// The feature is left in `scratch[..F]`.
     pub fn infer(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<[f32; POSE_DIM]> {
         let (feature, work) = self.split(scratch)?;
-        self.encode_into(source, feature, work)?;
+        self.encode_into(source, None, feature, work)?;
         self.head(feature, work)
+    }
+
+    /// Iterative registration (i-PCRNet), as [`crate::Int8Model::register_iterative`].
+    pub fn register_iterative(
+        &self,
+        source: &[[f32; 3]],
+        iterations: usize,
+        tolerance: f32,
+        scratch: &mut [f32],
+    ) -> Result<(Pose, usize)> {
+        pose::iterate(iterations, tolerance, |current| {
+            let moved = Rigid::from(current);
+            let (feature, work) = self.split(scratch)?;
+            self.encode_into(source, Some(&moved), feature, work)?;
+            Pose::from_head_output(&self.head(feature, work)?)
+        })
     }
 
     /// Encodes `source` into its global feature (a view into `scratch`).
     pub fn encode<'s>(&self, source: &[[f32; 3]], scratch: &'s mut [f32]) -> Result<&'s [f32]> {
         let (feature, work) = self.split(scratch)?;
-        self.encode_into(source, feature, work)?;
+        self.encode_into(source, None, feature, work)?;
         Ok(feature)
     }
 
@@ -192,9 +208,11 @@ impl<P: Params> F32Network<P> {
         Ok(s.split_at_mut(self.arch.feature_dim()))
     }
 
+    /// Encodes `source`, each point first moved by `moved` if given.
     fn encode_into(
         &self,
         source: &[[f32; 3]],
+        moved: Option<&Rigid>,
         feature: &mut [f32],
         work: &mut [f32],
     ) -> Result<()> {
@@ -208,13 +226,14 @@ impl<P: Params> F32Network<P> {
             if p.iter().any(|x| !x.is_finite()) {
                 return Err(Error::NonFiniteCoordinate { index });
             }
+            let p = moved.map_or(*p, |m| m.apply(*p));
             let mut inputs = INPUT_DIM;
             for (l, (layer, shape)) in self.layers[..n_enc]
                 .iter()
                 .zip(self.arch.encoder_layers())
                 .enumerate()
             {
-                let x: &[f32] = if l == 0 { p } else { &a[..inputs] };
+                let x: &[f32] = if l == 0 { &p } else { &a[..inputs] };
                 if l + 1 == n_enc {
                     dense(layer, x, shape.outputs, true, |o, v| {
                         if let Some(f) = feature.get_mut(o) {

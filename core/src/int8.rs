@@ -24,7 +24,7 @@ use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
 use crate::kernel::{QValue, Requant, dense_tile, dot};
-use crate::pose::Pose;
+use crate::pose::{self, Pose, Rigid};
 
 /// A validated int8 model borrowing its weights from a blob.
 #[derive(Debug, Clone)]
@@ -130,6 +130,28 @@ impl<'a> Int8Model<'a> {
         self.pose(&inference.head)
     }
 
+    /// Iterative registration (i-PCRNet): up to `iterations` passes, each on
+    /// the source moved by the pose so far (moved point by point while
+    /// quantizing: no copy of the cloud), composing the estimates, and
+    /// stopping early once a pass changes the pose by less than `tolerance`
+    /// (`||delta - I||_F`, see [`pose::iterate`]). Returns the pose and the
+    /// number of passes. One pass equals [`Self::register`] bit for bit.
+    pub fn register_iterative(
+        &self,
+        source: &[[f32; 3]],
+        iterations: usize,
+        tolerance: f32,
+        scratch: &mut [i8],
+    ) -> Result<(Pose, usize)> {
+        let tile = self.tile_for(scratch.len())?;
+        pose::iterate(iterations, tolerance, |current| {
+            let moved = Rigid::from(current);
+            let (feature, work) = self.split_scratch(tile, scratch)?;
+            self.encode_into(source, Some(&moved), tile, feature, work)?;
+            self.pose(&self.head(feature, work)?)
+        })
+    }
+
     /// Encodes `source` and runs the head, returning the raw results.
     /// Uses the largest tile the scratch allows.
     pub fn infer<'s>(
@@ -149,7 +171,7 @@ impl<'a> Int8Model<'a> {
         scratch: &'s mut [i8],
     ) -> Result<Int8Inference<'s>> {
         let (feature, work) = self.split_scratch(tile, scratch)?;
-        self.encode_into(source, tile, feature, work)?;
+        self.encode_into(source, None, tile, feature, work)?;
         let head = self.head(feature, work)?;
         Ok(Int8Inference { feature, head })
     }
@@ -168,7 +190,7 @@ impl<'a> Int8Model<'a> {
         scratch: &'s mut [i8],
     ) -> Result<&'s [i8]> {
         let (feature, work) = self.split_scratch(tile, scratch)?;
-        self.encode_into(source, tile, feature, work)?;
+        self.encode_into(source, None, tile, feature, work)?;
         Ok(feature)
     }
 
@@ -190,22 +212,31 @@ impl<'a> Int8Model<'a> {
         Ok(scratch.split_at_mut(self.p.arch.feature_dim()))
     }
 
-    /// Quantizes one point to the model's int16 input grid.
-    pub fn quantize_point(&self, index: usize, p: &[f32; 3]) -> Result<[i16; 3]> {
+    /// Quantizes point `index` to the model's int16 input grid, after
+    /// moving it by `moved` if given (a moved point may leave the input range).
+    pub fn quantize_point(
+        &self,
+        index: usize,
+        p: &[f32; 3],
+        moved: Option<&Rigid>,
+    ) -> Result<[i16; 3]> {
+        if p.iter().any(|x| !x.is_finite()) {
+            return Err(Error::NonFiniteCoordinate { index });
+        }
+        let p = moved.map_or(*p, |m| m.apply(*p));
         let mut q = [0i16; 3];
-        for (q, &x) in q.iter_mut().zip(p) {
-            if !x.is_finite() {
-                return Err(Error::NonFiniteCoordinate { index });
-            }
+        for (q, x) in q.iter_mut().zip(p) {
             *q = quantize_coordinate(x, self.p.input_scale)
                 .ok_or(Error::CoordinateOutOfRange { index })?;
         }
         Ok(q)
     }
 
+    /// Encodes `source`, each point first moved by `moved` if given.
     fn encode_into(
         &self,
         source: &[[f32; 3]],
+        moved: Option<&Rigid>,
         tile: usize,
         feature: &mut [i8],
         work: &mut [i8],
@@ -220,7 +251,7 @@ impl<'a> Int8Model<'a> {
         for (chunk_index, chunk) in source.chunks(tile).enumerate() {
             let mut q = [[0i16; INPUT_DIM]; MAX_TILE];
             for (i, (q, p)) in q.iter_mut().zip(chunk).enumerate() {
-                *q = self.quantize_point(chunk_index * tile + i, p)?;
+                *q = self.quantize_point(chunk_index * tile + i, p, moved)?;
             }
             let x0 = q[..chunk.len()].as_flattened();
             let mut inputs = INPUT_DIM;

@@ -80,16 +80,96 @@ impl Pose {
         ]
     }
 
-    /// Applies the transform to a point: `R p + t`.
+    /// Applies the transform to a point: `R p + t`. (To move many points,
+    /// build a [`Rigid`] once.)
     pub fn transform_point(&self, p: [f32; 3]) -> [f32; 3] {
+        Rigid::from(self).apply(p)
+    }
+
+    /// `self` followed by `next`: the pose `p -> next(self(p))`.
+    /// The quaternion product is renormalised (`libm::sqrtf`) and made
+    /// canonical (`w >= 0`).
+    pub fn then(&self, next: &Pose) -> Pose {
+        let [aw, ax, ay, az] = next.rotation;
+        let [bw, bx, by, bz] = self.rotation;
+        let q = [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ];
+        let n = libm::sqrtf(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        let s = if q[0] < 0.0 { -1.0 / n } else { 1.0 / n };
+        Pose {
+            rotation: [q[0] * s, q[1] * s, q[2] * s, q[3] * s],
+            translation: next.transform_point(self.translation),
+        }
+    }
+
+    /// `||T - I||_F^2` of the 4x4 matrix: how far the pose is from the identity.
+    pub fn distance_to_identity_squared(&self) -> f32 {
         let r = self.rotation_matrix();
-        let t = self.translation;
+        let mut d = 0.0;
+        for (i, row) in r.iter().enumerate() {
+            for (j, &v) in row.iter().enumerate() {
+                let e = if i == j { v - 1.0 } else { v };
+                d += e * e;
+            }
+        }
+        self.translation.iter().fold(d, |d, t| d + t * t)
+    }
+}
+
+/// A pose as a rotation matrix and a translation, to move many points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rigid {
+    /// Rotation, row-major.
+    pub rotation: [[f32; 3]; 3],
+    /// Translation.
+    pub translation: [f32; 3],
+}
+
+impl From<&Pose> for Rigid {
+    fn from(pose: &Pose) -> Self {
+        Rigid {
+            rotation: pose.rotation_matrix(),
+            translation: pose.translation,
+        }
+    }
+}
+
+impl Rigid {
+    /// `R p + t`, each row summed left to right.
+    pub fn apply(&self, p: [f32; 3]) -> [f32; 3] {
+        let (r, t) = (&self.rotation, &self.translation);
         [
             r[0][0] * p[0] + r[0][1] * p[1] + r[0][2] * p[2] + t[0],
             r[1][0] * p[0] + r[1][1] * p[1] + r[1][2] * p[2] + t[1],
             r[2][0] * p[0] + r[2][1] * p[1] + r[2][2] * p[2] + t[2],
         ]
     }
+}
+
+/// Iterative registration (i-PCRNet at test time): from the identity, each
+/// step estimates the pose of the source moved by the current estimate, and
+/// the estimates compose (`current.then(delta)`). Stops after `iterations`
+/// steps, or earlier once a step's `||delta - I||_F` is below `tolerance`
+/// (the paper uses 1e-7 and 20 iterations). Returns the pose and the number
+/// of steps taken.
+pub fn iterate(
+    iterations: usize,
+    tolerance: f32,
+    mut step: impl FnMut(&Pose) -> Result<Pose>,
+) -> Result<(Pose, usize)> {
+    let mut current = Pose::IDENTITY;
+    for done in 1..=iterations {
+        let delta = step(&current)?;
+        current = current.then(&delta);
+        if delta.distance_to_identity_squared() < tolerance * tolerance {
+            return Ok((current, done));
+        }
+    }
+    Ok((current, iterations))
 }
 
 #[cfg(test)]
@@ -111,6 +191,41 @@ mod tests {
         assert!((q[0]).abs() < 1e-6 && (q[1] - 1.0).abs() < 1e-6 && q[2].abs() < 1e-6);
         let m = p.matrix();
         assert_eq!(m[3], [0.0, 0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn composition_applies_first_then_second() {
+        let h = core::f32::consts::FRAC_1_SQRT_2;
+        let a = Pose::from_head_output(&[h, 0.0, 0.0, h, 1.0, 0.0, 0.0]).unwrap();
+        let b = Pose::from_head_output(&[h, h, 0.0, 0.0, 0.0, 2.0, 0.0]).unwrap();
+        let p = [0.3, -0.7, 1.1];
+        let composed = a.then(&b).transform_point(p);
+        let stepwise = b.transform_point(a.transform_point(p));
+        for k in 0..3 {
+            assert!((composed[k] - stepwise[k]).abs() < 1e-5);
+        }
+        assert_eq!(Pose::IDENTITY.distance_to_identity_squared(), 0.0);
+        assert!((a.distance_to_identity_squared() - (2.0 + 2.0 + 1.0)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn iterate_composes_and_stops_early() {
+        let h = core::f32::consts::FRAC_1_SQRT_2;
+        let quarter = Pose::from_head_output(&[h, 0.0, 0.0, h, 0.0, 0.0, 0.0]).unwrap();
+        let mut calls = 0;
+        let (pose, n) = iterate(20, 1e-3, |_| {
+            calls += 1;
+            Ok(if calls <= 2 { quarter } else { Pose::IDENTITY })
+        })
+        .unwrap();
+        assert_eq!((n, calls), (3, 3));
+        // Two quarter turns about z: a half turn.
+        let p = pose.transform_point([1.0, 0.0, 0.0]);
+        assert!((p[0] + 1.0).abs() < 1e-5 && p[1].abs() < 1e-5);
+        assert_eq!(
+            iterate(5, 0.0, |_| Err(Error::EmptyCloud)),
+            Err(Error::EmptyCloud)
+        );
     }
 
     #[test]

@@ -66,3 +66,22 @@ fn bad_input_is_a_typed_error() {
         Err(Error::ScratchTooSmall { .. })
     ));
 }
+
+#[test]
+fn iterative_registration_is_repeated_single_passes() {
+    use pcrnet_core::pose::{Pose, Rigid};
+    let b = blob(8);
+    let m = F32Model::from_bytes(&b).unwrap();
+    let mut s = vec![0f32; m.scratch_len()];
+    let pts = cloud(9, 64);
+    let mut current = Pose::IDENTITY;
+    for _ in 0..2 {
+        let rigid = Rigid::from(&current);
+        let moved: Vec<[f32; 3]> = pts.iter().map(|&p| rigid.apply(p)).collect();
+        current = current.then(&m.register(&moved, &mut s).unwrap());
+    }
+    assert_eq!(
+        m.register_iterative(&pts, 2, 0.0, &mut s).unwrap(),
+        (current, 2)
+    );
+}

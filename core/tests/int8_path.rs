@@ -235,3 +235,34 @@ fn paper_architecture_runs() {
     assert_eq!(got.feature, &feature[..]);
     assert_eq!(got.head, raw);
 }
+
+#[test]
+fn iterative_registration_is_repeated_single_passes() {
+    use pcrnet_core::pose::{Pose, Rigid};
+    let b = blob(71, SMALL_ENC, SMALL_HEAD);
+    let model = Int8Model::from_bytes(&b).unwrap();
+    let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
+    let pts = cloud(72, 300, 0.8);
+    // One pass is `register`, bit for bit.
+    let single = model.register(&pts, &mut s).unwrap();
+    assert_eq!(
+        model.register_iterative(&pts, 1, 0.0, &mut s).unwrap(),
+        (single, 1)
+    );
+    // Three passes equal moving the cloud explicitly and composing by hand.
+    let mut current = Pose::IDENTITY;
+    for _ in 0..3 {
+        let rigid = Rigid::from(&current);
+        let moved: Vec<[f32; 3]> = pts.iter().map(|&p| rigid.apply(p)).collect();
+        current = current.then(&model.register(&moved, &mut s).unwrap());
+    }
+    assert_eq!(
+        model.register_iterative(&pts, 3, 0.0, &mut s).unwrap(),
+        (current, 3)
+    );
+    // A huge tolerance stops after the first pass.
+    assert_eq!(
+        model.register_iterative(&pts, 10, 1e9, &mut s).unwrap().1,
+        1
+    );
+}

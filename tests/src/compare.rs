@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 use pcrnet_core::POSE_DIM;
 
-use crate::vectors::Expected;
+use crate::vectors::{Expected, Iterative};
 
 /// What the device printed for one case.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,6 +28,8 @@ pub struct DeviceRun {
     pub static_ram: Option<usize>,
     /// Per case index.
     pub cases: BTreeMap<usize, DeviceResult>,
+    /// Iterative registrations, per case index.
+    pub iterative: BTreeMap<usize, Iterative>,
     /// Lines that were not understood (reported, and they fail the run).
     pub unparsed: Vec<String>,
     /// Whether the runner printed its closing `done`.
@@ -94,6 +96,23 @@ pub fn parse(stdout: &str) -> DeviceRun {
             ["case", c, "ok", rest @ ..] => c.parse().ok().zip(parse_ok(rest)).map(|(c, r)| {
                 run.cases.insert(c, r);
             }),
+            ["case", c, "iter", "ok", n, bits @ ..] if bits.len() == POSE_DIM => {
+                let mut out = [0u32; POSE_DIM];
+                let ok = out
+                    .iter_mut()
+                    .zip(bits)
+                    .all(|(o, b)| u32::from_str_radix(b, 16).map(|v| *o = v).is_ok());
+                c.parse()
+                    .ok()
+                    .zip(n.parse().ok())
+                    .filter(|_| ok)
+                    .map(|(c, n)| {
+                        run.iterative.insert(c, Ok((n, out)));
+                    })
+            }
+            ["case", c, "iter", "error", error @ ..] => c.parse().ok().map(|c| {
+                run.iterative.insert(c, Err(error.join(" ")));
+            }),
             ["case", c, "error", encoded, error @ ..] => c
                 .parse()
                 .ok()
@@ -119,6 +138,26 @@ pub fn parse(stdout: &str) -> DeviceRun {
         }
     }
     run
+}
+
+/// How an iterative registration differs between host and device, if it does.
+pub fn iterative_difference(host: &Iterative, device: Option<&Iterative>) -> Option<String> {
+    match (host, device) {
+        (_, None) => Some("iterative: no output from the device".into()),
+        (Ok((hn, h)), Some(Ok((dn, d)))) => {
+            if hn != dn {
+                return Some(format!("iterative passes: host {hn} device {dn}"));
+            }
+            (0..POSE_DIM).find(|&i| h[i] != d[i]).map(|i| {
+                format!(
+                    "iterative pose {}: host {:08x} device {:08x}",
+                    POSE_NAMES[i], h[i], d[i]
+                )
+            })
+        }
+        (h, Some(d)) if h == d => None,
+        (h, Some(d)) => Some(format!("iterative: host {h:?} device {d:?}")),
+    }
 }
 
 /// The first value that differs between host and device, if any.
@@ -177,7 +216,8 @@ mod tests {
     fn parses_and_compares() {
         let out = "calibration 2000000 2000000\nstatic_ram 65600\n\
                    case 0 ok 100 250 512 feature 7f80ff00 head 1 -2 3 4 5 6 7 pose 3f800000 0 0 0 0 0 0\n\
-                   case 1 error false EmptyCloud\ndone\n";
+                   case 0 iter ok 3 3f800000 0 0 0 0 0 1\n\
+                   case 1 error false EmptyCloud\ncase 1 iter error EmptyCloud\ndone\n";
         let run = parse(out);
         assert!(run.done && run.unparsed.is_empty());
         assert_eq!(run.calibration, Some((2_000_000, 2_000_000)));
@@ -203,5 +243,13 @@ mod tests {
         };
         assert_eq!(first_difference(&err, &run.cases[&1].outputs), None);
         assert!(parse("case 3 ok garbage").unparsed.len() == 1);
+        let it: Iterative = Ok((3, [0x3f80_0000, 0, 0, 0, 0, 0, 1]));
+        assert_eq!(iterative_difference(&it, run.iterative.get(&0)), None);
+        assert_eq!(
+            iterative_difference(&Ok((2, [0; POSE_DIM])), run.iterative.get(&0)).as_deref(),
+            Some("iterative passes: host 2 device 3")
+        );
+        let err: Iterative = Err("EmptyCloud".into());
+        assert_eq!(iterative_difference(&err, run.iterative.get(&1)), None);
     }
 }

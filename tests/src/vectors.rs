@@ -1,7 +1,7 @@
 //! Test models, clouds and the container the device reads.
 
 use pcrnet_core::testing::{SplitMix64, random_int8_blob_into};
-use pcrnet_core::{Int8Model, POSE_DIM};
+use pcrnet_core::{Int8Model, MAX_TILE, POSE_DIM};
 
 /// Where the container goes in the MPS2 PSRAM.
 pub const PSRAM_BASE: u32 = 0x2100_0000;
@@ -26,6 +26,33 @@ pub struct Case {
     pub cloud: Vec<[f32; 3]>,
     /// Tile size passed to the encoder.
     pub tile: usize,
+    /// i-PCRNet passes to run as well (0: none), with tolerance 0.
+    pub iterations: usize,
+}
+
+/// Result of an iterative registration: passes done and pose bits, or the error's Debug text.
+pub type Iterative = Result<(usize, [u32; POSE_DIM]), String>;
+
+fn pose_bits(p: &pcrnet_core::Pose) -> [u32; POSE_DIM] {
+    let mut bits = [0u32; POSE_DIM];
+    for (b, v) in bits.iter_mut().zip(p.rotation.iter().chain(&p.translation)) {
+        *b = v.to_bits();
+    }
+    bits
+}
+
+/// What the host computes for a case's iterative registration, if it has one.
+pub fn expected_iterative(model: &[u8], case: &Case) -> Option<Iterative> {
+    if case.iterations == 0 {
+        return None;
+    }
+    let m = Int8Model::from_bytes(model).expect("test models are valid");
+    let mut scratch = vec![0i8; m.scratch_len(MAX_TILE)];
+    Some(
+        m.register_iterative(&case.cloud, case.iterations, 0.0, &mut scratch)
+            .map(|(p, n)| (n, pose_bits(&p)))
+            .map_err(|e| format!("{e:?}")),
+    )
 }
 
 /// What the host computes for a case, in the device's terms.
@@ -125,13 +152,7 @@ pub fn expected(model: &[u8], case: &Case) -> Expected {
             head: r.head,
             pose: m
                 .pose(&r.head)
-                .map(|p| {
-                    let mut bits = [0u32; POSE_DIM];
-                    for (b, v) in bits.iter_mut().zip(p.rotation.iter().chain(&p.translation)) {
-                        *b = v.to_bits();
-                    }
-                    bits
-                })
+                .map(|p| pose_bits(&p))
                 .map_err(|e| format!("{e:?}")),
         },
         Err(e) => Expected::Err {
@@ -153,11 +174,11 @@ fn align4(buf: &mut Vec<u8>) {
 
 /// Lays out the container the device runner reads (see `tests/firmware`).
 pub fn container(models: &[TestModel], cases: &[Case]) -> anyhow::Result<Vec<u8>> {
-    let header = 16 + 8 * models.len() + 16 * cases.len();
+    let header = 16 + 8 * models.len() + 20 * cases.len();
     let mut data = vec![0u8; header];
     let mut table = Vec::with_capacity(header);
     table.extend_from_slice(b"PCRV");
-    push_u32(&mut table, 1);
+    push_u32(&mut table, 2);
     push_u32(&mut table, models.len());
     push_u32(&mut table, cases.len());
     for m in models {
@@ -172,6 +193,7 @@ pub fn container(models: &[TestModel], cases: &[Case]) -> anyhow::Result<Vec<u8>
         push_u32(&mut table, data.len());
         push_u32(&mut table, c.cloud.len());
         push_u32(&mut table, c.tile);
+        push_u32(&mut table, c.iterations);
         for v in c.cloud.iter().flatten() {
             data.extend_from_slice(&v.to_le_bytes());
         }

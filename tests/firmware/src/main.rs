@@ -66,7 +66,7 @@ fn main() -> ! {
     hprintln!("calibration {} {}", 2 * 1_000_000u64, t1 - t0);
     let _ = n;
 
-    if &word(0).to_le_bytes() != b"PCRV" || word(1) != 1 {
+    if &word(0).to_le_bytes() != b"PCRV" || word(1) != 2 {
         hprintln!("error no test vectors at {:#x}", BASE);
         debug::exit(debug::EXIT_FAILURE);
     }
@@ -83,10 +83,10 @@ fn main() -> ! {
                 continue;
             }
         };
-        for c in (0..n_cases).filter(|&c| word(cases + 4 * c) as usize == m) {
+        for c in (0..n_cases).filter(|&c| word(cases + 5 * c) as usize == m) {
             let (cloud, tile) = (
-                points(word(cases + 4 * c + 1), word(cases + 4 * c + 2)),
-                word(cases + 4 * c + 3) as usize,
+                points(word(cases + 5 * c + 1), word(cases + 5 * c + 2)),
+                word(cases + 5 * c + 3) as usize,
             );
             let baseline = stack::paint();
             let e0 = counter.instructions();
@@ -126,6 +126,22 @@ fn main() -> ! {
                 }
             }
             emit(&line);
+            let iterations = word(cases + 5 * c + 4) as usize;
+            if iterations > 0 {
+                line.clear();
+                match model.register_iterative(cloud, iterations, 0.0, SCRATCH_BUF) {
+                    Ok((p, n)) => {
+                        let _ = write!(line, "case {c} iter ok {n}");
+                        for v in p.rotation.iter().chain(&p.translation) {
+                            let _ = write!(line, " {:08x}", v.to_bits());
+                        }
+                    }
+                    Err(e) => {
+                        let _ = write!(line, "case {c} iter error {e:?}");
+                    }
+                }
+                emit(&line);
+            }
         }
     }
     hprintln!("done");
