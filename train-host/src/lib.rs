@@ -14,6 +14,7 @@ pub mod net;
 pub mod quantize;
 pub mod register;
 pub mod shapes;
+pub mod train;
 
 pub use net::F32Params;
 pub use quantize::{CalibrationRule, QuantizeError, quantize};

@@ -44,6 +44,13 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         head: Option<Vec<u16>>,
     },
+    /// Train PCRNet / i-PCRNet in f32 on ModelNet-style data or generated
+    /// shapes; writes checkpoints, a JSON-lines log and the f32 blob (and
+    /// with --export the int8 blob) into --out.
+    Train(Box<pcrnet_train::train::cli::TrainArgs>),
+    /// Export a training checkpoint to the f32 and int8 blobs, with the
+    /// template's feature embedded.
+    Export(pcrnet_train::train::cli::ExportArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -66,6 +73,8 @@ fn main() -> anyhow::Result<()> {
             )?;
             demo(arch, seed, out)?
         }
+        Command::Train(args) => pcrnet_train::train::cli::train(*args)?,
+        Command::Export(args) => pcrnet_train::train::cli::export(args)?,
     }
     Ok(())
 }

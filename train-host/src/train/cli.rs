@@ -1,0 +1,388 @@
+//! The `pcrnet train` and `pcrnet export` subcommands (arguments and driver).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+
+use super::{
+    CHECKPOINT_FILE, Checkpoint, Dataset, LossKind, ModelKind, PairConfig, RunOptions, Sampling,
+    Schedule, Split, TrainConfig, Trainer, data, export as exp,
+};
+use crate::{EMBEDDED_ENCODER, EMBEDDED_HEAD};
+
+/// Network kind on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// Single pass.
+    Pcrnet,
+    /// Iterative (see --iterations).
+    Ipcrnet,
+}
+
+/// Loss on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LossArg {
+    /// Chamfer distance (the paper's).
+    Chamfer,
+    /// Frobenius distance of the 4x4 poses.
+    Pose,
+}
+
+/// Schedule on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ScheduleArg {
+    /// Cosine to 1% of --lr.
+    Cosine,
+    /// Halve every --step-epochs epochs.
+    Step,
+    /// Constant --lr.
+    Constant,
+}
+
+/// Subsampling on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SamplingArg {
+    /// Farthest point sampling.
+    Fps,
+    /// Random subset.
+    Random,
+}
+
+/// Arguments of `pcrnet train`.
+#[derive(Debug, Clone, Args)]
+pub struct TrainArgs {
+    /// ModelNet-style root (`<root>/<class>/{train,test}/*.pcd`); the test
+    /// split is the validation set.
+    #[arg(long, conflicts_with = "generated")]
+    pub data: Option<PathBuf>,
+    /// Train on this many generated shapes instead (validation: a quarter as many).
+    #[arg(long)]
+    pub generated: Option<usize>,
+    /// Only these classes (comma-separated): single- or few-category training.
+    #[arg(long, value_delimiter = ',')]
+    pub classes: Option<Vec<String>>,
+    /// Train (and validate) on the training shape of this index only.
+    #[arg(long)]
+    pub single_model: Option<usize>,
+    /// `embedded`, `paper` (PCRNet head), `ipcrnet` (paper encoder,
+    /// i-PCRNet head) or custom widths `E1,E2,...:H1,H2,...`.
+    #[arg(long, default_value = "embedded")]
+    pub arch: String,
+    /// Single-pass or iterative network.
+    #[arg(long, value_enum, default_value_t = ModelArg::Pcrnet)]
+    pub model: ModelArg,
+    /// i-PCRNet passes.
+    #[arg(long, default_value_t = 8)]
+    pub iterations: usize,
+    /// Points per cloud.
+    #[arg(long, default_value_t = 1024)]
+    pub points: usize,
+    /// How clouds are reduced to --points.
+    #[arg(long, value_enum, default_value_t = SamplingArg::Fps)]
+    pub sampling: SamplingArg,
+    /// Pairs per step.
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Epochs.
+    #[arg(long, default_value_t = 10)]
+    pub epochs: usize,
+    /// Steps per epoch (default: training shapes / batch).
+    #[arg(long)]
+    pub steps_per_epoch: Option<usize>,
+    /// Base learning rate (Adam).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f32,
+    /// Learning-rate schedule.
+    #[arg(long, value_enum, default_value_t = ScheduleArg::Cosine)]
+    pub schedule: ScheduleArg,
+    /// Epochs between halvings with --schedule step.
+    #[arg(long, default_value_t = 10)]
+    pub step_epochs: usize,
+    /// Training loss.
+    #[arg(long, value_enum, default_value_t = LossArg::Chamfer)]
+    pub loss: LossArg,
+    /// Seed of weights and pairs.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Largest Euler angle per axis (degrees).
+    #[arg(long, default_value_t = 45.0)]
+    pub max_deg: f32,
+    /// Largest translation per axis.
+    #[arg(long, default_value_t = 1.0)]
+    pub max_t: f32,
+    /// Gaussian noise on the source, sigma drawn from U[0, SIGMA] (default 0.04).
+    #[arg(long, num_args = 0..=1, default_missing_value = "0.04")]
+    pub noise: Option<f32>,
+    /// Partial source: plane crop keeping a fraction in LO,HI (default 0.3,0.8).
+    #[arg(long, num_args = 0..=1, default_missing_value = "0.3,0.8")]
+    pub partial: Option<String>,
+    /// Sparse source: random subset keeping a fraction in LO,HI (default 0.25,0.75).
+    #[arg(long, num_args = 0..=1, default_missing_value = "0.25,0.75")]
+    pub sparse: Option<String>,
+    /// Clip the gradient's global norm.
+    #[arg(long)]
+    pub clip: Option<f32>,
+    /// Validation pairs (0: one per validation shape).
+    #[arg(long, default_value_t = 0)]
+    pub val_pairs: usize,
+    /// Also checkpoint every this many steps (0: at epoch ends only).
+    #[arg(long, default_value_t = 0)]
+    pub checkpoint_every: usize,
+    /// Output folder: checkpoint, log, config, blobs.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Resume from `<out>/checkpoint.bin` (its configuration wins).
+    #[arg(long)]
+    pub resume: bool,
+    /// Stop after this many steps and report step times (timing runs; no export).
+    #[arg(long)]
+    pub max_steps: Option<usize>,
+    /// Also write the int8 blob at the end.
+    #[arg(long)]
+    pub export: bool,
+    /// Template embedded in the blobs (default: the first training shape).
+    #[arg(long)]
+    pub template: Option<PathBuf>,
+    /// No progress bars.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+/// Arguments of `pcrnet export`.
+#[derive(Debug, Clone, Args)]
+pub struct ExportArgs {
+    /// A checkpoint written by `pcrnet train`.
+    #[arg(long)]
+    pub checkpoint: PathBuf,
+    /// The template cloud (any format `pcrnet` reads).
+    #[arg(long)]
+    pub template: PathBuf,
+    /// Points the template is reduced to (as in training).
+    #[arg(long, default_value_t = 1024)]
+    pub points: usize,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Parses `embedded`, `paper`, `ipcrnet` or `E1,E2:H1,H2` into widths.
+pub fn parse_arch(s: &str) -> anyhow::Result<(Vec<u16>, Vec<u16>)> {
+    use pcrnet_core::arch::{IPCRNET_HEAD, PAPER_ENCODER, PCRNET_HEAD};
+    Ok(match s {
+        "embedded" => (EMBEDDED_ENCODER.to_vec(), EMBEDDED_HEAD.to_vec()),
+        "paper" => (PAPER_ENCODER.to_vec(), PCRNET_HEAD.to_vec()),
+        "ipcrnet" => (PAPER_ENCODER.to_vec(), IPCRNET_HEAD.to_vec()),
+        custom => {
+            let (e, h) = custom.split_once(':').unwrap_or((custom, ""));
+            let widths = |t: &str| -> anyhow::Result<Vec<u16>> {
+                t.split(',')
+                    .filter(|x| !x.trim().is_empty())
+                    .map(|x| {
+                        x.trim()
+                            .parse::<u16>()
+                            .with_context(|| format!("width {x:?}"))
+                    })
+                    .collect()
+            };
+            let (e, h) = (widths(e)?, widths(h)?);
+            pcrnet_core::Arch::new(&e, &h)
+                .map_err(|e| anyhow::anyhow!("architecture {custom:?}: {e}"))?;
+            (e, h)
+        }
+    })
+}
+
+fn parse_range(s: &str) -> anyhow::Result<[f32; 2]> {
+    let (a, b) = s.split_once(',').unwrap_or((s, s));
+    let (a, b): (f32, f32) = (a.trim().parse()?, b.trim().parse()?);
+    if !(0.0 < a && a <= b && b <= 1.0) {
+        bail!("fraction range {s:?} must satisfy 0 < LO <= HI <= 1");
+    }
+    Ok([a, b])
+}
+
+fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
+    let (encoder, head) = parse_arch(&args.arch)?;
+    Ok(TrainConfig {
+        encoder,
+        head,
+        model: match args.model {
+            ModelArg::Pcrnet => ModelKind::Pcrnet,
+            ModelArg::Ipcrnet => ModelKind::Ipcrnet {
+                iterations: args.iterations,
+            },
+        },
+        loss: match args.loss {
+            LossArg::Chamfer => LossKind::Chamfer,
+            LossArg::Pose => LossKind::Pose,
+        },
+        batch: args.batch,
+        epochs: args.epochs,
+        steps_per_epoch: args.steps_per_epoch,
+        lr: args.lr,
+        schedule: match args.schedule {
+            ScheduleArg::Cosine => Schedule::Cosine { min_factor: 0.01 },
+            ScheduleArg::Step => Schedule::Step {
+                every_epochs: args.step_epochs,
+                gamma: 0.5,
+            },
+            ScheduleArg::Constant => Schedule::Constant,
+        },
+        seed: args.seed,
+        pairs: PairConfig {
+            max_deg: args.max_deg,
+            max_t: args.max_t,
+            noise: args.noise,
+            partial: args.partial.as_deref().map(parse_range).transpose()?,
+            sparse: args.sparse.as_deref().map(parse_range).transpose()?,
+        },
+        clip_norm: args.clip,
+        checkpoint_every: args.checkpoint_every,
+        val_pairs: args.val_pairs,
+    })
+}
+
+fn sampling(a: SamplingArg) -> Sampling {
+    match a {
+        SamplingArg::Fps => Sampling::Fps,
+        SamplingArg::Random => Sampling::Random,
+    }
+}
+
+fn load_data(args: &TrainArgs, seed: u64) -> anyhow::Result<(Dataset, Dataset)> {
+    let (mut train, mut val) = if let Some(root) = &args.data {
+        let s = sampling(args.sampling);
+        let classes = args.classes.as_deref();
+        let train = Dataset::load_modelnet(root, Split::Train, classes, args.points, s, seed)?;
+        let val = Dataset::load_modelnet(root, Split::Test, classes, args.points, s, seed ^ 1)?;
+        (train, val)
+    } else if let Some(n) = args.generated {
+        let train = Dataset::generated(n, args.points, seed);
+        let val = Dataset::generated(n.div_ceil(4), args.points, seed ^ 0xABCD);
+        (train, val)
+    } else {
+        bail!("give --data PATH or --generated COUNT");
+    };
+    if let Some(i) = args.single_model {
+        train = train.single_model(i);
+        val = train.clone();
+    }
+    Ok((train, val))
+}
+
+/// Reads a template file and preprocesses it as the training shapes.
+fn load_template(path: &Path, points: usize, seed: u64) -> anyhow::Result<Vec<[f32; 3]>> {
+    let raw = crate::io::read_cloud(path)?;
+    data::preprocess(&raw, points, Sampling::Fps, seed)
+        .with_context(|| format!("{}: no finite point", path.display()))
+}
+
+/// Runs `pcrnet train`.
+pub fn train(args: TrainArgs) -> anyhow::Result<()> {
+    let config = config_from(&args)?;
+    std::fs::create_dir_all(&args.out)?;
+    let ck_path = args.out.join(CHECKPOINT_FILE);
+    let resume = args.resume && ck_path.exists();
+    let seed = if resume {
+        Checkpoint::load(&ck_path)?.config.seed
+    } else {
+        config.seed
+    };
+    let t0 = std::time::Instant::now();
+    let (train, val) = load_data(&args, seed)?;
+    eprintln!(
+        "data: {} training shapes, {} validation shapes, {} points each ({:.1} s)",
+        train.len(),
+        val.len(),
+        train.points,
+        t0.elapsed().as_secs_f64()
+    );
+    let mut trainer = if resume {
+        let ck = Checkpoint::load(&ck_path)?;
+        if ck.config != config {
+            eprintln!(
+                "resuming with the checkpoint's configuration (command-line hyperparameters ignored)"
+            );
+        }
+        eprintln!(
+            "resuming at epoch {} step {} (global step {})",
+            ck.progress.epoch, ck.progress.step_in_epoch, ck.progress.global_step
+        );
+        Trainer::from_checkpoint(ck, train, val)?
+    } else {
+        Trainer::new(config, train, val)?
+    };
+    crate::train::checkpoint::write_atomic(
+        &args.out.join("config.json"),
+        serde_json::to_string_pretty(&trainer.config)?.as_bytes(),
+    )?;
+    eprintln!(
+        "arch {:?} / {:?}, {} parameters, {:?}, {:?} loss, batch {}, {} steps/epoch x {} epochs",
+        trainer.config.encoder,
+        trainer.config.head,
+        trainer.params.arch.parameters(),
+        trainer.config.model,
+        trainer.config.loss,
+        trainer.config.batch,
+        trainer.steps_per_epoch(),
+        trainer.config.epochs
+    );
+    let summary = trainer.run(&RunOptions {
+        out_dir: Some(args.out.clone()),
+        progress: !args.no_progress,
+        max_steps: args.max_steps,
+    })?;
+    for e in &summary.epochs {
+        eprintln!(
+            "epoch {:>3}: loss {:.5}  lr {:.2e}  val rot {:.2} deg (median {:.2})  trans {:.4} (median {:.4})  {:.0} s",
+            e.epoch,
+            e.train_loss,
+            e.lr,
+            e.val.rot_mean_deg,
+            e.val.rot_median_deg,
+            e.val.trans_mean,
+            e.val.trans_median,
+            e.seconds
+        );
+    }
+    let st = &summary.step_seconds;
+    if st.len() > 1 {
+        let rest = &st[1..];
+        let mean = rest.iter().sum::<f64>() / rest.len() as f64;
+        let min = rest.iter().copied().fold(f64::INFINITY, f64::min);
+        eprintln!(
+            "step time: first {:.3} s, then mean {:.3} s, min {:.3} s over {} steps",
+            st[0],
+            mean,
+            min,
+            rest.len()
+        );
+    }
+    if !trainer.finished() {
+        eprintln!("stopped before the end (--max-steps): no export");
+        return Ok(());
+    }
+    let template = match &args.template {
+        Some(p) => load_template(p, trainer.train_data().points, seed)?,
+        None => trainer.train_data().clouds[0].clone(),
+    };
+    let cal = args.export.then(|| {
+        exp::calibration_clouds(&template, &trainer.config.pairs, 64, trainer.config.seed)
+    });
+    for p in exp::export(&trainer.params, &template, cal.as_deref(), &args.out)? {
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// Runs `pcrnet export`.
+pub fn export(args: ExportArgs) -> anyhow::Result<()> {
+    let ck = Checkpoint::load(&args.checkpoint)?;
+    let template = load_template(&args.template, args.points, ck.config.seed)?;
+    let cal = exp::calibration_clouds(&template, &ck.config.pairs, 64, ck.config.seed);
+    for p in exp::export(&ck.params(), &template, Some(&cal), &args.out)? {
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}

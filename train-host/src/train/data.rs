@@ -1,0 +1,448 @@
+//! Training data: shape sets and seeded (template, source) pairs.
+//!
+//! # Preprocessing (once, at load)
+//! Non-finite points are dropped, the cloud is reduced to `points` points
+//! (farthest point sampling from a seeded start, or a seeded random subset;
+//! a smaller cloud is padded by repeating seeded random points), then
+//! centred on its centroid and scaled into `[-0.5, 0.5]^3`
+//! ([`crate::shapes::normalise`]).
+//!
+//! # Pairs
+//! Template = a preprocessed shape. Source = the template under a random
+//! rigid transform (Euler angles `U[-max_deg, max_deg]` per axis,
+//! `R = Rz Ry Rx`, translation `U[-max_t, max_t]` per axis), optionally
+//! cropped by a random plane (keeping a fraction in `partial`), optionally
+//! thinned to a random subset (a fraction in `sparse`), then padded back to
+//! `points` points by repeating random kept points (max-pooling ignores
+//! repeats), then perturbed by Gaussian noise of a standard deviation drawn
+//! from `U[0, noise]`. The true pose maps the source onto the template:
+//! `(R^T, -R^T t)`.
+//!
+//! Every random choice comes from a ChaCha8 generator seeded by
+//! [`mix_seed`] of the run seed and the pair's position, so a pair depends
+//! only on (seed, epoch, slot): batches can be built in parallel and a run
+//! resumes at any step without replaying a generator.
+
+use std::path::{Path, PathBuf};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::geometry::{Mat3, apply, euler_to_mat, invert};
+use super::model::Batch;
+use crate::io::{self, ReadError};
+use crate::shapes::{self, Shape};
+
+/// How a cloud is reduced to the wanted number of points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Sampling {
+    /// Farthest point sampling from a seeded random start.
+    Fps,
+    /// A seeded random subset.
+    Random,
+}
+
+/// How sources are made from templates.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PairConfig {
+    /// Largest Euler angle per axis, degrees.
+    pub max_deg: f32,
+    /// Largest translation per axis.
+    pub max_t: f32,
+    /// Largest noise standard deviation (drawn per pair from `U[0, noise]`).
+    pub noise: Option<f32>,
+    /// Fraction range kept by the plane crop (partial source).
+    pub partial: Option<[f32; 2]>,
+    /// Fraction range kept by random thinning (sparse source).
+    pub sparse: Option<[f32; 2]>,
+}
+
+impl Default for PairConfig {
+    /// The paper's: 45 degrees, translation 1, clean full sources.
+    fn default() -> Self {
+        PairConfig {
+            max_deg: 45.0,
+            max_t: 1.0,
+            noise: None,
+            partial: None,
+            sparse: None,
+        }
+    }
+}
+
+/// Which split of a ModelNet-style folder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Split {
+    /// `<class>/train`.
+    Train,
+    /// `<class>/test`.
+    Test,
+}
+
+impl Split {
+    fn dir(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Test => "test",
+        }
+    }
+}
+
+/// Why a data set could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// A folder could not be listed.
+    #[error("{}: {error}", path.display())]
+    Io {
+        /// The folder.
+        path: PathBuf,
+        /// The underlying error.
+        error: std::io::Error,
+    },
+    /// A cloud file could not be read.
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    /// Nothing matched (no class folder, no file, or an empty cloud).
+    #[error("no usable cloud found: {0}")]
+    Empty(String),
+}
+
+/// A class name and its preprocessed cloud.
+type Labelled = (String, Vec<[f32; 3]>);
+
+/// A set of preprocessed shapes, all with the same number of points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// The clouds, each `points` long, centred and in the unit box.
+    pub clouds: Vec<Vec<[f32; 3]>>,
+    /// Class name of each cloud.
+    pub labels: Vec<String>,
+    /// Points per cloud.
+    pub points: usize,
+}
+
+/// A 64-bit mix of a seed and two counters (splitmix64 finaliser).
+pub fn mix_seed(seed: u64, a: u64, b: u64) -> u64 {
+    let mut z = seed
+        ^ a.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ b.wrapping_mul(0xC2B2_AE3D_27D4_EB4F).rotate_left(17);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Farthest point sampling: `k` points of `cloud`, starting from `start`.
+pub fn farthest_point_sampling(cloud: &[[f32; 3]], k: usize, start: usize) -> Vec<[f32; 3]> {
+    if cloud.is_empty() || k == 0 {
+        return Vec::new();
+    }
+    let d2 = |a: &[f32; 3], b: &[f32; 3]| {
+        (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
+    };
+    let mut out = Vec::with_capacity(k);
+    let mut dist = vec![f32::INFINITY; cloud.len()];
+    let mut cur = start % cloud.len();
+    for _ in 0..k.min(cloud.len()) {
+        out.push(cloud[cur]);
+        let c = cloud[cur];
+        let mut best = (0usize, -1f32);
+        for (i, p) in cloud.iter().enumerate() {
+            let d = d2(p, &c).min(dist[i]);
+            dist[i] = d;
+            if d > best.1 {
+                best = (i, d);
+            }
+        }
+        cur = best.0;
+    }
+    out
+}
+
+/// Reduces (or pads) a cloud to `points` points and normalises it (see the
+/// module docs). Returns `None` for a cloud without finite points.
+pub fn preprocess(
+    cloud: &[[f32; 3]],
+    points: usize,
+    sampling: Sampling,
+    seed: u64,
+) -> Option<Vec<[f32; 3]>> {
+    let finite: Vec<[f32; 3]> = cloud
+        .iter()
+        .copied()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .collect();
+    if finite.is_empty() || points == 0 {
+        return None;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut out = if finite.len() > points {
+        match sampling {
+            Sampling::Fps => {
+                let start = rng.random_range(0..finite.len());
+                farthest_point_sampling(&finite, points, start)
+            }
+            Sampling::Random => random_subset(&finite, points, &mut rng),
+        }
+    } else {
+        finite
+    };
+    pad(&mut out, points, &mut rng);
+    shapes::normalise(&mut out);
+    Some(out)
+}
+
+/// `k` distinct points of `cloud` in a random order (partial Fisher-Yates).
+fn random_subset(cloud: &[[f32; 3]], k: usize, rng: &mut ChaCha8Rng) -> Vec<[f32; 3]> {
+    let mut idx: Vec<usize> = (0..cloud.len()).collect();
+    let k = k.min(idx.len());
+    for i in 0..k {
+        let j = rng.random_range(i..idx.len());
+        idx.swap(i, j);
+    }
+    idx[..k].iter().map(|&i| cloud[i]).collect()
+}
+
+/// Pads by repeating random points of the original length.
+fn pad(pts: &mut Vec<[f32; 3]>, points: usize, rng: &mut ChaCha8Rng) {
+    let len = pts.len();
+    while pts.len() < points {
+        let i = rng.random_range(0..len);
+        pts.push(pts[i]);
+    }
+}
+
+/// Standard normal sample (Box-Muller).
+fn gaussian(rng: &mut ChaCha8Rng) -> f32 {
+    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.random::<f64>();
+    ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
+}
+
+/// One (template, source, R_gt, t_gt) pair from a preprocessed template
+/// (see the module docs). The source has as many points as the template.
+pub fn make_pair(
+    template: &[[f32; 3]],
+    cfg: &PairConfig,
+    seed: u64,
+) -> (Vec<[f32; 3]>, Mat3, [f32; 3]) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n = template.len();
+    let angles: [f32; 3] =
+        std::array::from_fn(|_| rng.random_range(-cfg.max_deg..=cfg.max_deg).to_radians());
+    let t: [f32; 3] = std::array::from_fn(|_| rng.random_range(-cfg.max_t..=cfg.max_t));
+    let r = euler_to_mat(angles);
+    let mut pts = template.to_vec();
+    if let Some([lo, hi]) = cfg.partial {
+        let frac = if hi > lo {
+            rng.random_range(lo..=hi)
+        } else {
+            lo
+        };
+        let d: [f32; 3] = loop {
+            let v: [f32; 3] = std::array::from_fn(|_| gaussian(&mut rng));
+            let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if norm > 1e-6 {
+                break v.map(|x| x / norm);
+            }
+        };
+        let keep = ((frac * n as f32).round() as usize).clamp(1, n);
+        let mut order: Vec<(f32, usize)> = pts
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (p[0] * d[0] + p[1] * d[1] + p[2] * d[2], i))
+            .collect();
+        order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        pts = order[..keep].iter().map(|&(_, i)| pts[i]).collect();
+    }
+    if let Some([lo, hi]) = cfg.sparse {
+        let frac = if hi > lo {
+            rng.random_range(lo..=hi)
+        } else {
+            lo
+        };
+        let keep = ((frac * pts.len() as f32).round() as usize).clamp(1, pts.len());
+        pts = random_subset(&pts, keep, &mut rng);
+    }
+    pad(&mut pts, n, &mut rng);
+    let sigma = cfg
+        .noise
+        .filter(|&s| s > 0.0)
+        .map_or(0.0, |s| rng.random_range(0.0..=s));
+    let source = pts
+        .iter()
+        .map(|p| {
+            let q = apply(&r, &t, p);
+            if sigma > 0.0 {
+                q.map(|v| v + sigma * gaussian(&mut rng))
+            } else {
+                q
+            }
+        })
+        .collect();
+    let (r_gt, t_gt) = invert(&r, &t);
+    (source, r_gt, t_gt)
+}
+
+fn list_dir(path: &Path) -> Result<Vec<PathBuf>, DataError> {
+    let rd = std::fs::read_dir(path).map_err(|error| DataError::Io {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    let mut out: Vec<PathBuf> = rd.filter_map(|e| e.ok().map(|e| e.path())).collect();
+    out.sort();
+    Ok(out)
+}
+
+impl Dataset {
+    /// Loads `<root>/<class>/<split>/*` (every file [`io::read_cloud`]
+    /// understands), classes in name order, files in name order, keeping
+    /// only `classes` when given. Preprocessing (see the module docs) is
+    /// seeded per file by `seed` and the file's position.
+    pub fn load_modelnet(
+        root: &Path,
+        split: Split,
+        classes: Option<&[String]>,
+        points: usize,
+        sampling: Sampling,
+        seed: u64,
+    ) -> Result<Self, DataError> {
+        let mut files = Vec::new();
+        for class_dir in list_dir(root)? {
+            if !class_dir.is_dir() {
+                continue;
+            }
+            let name = class_dir
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            if classes.is_some_and(|c| !c.iter().any(|x| x == &name)) {
+                continue;
+            }
+            let dir = class_dir.join(split.dir());
+            if !dir.is_dir() {
+                continue;
+            }
+            for f in list_dir(&dir)? {
+                if io::Format::from_path(&f).is_some() {
+                    files.push((name.clone(), f));
+                }
+            }
+        }
+        if files.is_empty() {
+            return Err(DataError::Empty(format!(
+                "{} ({} split, classes {:?})",
+                root.display(),
+                split.dir(),
+                classes
+            )));
+        }
+        let loaded: Vec<Result<Option<Labelled>, DataError>> = files
+            .par_iter()
+            .enumerate()
+            .map(|(i, (label, path))| {
+                let raw = io::read_cloud(path)?;
+                Ok(
+                    preprocess(&raw, points, sampling, mix_seed(seed, 0x10AD, i as u64))
+                        .map(|c| (label.clone(), c)),
+                )
+            })
+            .collect();
+        let mut clouds = Vec::new();
+        let mut labels = Vec::new();
+        for r in loaded {
+            if let Some((l, c)) = r? {
+                labels.push(l);
+                clouds.push(c);
+            }
+        }
+        if clouds.is_empty() {
+            return Err(DataError::Empty(root.display().to_string()));
+        }
+        Ok(Dataset {
+            clouds,
+            labels,
+            points,
+        })
+    }
+
+    /// `count` generated shapes (box, torus, "L" in turn, each with its own
+    /// sampling and a random per-axis stretch in `[0.6, 1]`), preprocessed
+    /// as loaded data. Needs no files.
+    pub fn generated(count: usize, points: usize, seed: u64) -> Self {
+        let kinds = [
+            (Shape::Box, "box"),
+            (Shape::Torus, "torus"),
+            (Shape::Ell, "ell"),
+        ];
+        let mut clouds = Vec::with_capacity(count);
+        let mut labels = Vec::with_capacity(count);
+        for i in 0..count {
+            let (kind, name) = kinds[i % kinds.len()];
+            let s = mix_seed(seed, 0x6E7, i as u64);
+            let mut rng = ChaCha8Rng::seed_from_u64(s);
+            let stretch: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.6..=1.0));
+            let raw: Vec<[f32; 3]> = shapes::sample(kind, points, s)
+                .into_iter()
+                .map(|p| std::array::from_fn(|k| p[k] * stretch[k]))
+                .collect();
+            if let Some(c) = preprocess(&raw, points, Sampling::Random, s) {
+                clouds.push(c);
+                labels.push(name.to_string());
+            }
+        }
+        Dataset {
+            clouds,
+            labels,
+            points,
+        }
+    }
+
+    /// Only the shape at `index` (single-model training).
+    pub fn single_model(mut self, index: usize) -> Self {
+        let i = index.min(self.clouds.len().saturating_sub(1));
+        self.clouds = self.clouds.drain(i..=i).collect();
+        self.labels = self.labels.drain(i..=i).collect();
+        self
+    }
+
+    /// Number of shapes.
+    pub fn len(&self) -> usize {
+        self.clouds.len()
+    }
+
+    /// Whether there is no shape.
+    pub fn is_empty(&self) -> bool {
+        self.clouds.is_empty()
+    }
+
+    /// Builds the batch of pairs: shape `shapes[k]` with pair seed
+    /// `seeds[k]`, in parallel (each pair depends on its seed only).
+    pub fn batch(&self, shapes: &[usize], seeds: &[u64], cfg: &PairConfig) -> Batch {
+        let pairs: Vec<_> = shapes
+            .par_iter()
+            .zip(seeds.par_iter())
+            .map(|(&s, &seed)| {
+                let tpl = &self.clouds[s];
+                let (src, r, t) = make_pair(tpl, cfg, seed);
+                (s, src, r, t)
+            })
+            .collect();
+        let mut batch = Batch {
+            size: shapes.len(),
+            points: self.points,
+            template: Vec::with_capacity(shapes.len() * self.points),
+            source: Vec::with_capacity(shapes.len() * self.points),
+            r_gt: Vec::with_capacity(shapes.len()),
+            t_gt: Vec::with_capacity(shapes.len()),
+        };
+        for (s, src, r, t) in pairs {
+            batch.template.extend_from_slice(&self.clouds[s]);
+            batch.source.extend_from_slice(&src);
+            batch.r_gt.push(r);
+            batch.t_gt.push(t);
+        }
+        batch
+    }
+}

@@ -1,0 +1,49 @@
+//! Export of trained parameters to `pcrnet-core` blobs.
+
+use std::path::{Path, PathBuf};
+
+use super::checkpoint::write_atomic;
+use super::data::{PairConfig, make_pair, mix_seed};
+use crate::{CalibrationRule, F32Params, quantize};
+
+/// File name of the exported f32 blob.
+pub const F32_BLOB: &str = "model-f32.pcrn";
+/// File name of the exported int8 blob.
+pub const INT8_BLOB: &str = "model-int8.pcrn";
+
+/// `count` calibration sources: the template under seeded random poses of
+/// `pairs` (noise, crops and all), as the device will see it.
+pub fn calibration_clouds(
+    template: &[[f32; 3]],
+    pairs: &PairConfig,
+    count: usize,
+    seed: u64,
+) -> Vec<Vec<[f32; 3]>> {
+    (0..count)
+        .map(|i| make_pair(template, pairs, mix_seed(seed, 0xCA11, i as u64)).0)
+        .collect()
+}
+
+/// Writes the f32 blob (template feature embedded) into `dir`, and the
+/// int8 blob too when `calibration` is given. Files are written atomically.
+/// Returns the paths written.
+pub fn export(
+    params: &F32Params,
+    template: &[[f32; 3]],
+    calibration: Option<&[Vec<[f32; 3]>]>,
+    dir: &Path,
+) -> anyhow::Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir)?;
+    let mut written = Vec::new();
+    let f32_blob = params.to_f32_blob(template)?;
+    let p = dir.join(F32_BLOB);
+    write_atomic(&p, &f32_blob)?;
+    written.push(p);
+    if let Some(cal) = calibration {
+        let int8 = quantize(params, template, cal, CalibrationRule::default())?;
+        let p = dir.join(INT8_BLOB);
+        write_atomic(&p, &int8)?;
+        written.push(p);
+    }
+    Ok(written)
+}
