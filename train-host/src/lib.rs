@@ -8,6 +8,7 @@
 //! run over the arrays held here, so host and device share one network
 //! definition.
 
+pub mod eval;
 pub mod inspect;
 pub mod io;
 pub mod net;

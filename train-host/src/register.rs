@@ -16,7 +16,23 @@ pub enum Precision {
     F32,
 }
 
-/// Registers `source` onto `template` with a model blob of either kind.
+/// Stop rule of iterative registration: `||dT - I||_F` below this (the paper's).
+pub const ITERATIVE_TOLERANCE: f32 = 1e-7;
+
+/// What a registration produced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Registration {
+    /// Pose mapping the source onto the template, in the input coordinates.
+    pub pose: Pose,
+    /// Which network ran.
+    pub precision: Precision,
+    /// Network passes run (1 for PCRNet).
+    pub passes: usize,
+}
+
+/// Registers `source` onto `template` with a model blob of either kind, in
+/// up to `passes` passes (1: PCRNet; more: i-PCRNet, stopping early by
+/// [`ITERATIVE_TOLERANCE`]).
 ///
 /// Both clouds are normalised with the template's normalisation (centroid,
 /// scale into the unit box), as in training, so their relative pose is
@@ -27,27 +43,33 @@ pub fn register(
     blob: &[u8],
     template: &[[f32; 3]],
     source: &[[f32; 3]],
-) -> Result<(Pose, Precision), pcrnet_core::Error> {
+    passes: usize,
+) -> Result<Registration, pcrnet_core::Error> {
     let norm = Normalisation::of(template);
     let (mut t, mut s) = (template.to_vec(), source.to_vec());
     norm.apply(&mut t);
     norm.apply(&mut s);
-    let (pose, precision) = match Int8Model::from_bytes(blob) {
-        Ok(model) => (register_int8(&model, &t, &s)?, Precision::Int8),
+    let ((pose, passes), precision) = match Int8Model::from_bytes(blob) {
+        Ok(model) => (register_int8(&model, &t, &s, passes)?, Precision::Int8),
         Err(pcrnet_core::Error::WrongKind { .. }) => (
-            register_f32(&F32Model::from_bytes(blob)?, &t, &s)?,
+            register_f32(&F32Model::from_bytes(blob)?, &t, &s, passes)?,
             Precision::F32,
         ),
         Err(e) => return Err(e),
     };
-    Ok((denormalise(&pose, &norm), precision))
+    Ok(Registration {
+        pose: denormalise(&pose, &norm),
+        precision,
+        passes,
+    })
 }
 
 fn register_int8(
     model: &Int8Model<'_>,
     template: &[[f32; 3]],
     source: &[[f32; 3]],
-) -> Result<Pose, pcrnet_core::Error> {
+    passes: usize,
+) -> Result<(Pose, usize), pcrnet_core::Error> {
     let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
     let feature: Vec<u8> = model
         .encode(template, &mut scratch)?
@@ -58,19 +80,25 @@ fn register_int8(
         template_feature: &feature,
         ..model.payload().clone()
     };
-    Int8Model::from_payload(payload)?.register(source, &mut scratch)
+    Int8Model::from_payload(payload)?.register_iterative(
+        source,
+        passes,
+        ITERATIVE_TOLERANCE,
+        &mut scratch,
+    )
 }
 
 fn register_f32(
     model: &F32Model<'_>,
     template: &[[f32; 3]],
     source: &[[f32; 3]],
-) -> Result<Pose, pcrnet_core::Error> {
+    passes: usize,
+) -> Result<(Pose, usize), pcrnet_core::Error> {
     let params = F32Params::from_network(model);
     let feature = params.encode(template)?;
     let net = params.network(&feature)?;
     let mut scratch = vec![0f32; net.scratch_len()];
-    net.register(source, &mut scratch)
+    net.register_iterative(source, passes, ITERATIVE_TOLERANCE, &mut scratch)
 }
 
 /// Turns a pose between normalised clouds (`q = s (p - c)`) into one
@@ -129,9 +157,14 @@ mod tests {
             .map(|p| [p[0] * 20.0 + 5.0, p[1] * 20.0, p[2] * 20.0 - 3.0])
             .collect();
         let source = random_transform(&world, 30.0, 0.0, 9);
-        let (p8, k8) = register(&int8, &world, &source).unwrap();
-        let (pf, kf) = register(&f32_blob, &world, &source).unwrap();
-        assert_eq!((k8, kf), (Precision::Int8, Precision::F32));
+        let r8 = register(&int8, &world, &source, 1).unwrap();
+        let rf = register(&f32_blob, &world, &source, 1).unwrap();
+        assert_eq!(
+            (r8.precision, rf.precision),
+            (Precision::Int8, Precision::F32)
+        );
+        assert_eq!((r8.passes, rf.passes), (1, 1));
+        let (p8, pf) = (r8.pose, rf.pose);
         // Same network, same clouds: the two paths agree to quantization error.
         let dot: f32 = p8
             .rotation
@@ -141,8 +174,10 @@ mod tests {
             .sum();
         assert!(2.0 * dot.abs().min(1.0).acos().to_degrees() < 10.0);
         assert!(matches!(
-            register(&int8, &world, &[]),
+            register(&int8, &world, &[], 1),
             Err(pcrnet_core::Error::EmptyCloud)
         ));
+        let it = register(&int8, &world, &source, 4).unwrap();
+        assert!((1..=4).contains(&it.passes));
     }
 }

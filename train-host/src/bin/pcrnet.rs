@@ -1,10 +1,12 @@
-//! `pcrnet`: the host command line (inspect models, run the demo).
+//! `pcrnet`: the host command line (train, export, inspect, register, demo).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
+use pcrnet_train::eval::icp::{IcpConfig, icp};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::{
     CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, inspect, quantize,
@@ -51,6 +53,37 @@ enum Command {
     /// Export a training checkpoint to the f32 and int8 blobs, with the
     /// template's feature embedded.
     Export(pcrnet_train::train::cli::ExportArgs),
+    /// Register SOURCE onto TEMPLATE (files: .pcd .ply .off .xyz .txt) and
+    /// print the pose as quaternion + translation and as a 4x4 matrix.
+    Register {
+        /// The template cloud (the known model).
+        template: PathBuf,
+        /// The source cloud (what the sensor sees).
+        source: PathBuf,
+        /// Method: pcrnet (one pass), ipcrnet (iterative) or icp.
+        #[arg(long, value_enum, default_value_t = Method::Pcrnet)]
+        method: Method,
+        /// Model blob (int8 or f32) for pcrnet / ipcrnet.
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Most passes of ipcrnet (the paper: 20) or iterations of icp (100).
+        #[arg(long)]
+        iterations: Option<usize>,
+        /// Write the source moved onto the template here (XYZ text).
+        #[arg(long)]
+        aligned: Option<PathBuf>,
+    },
+}
+
+/// Registration methods of `pcrnet register`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Method {
+    /// One network pass.
+    Pcrnet,
+    /// Iterative network passes (i-PCRNet).
+    Ipcrnet,
+    /// Point-to-point ICP.
+    Icp,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -75,8 +108,87 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Train(args) => pcrnet_train::train::cli::train(*args)?,
         Command::Export(args) => pcrnet_train::train::cli::export(args)?,
+        Command::Register {
+            template,
+            source,
+            method,
+            model,
+            iterations,
+            aligned,
+        } => register(&template, &source, method, model, iterations, aligned)?,
     }
     Ok(())
+}
+
+fn register(
+    template_path: &Path,
+    source_path: &Path,
+    method: Method,
+    model: Option<PathBuf>,
+    iterations: Option<usize>,
+    aligned: Option<PathBuf>,
+) -> anyhow::Result<()> {
+    let template = read_cloud(template_path)?;
+    let source = read_cloud(source_path)?;
+    let start = Instant::now();
+    let pose = match method {
+        Method::Icp => {
+            let config = IcpConfig {
+                max_iterations: iterations.unwrap_or(IcpConfig::default().max_iterations),
+                ..IcpConfig::default()
+            };
+            let r = icp(&template, &source, config)?;
+            println!(
+                "method: ICP, {} iterations, final MSE {:.3e}",
+                r.iterations, r.mse
+            );
+            r.pose
+        }
+        Method::Pcrnet | Method::Ipcrnet => {
+            let path = model.context("--model BLOB is needed for pcrnet and ipcrnet")?;
+            let blob =
+                std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+            let passes = match method {
+                Method::Pcrnet => 1,
+                _ => iterations.unwrap_or(20),
+            };
+            let r = pcrnet_train::register::register(&blob, &template, &source, passes)
+                .with_context(|| format!("registering with {}", path.display()))?;
+            println!(
+                "method: {method:?} ({:?}), {} pass(es)",
+                r.precision, r.passes
+            );
+            r.pose
+        }
+    };
+    println!("time: {:.3} ms", start.elapsed().as_secs_f64() * 1e3);
+    println!("quaternion (w, x, y, z): {:?}", pose.rotation);
+    println!("translation: {:?}", pose.translation);
+    println!("matrix (maps source onto template):");
+    for row in pose.matrix() {
+        println!(
+            "  [{:>10.6} {:>10.6} {:>10.6} {:>10.6}]",
+            row[0], row[1], row[2], row[3]
+        );
+    }
+    if let Some(out) = aligned {
+        let text: String = source
+            .iter()
+            .map(|&p| {
+                let q = pose.transform_point(p);
+                format!("{} {} {}\n", q[0], q[1], q[2])
+            })
+            .collect();
+        std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+        println!("aligned source written to {}", out.display());
+    }
+    Ok(())
+}
+
+fn read_cloud(path: &Path) -> anyhow::Result<Vec<[f32; 3]>> {
+    let cloud = pcrnet_train::io::read_cloud(path)?;
+    anyhow::ensure!(!cloud.is_empty(), "{}: no points", path.display());
+    Ok(cloud)
 }
 
 fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {

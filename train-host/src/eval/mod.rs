@@ -1,0 +1,3 @@
+//! Evaluation: the classical baseline (ICP) the networks are compared with.
+
+pub mod icp;
