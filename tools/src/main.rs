@@ -21,7 +21,7 @@ cargo xtask <command>
                 the device is caught
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
-  bench         host benchmarks of the encoder (criterion)
+  bench         host benchmarks (criterion): encoder throughput, training step
   help          this text
 
 Missing tools are installed: the thumbv7em-none-eabihf target (rustup) and
@@ -33,7 +33,7 @@ fn main() -> ExitCode {
     let result = match args.first().map(String::as_str) {
         Some("ci") => ci(),
         Some("demo") => demo(&args[1..]),
-        Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "--bench", "encoder"]),
+        Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "-p", "pcrnet-train"]),
         Some("qemu-test") => qemu_test(),
         Some("firmware-run") => firmware_run(),
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
