@@ -60,13 +60,14 @@ enum Command {
         template: PathBuf,
         /// The source cloud (what the sensor sees).
         source: PathBuf,
-        /// Method: pcrnet (one pass), ipcrnet (iterative) or icp.
+        /// Method: pcrnet (one pass), ipcrnet (iterative), pointnetlk (f32 blob) or icp.
         #[arg(long, value_enum, default_value_t = Method::Pcrnet)]
         method: Method,
-        /// Model blob (int8 or f32) for pcrnet / ipcrnet.
+        /// Model blob: int8 or f32 for pcrnet / ipcrnet, f32 for pointnetlk.
         #[arg(long)]
         model: Option<PathBuf>,
-        /// Most passes of ipcrnet (the paper: 20) or iterations of icp (100).
+        /// Most passes of ipcrnet / steps of pointnetlk (the paper: 20) or
+        /// iterations of icp (100).
         #[arg(long)]
         iterations: Option<usize>,
         /// Write the source moved onto the template here (XYZ text).
@@ -82,6 +83,8 @@ enum Method {
     Pcrnet,
     /// Iterative network passes (i-PCRNet).
     Ipcrnet,
+    /// Lucas-Kanade on the encoder's features (PointNetLK).
+    Pointnetlk,
     /// Point-to-point ICP.
     Icp,
 }
@@ -143,6 +146,20 @@ fn register(
                 r.iterations, r.mse
             );
             r.pose
+        }
+        Method::Pointnetlk => {
+            let path = model.context("--model F32_BLOB is needed for pointnetlk")?;
+            let blob =
+                std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+            let (pose, steps) = pcrnet_train::register::register_pointnetlk(
+                &blob,
+                &template,
+                &source,
+                iterations.unwrap_or(20),
+            )
+            .with_context(|| format!("registering with {}", path.display()))?;
+            println!("method: PointNetLK (f32 encoder), {steps} step(s)");
+            pose
         }
         Method::Pcrnet | Method::Ipcrnet => {
             let path = model.context("--model BLOB is needed for pcrnet and ipcrnet")?;

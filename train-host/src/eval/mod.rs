@@ -1,3 +1,4 @@
-//! Evaluation: the classical baseline (ICP) the networks are compared with.
+//! Evaluation: the baselines the networks are compared with (ICP, PointNetLK).
 
 pub mod icp;
+pub mod pointnetlk;
