@@ -3,8 +3,10 @@
 //! SVD method (`nalgebra`), in f64.
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use pcrnet_core::Pose;
+
+use super::pose_from_matrix;
 
 /// ICP settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,21 +52,6 @@ pub enum IcpError {
 
 fn to_vec(p: &[f32; 3]) -> Vector3<f64> {
     Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)
-}
-
-/// The pose of a rotation matrix and translation (f64 -> f32).
-fn to_pose(r: &Matrix3<f64>, t: &Vector3<f64>) -> Pose {
-    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r));
-    let s = if q.w < 0.0 { -1.0 } else { 1.0 };
-    Pose {
-        rotation: [
-            (s * q.w) as f32,
-            (s * q.i) as f32,
-            (s * q.j) as f32,
-            (s * q.k) as f32,
-        ],
-        translation: [t.x as f32, t.y as f32, t.z as f32],
-    }
 }
 
 /// The rigid transform minimising `sum |R a_i + t - b_i|^2` (Kabsch).
@@ -129,11 +116,11 @@ pub fn icp(
         }
         r = dr * r;
         t = dr * t + dt;
-        trajectory.push(to_pose(&r, &t));
+        trajectory.push(pose_from_matrix(&r, &t));
         mse = sum / moved.len() as f64;
         if (previous - mse).abs() < config.tolerance {
             return Ok(IcpResult {
-                pose: to_pose(&r, &t),
+                pose: pose_from_matrix(&r, &t),
                 iterations: iteration,
                 mse,
                 trajectory,
@@ -142,7 +129,7 @@ pub fn icp(
         previous = mse;
     }
     Ok(IcpResult {
-        pose: to_pose(&r, &t),
+        pose: pose_from_matrix(&r, &t),
         iterations: config.max_iterations,
         mse,
         trajectory,
@@ -178,7 +165,7 @@ mod tests {
     #[test]
     fn kabsch_is_exact_on_correspondences() {
         let a: Vec<Vector3<f64>> = sample(Shape::Torus, 50, 1).iter().map(to_vec).collect();
-        let rot = Rotation3::from_euler_angles(0.3, -0.5, 1.2);
+        let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.5, 1.2);
         let b: Vec<Vector3<f64>> = a
             .iter()
             .map(|p| rot * p + Vector3::new(0.1, 0.2, -0.3))

@@ -7,9 +7,10 @@
 //! iteration solves `J dxi = phi(G S) - phi(T)` in the least-squares sense
 //! and updates `G <- exp(dxi)^-1 G`, so that `G S` moves onto `T`.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3, Vector6};
 use pcrnet_core::Pose;
 
+use super::pose_from_matrix;
 use crate::net::F32Params;
 
 /// A rigid transform in f64.
@@ -70,17 +71,7 @@ impl Rigid64 {
     }
 
     fn pose(&self) -> Pose {
-        let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(self.r));
-        let s = if q.w < 0.0 { -1.0 } else { 1.0 };
-        Pose {
-            rotation: [
-                (s * q.w) as f32,
-                (s * q.i) as f32,
-                (s * q.j) as f32,
-                (s * q.k) as f32,
-            ],
-            translation: [self.t.x as f32, self.t.y as f32, self.t.z as f32],
-        }
+        pose_from_matrix(&self.r, &self.t)
     }
 }
 
