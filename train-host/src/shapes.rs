@@ -125,21 +125,7 @@ pub fn random_transform(pts: &[[f32; 3]], max_deg: f32, max_t: f32, seed: u64) -
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let a: [f32; 3] = std::array::from_fn(|_| rng.random_range(-max_deg..=max_deg).to_radians());
     let t: [f32; 3] = std::array::from_fn(|_| rng.random_range(-max_t..=max_t));
-    let (sx, cx, sy, cy, sz, cz) = (
-        a[0].sin(),
-        a[0].cos(),
-        a[1].sin(),
-        a[1].cos(),
-        a[2].sin(),
-        a[2].cos(),
-    );
     // R = Rz * Ry * Rx
-    let r = [
-        [cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx],
-        [sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx],
-        [-sy, cy * sx, cy * cx],
-    ];
-    pts.iter()
-        .map(|p| std::array::from_fn(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + t[i]))
-        .collect()
+    let r = crate::train::geometry::euler_to_mat(a);
+    crate::train::geometry::transform_points(&r, &t, pts)
 }
