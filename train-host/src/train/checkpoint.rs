@@ -18,7 +18,8 @@ use super::TrainConfig;
 use super::adam::Adam;
 use crate::F32Params;
 
-const MAGIC: &[u8; 8] = b"PCRNCKP1";
+/// Version 2: [`super::PairConfig::centre`] added to the configuration.
+const MAGIC: &[u8; 8] = b"PCRNCKP2";
 
 /// Where a run is.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -120,7 +121,7 @@ impl Checkpoint {
         };
         let body = bytes
             .strip_prefix(MAGIC.as_slice())
-            .ok_or_else(|| invalid("bad magic".into()))?;
+            .ok_or_else(|| invalid("bad magic (or a checkpoint of an older version)".into()))?;
         let ck: Checkpoint = postcard::from_bytes(body).map_err(|e| invalid(e.to_string()))?;
         let shapes: Vec<_> = ck
             .arch

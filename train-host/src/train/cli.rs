@@ -120,6 +120,10 @@ pub struct TrainArgs {
     /// Sparse source: random subset keeping a fraction in LO,HI (default 0.25,0.75).
     #[arg(long, num_args = 0..=1, default_missing_value = "0.25,0.75")]
     pub sparse: Option<String>,
+    /// Feed the network uncentred sources (default: sources centred on
+    /// their centroid, as the reference implementation; see `train::data`).
+    #[arg(long)]
+    pub no_centre: bool,
     /// Clip the gradient's global norm.
     #[arg(long)]
     pub clip: Option<f32>,
@@ -236,6 +240,7 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             noise: args.noise,
             partial: args.partial.as_deref().map(parse_range).transpose()?,
             sparse: args.sparse.as_deref().map(parse_range).transpose()?,
+            centre: !args.no_centre,
         },
         clip_norm: args.clip,
         checkpoint_every: args.checkpoint_every,
