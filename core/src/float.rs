@@ -65,6 +65,7 @@ pub struct Layer<P> {
 #[derive(Debug, Clone)]
 pub struct F32Network<P> {
     arch: Arch,
+    centre_source: bool,
     layers: heapless::Vec<Layer<P>, { 2 * crate::arch::MAX_LAYERS + 1 }>,
     template: P,
 }
@@ -95,7 +96,8 @@ impl<'a> F32Model<'a> {
             4,
             "template feature",
         )?;
-        F32Network::new(p.arch, layers, LeF32(p.template_feature))
+        Ok(F32Network::new(p.arch, layers, LeF32(p.template_feature))?
+            .with_centring(p.centre_source))
     }
 }
 
@@ -137,6 +139,7 @@ impl<P: Params> F32Network<P> {
         }
         Ok(F32Network {
             arch,
+            centre_source: false,
             layers,
             template,
         })
@@ -145,6 +148,18 @@ impl<P: Params> F32Network<P> {
     /// The network shape.
     pub fn arch(&self) -> &Arch {
         &self.arch
+    }
+
+    /// Sets whether the network expects the source centred on its centroid
+    /// (see [`pose::centring`]; off by default).
+    pub fn with_centring(mut self, centre_source: bool) -> Self {
+        self.centre_source = centre_source;
+        self
+    }
+
+    /// Whether the network sees the source centred on its centroid.
+    pub fn centres_source(&self) -> bool {
+        self.centre_source
     }
 
     /// The layers: encoder first, then head, output last.
@@ -164,16 +179,29 @@ impl<P: Params> F32Network<P> {
 
     /// Registers `source` to the template (pose maps source onto template).
     pub fn register(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<Pose> {
+        let centring = pose::centring(source, self.centre_source)?;
         let raw = self.infer(source, scratch)?;
-        Pose::from_head_output(&raw)
+        Ok(centring.then(&Pose::from_head_output(&raw)?))
     }
 
-    /// Encodes the source and runs the head, returning the raw 7 outputs.
-    /// The feature is left in `scratch[..F]`.
+    /// Encodes the source (centred first if the network says so) and runs
+    /// the head, returning the raw 7 outputs. The feature is left in
+    /// `scratch[..F]`.
     pub fn infer(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<[f32; POSE_DIM]> {
         let (feature, work) = self.split(scratch)?;
-        self.encode_into(source, None, feature, work)?;
+        self.encode_centred(source, feature, work)?;
         self.head(feature, work)
+    }
+
+    fn encode_centred(
+        &self,
+        source: &[[f32; 3]],
+        feature: &mut [f32],
+        work: &mut [f32],
+    ) -> Result<()> {
+        let centring = pose::centring(source, self.centre_source)?;
+        let moved = self.centre_source.then(|| Rigid::from(&centring));
+        self.encode_into(source, moved.as_ref(), feature, work)
     }
 
     /// Iterative registration (i-PCRNet), as [`crate::Int8Model::register_iterative`].
@@ -184,7 +212,8 @@ impl<P: Params> F32Network<P> {
         tolerance: f32,
         scratch: &mut [f32],
     ) -> Result<(Pose, usize)> {
-        pose::iterate(iterations, tolerance, |current| {
+        let start = pose::centring(source, self.centre_source)?;
+        pose::iterate(start, iterations, tolerance, |current| {
             let moved = Rigid::from(current);
             let (feature, work) = self.split(scratch)?;
             self.encode_into(source, Some(&moved), feature, work)?;
@@ -195,7 +224,7 @@ impl<P: Params> F32Network<P> {
     /// Encodes `source` into its global feature (a view into `scratch`).
     pub fn encode<'s>(&self, source: &[[f32; 3]], scratch: &'s mut [f32]) -> Result<&'s [f32]> {
         let (feature, work) = self.split(scratch)?;
-        self.encode_into(source, None, feature, work)?;
+        self.encode_centred(source, feature, work)?;
         Ok(feature)
     }
 

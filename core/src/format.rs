@@ -3,7 +3,7 @@
 //! ```text
 //! offset  size  field
 //! 0       4     magic  b"PCRN"
-//! 4       2     format version, u16 little-endian (currently 1)
+//! 4       2     format version, u16 little-endian (currently 2)
 //! 6       1     kind: 0 = int8 (device), 1 = f32 (host reference)
 //! 7       4     payload length P, u32 little-endian
 //! 11      P     payload: postcard encoding of Int8Payload or F32Payload
@@ -29,7 +29,7 @@ use crate::error::{Error, Result};
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"PCRN";
 /// Format version written and read by this build.
-pub const FORMAT_VERSION: u16 = 1;
+pub const FORMAT_VERSION: u16 = 2;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 11;
 /// Bytes after the payload.
@@ -87,6 +87,9 @@ pub struct Int8Output<'a> {
 pub struct Int8Payload<'a> {
     /// Network shape.
     pub arch: Arch,
+    /// Whether the network expects the source centred on its centroid
+    /// (see [`crate::pose::centring`]); the pose is then composed back.
+    pub centre_source: bool,
     /// Real value of one step of the int16 input coordinates (zero point 0).
     pub input_scale: f32,
     /// Encoder layers, in order; the last one's output parameters are the feature's.
@@ -116,6 +119,8 @@ pub struct F32Layer<'a> {
 pub struct F32Payload<'a> {
     /// Network shape.
     pub arch: Arch,
+    /// Whether the network expects the source centred on its centroid.
+    pub centre_source: bool,
     /// Encoder layers then head layers (hidden and output), in order.
     #[serde(borrow)]
     pub layers: heapless::Vec<F32Layer<'a>, { 2 * MAX_LAYERS + 1 }>,

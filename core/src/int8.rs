@@ -37,8 +37,13 @@ pub struct Int8Model<'a> {
 pub struct Int8Inference<'s> {
     /// The source's int8 global feature (a view into the scratch).
     pub feature: &'s [i8],
-    /// The head's raw i32 outputs `[qw, qx, qy, qz, tx, ty, tz]`.
+    /// The head's raw i32 outputs `[qw, qx, qy, qz, tx, ty, tz]`: the
+    /// network's estimate for the source as it saw it (centred or not).
     pub head: [i32; POSE_DIM],
+    /// How the source was moved before the network: the identity, or the
+    /// centring translation for models trained on centred sources. The
+    /// registered pose is `centring.then(&model.pose(&head)?)`.
+    pub centring: Pose,
 }
 
 impl<'a> Int8Model<'a> {
@@ -127,7 +132,12 @@ impl<'a> Int8Model<'a> {
     /// source onto the template.
     pub fn register(&self, source: &[[f32; 3]], scratch: &mut [i8]) -> Result<Pose> {
         let inference = self.infer(source, scratch)?;
-        self.pose(&inference.head)
+        Ok(inference.centring.then(&self.pose(&inference.head)?))
+    }
+
+    /// Whether the network sees the source centred on its centroid.
+    pub fn centres_source(&self) -> bool {
+        self.p.centre_source
     }
 
     /// Iterative registration (i-PCRNet): up to `iterations` passes, each on
@@ -144,7 +154,8 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
     ) -> Result<(Pose, usize)> {
         let tile = self.tile_for(scratch.len())?;
-        pose::iterate(iterations, tolerance, |current| {
+        let start = pose::centring(source, self.p.centre_source)?;
+        pose::iterate(start, iterations, tolerance, |current| {
             let moved = Rigid::from(current);
             let (feature, work) = self.split_scratch(tile, scratch)?;
             self.encode_into(source, Some(&moved), tile, feature, work)?;
@@ -170,13 +181,20 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &'s mut [i8],
     ) -> Result<Int8Inference<'s>> {
+        let centring = pose::centring(source, self.p.centre_source)?;
+        let moved = self.p.centre_source.then(|| Rigid::from(&centring));
         let (feature, work) = self.split_scratch(tile, scratch)?;
-        self.encode_into(source, None, tile, feature, work)?;
+        self.encode_into(source, moved.as_ref(), tile, feature, work)?;
         let head = self.head(feature, work)?;
-        Ok(Int8Inference { feature, head })
+        Ok(Int8Inference {
+            feature,
+            head,
+            centring,
+        })
     }
 
-    /// Encodes `source` into its int8 global feature (a view into `scratch`).
+    /// Encodes `source` (centred first if the model says so) into its int8
+    /// global feature (a view into `scratch`).
     pub fn encode<'s>(&self, source: &[[f32; 3]], scratch: &'s mut [i8]) -> Result<&'s [i8]> {
         let tile = self.tile_for(scratch.len())?;
         self.encode_tiled(source, tile, scratch)
@@ -189,8 +207,10 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &'s mut [i8],
     ) -> Result<&'s [i8]> {
+        let centring = pose::centring(source, self.p.centre_source)?;
+        let moved = self.p.centre_source.then(|| Rigid::from(&centring));
         let (feature, work) = self.split_scratch(tile, scratch)?;
-        self.encode_into(source, None, tile, feature, work)?;
+        self.encode_into(source, moved.as_ref(), tile, feature, work)?;
         Ok(feature)
     }
 

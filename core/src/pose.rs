@@ -87,8 +87,11 @@ impl Pose {
     }
 
     /// `self` followed by `next`: the pose `p -> next(self(p))`.
-    /// The quaternion product is renormalised (`libm::sqrtf`) and made
-    /// canonical (`w >= 0`).
+    ///
+    /// The quaternion product is made canonical (`w >= 0`) but not
+    /// renormalised: a product of unit quaternions drifts by a few ulp at
+    /// most over the 20 compositions of an iterative registration, and this
+    /// way `Pose::IDENTITY.then(p)` is `p` bit for bit.
     pub fn then(&self, next: &Pose) -> Pose {
         let [aw, ax, ay, az] = next.rotation;
         let [bw, bx, by, bz] = self.rotation;
@@ -98,10 +101,9 @@ impl Pose {
             aw * by - ax * bz + ay * bw + az * bx,
             aw * bz + ax * by - ay * bx + az * bw,
         ];
-        let n = libm::sqrtf(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-        let s = if q[0] < 0.0 { -1.0 / n } else { 1.0 / n };
+        let rotation = if q[0] < 0.0 { q.map(|v| -v) } else { q };
         Pose {
-            rotation: [q[0] * s, q[1] * s, q[2] * s, q[3] * s],
+            rotation,
             translation: next.transform_point(self.translation),
         }
     }
@@ -150,18 +152,55 @@ impl Rigid {
     }
 }
 
-/// Iterative registration (i-PCRNet at test time): from the identity, each
+/// The centroid of a cloud, accumulated in f64 (IEEE-754 on every target:
+/// hardware on the host, correctly rounded soft-float on Cortex-M4) and
+/// rounded to f32 once.
+pub fn centroid(points: &[[f32; 3]]) -> Result<[f32; 3]> {
+    if points.is_empty() {
+        return Err(Error::EmptyCloud);
+    }
+    let mut sum = [0f64; 3];
+    for (index, p) in points.iter().enumerate() {
+        if p.iter().any(|x| !x.is_finite()) {
+            return Err(Error::NonFiniteCoordinate { index });
+        }
+        for (s, &x) in sum.iter_mut().zip(p) {
+            *s += x as f64;
+        }
+    }
+    let n = points.len() as f64;
+    Ok(sum.map(|s| (s / n) as f32))
+}
+
+/// Where registration starts: the identity, or for a network trained on
+/// centred sources (as the reference PCRNet implementation does), the
+/// translation by minus the source's centroid. The network then sees the
+/// centred source, and composing its estimate after this pose gives the pose
+/// of the source as given.
+pub fn centring(points: &[[f32; 3]], centre_source: bool) -> Result<Pose> {
+    if !centre_source {
+        return Ok(Pose::IDENTITY);
+    }
+    let c = centroid(points)?;
+    Ok(Pose {
+        rotation: Pose::IDENTITY.rotation,
+        translation: [-c[0], -c[1], -c[2]],
+    })
+}
+
+/// Iterative registration (i-PCRNet at test time): from `start`, each
 /// step estimates the pose of the source moved by the current estimate, and
 /// the estimates compose (`current.then(delta)`). Stops after `iterations`
 /// steps, or earlier once a step's `||delta - I||_F` is below `tolerance`
 /// (the paper uses 1e-7 and 20 iterations). Returns the pose and the number
 /// of steps taken.
 pub fn iterate(
+    start: Pose,
     iterations: usize,
     tolerance: f32,
     mut step: impl FnMut(&Pose) -> Result<Pose>,
 ) -> Result<(Pose, usize)> {
-    let mut current = Pose::IDENTITY;
+    let mut current = start;
     for done in 1..=iterations {
         let delta = step(&current)?;
         current = current.then(&delta);
@@ -213,7 +252,7 @@ mod tests {
         let h = core::f32::consts::FRAC_1_SQRT_2;
         let quarter = Pose::from_head_output(&[h, 0.0, 0.0, h, 0.0, 0.0, 0.0]).unwrap();
         let mut calls = 0;
-        let (pose, n) = iterate(20, 1e-3, |_| {
+        let (pose, n) = iterate(Pose::IDENTITY, 20, 1e-3, |_| {
             calls += 1;
             Ok(if calls <= 2 { quarter } else { Pose::IDENTITY })
         })
@@ -223,8 +262,22 @@ mod tests {
         let p = pose.transform_point([1.0, 0.0, 0.0]);
         assert!((p[0] + 1.0).abs() < 1e-5 && p[1].abs() < 1e-5);
         assert_eq!(
-            iterate(5, 0.0, |_| Err(Error::EmptyCloud)),
+            iterate(Pose::IDENTITY, 5, 0.0, |_| Err(Error::EmptyCloud)),
             Err(Error::EmptyCloud)
+        );
+    }
+
+    #[test]
+    fn centring_moves_the_centroid_to_the_origin() {
+        let pts = [[1.0, 2.0, 3.0], [3.0, 2.0, 1.0]];
+        assert_eq!(centroid(&pts), Ok([2.0, 2.0, 2.0]));
+        let c = centring(&pts, true).unwrap();
+        assert_eq!(c.transform_point([2.0, 2.0, 2.0]), [0.0; 3]);
+        assert_eq!(centring(&pts, false), Ok(Pose::IDENTITY));
+        assert_eq!(centroid(&[]), Err(Error::EmptyCloud));
+        assert_eq!(
+            centroid(&[[0.0; 3], [f32::NAN, 0.0, 0.0]]),
+            Err(Error::NonFiniteCoordinate { index: 1 })
         );
     }
 

@@ -116,11 +116,23 @@ pub fn random_cloud<const N: usize>(rng: &mut SplitMix64) -> [[f32; 3]; N] {
 
 /// Writes a random int8 model blob into `out` (weights generated into
 /// `arena`). Its template feature is the int8 encoding of a random 64-point
-/// cloud. Feature size must be at most 4096.
+/// cloud. Feature size must be at most 4096. The model does not centre sources.
 pub fn random_int8_blob_into<'o>(
     seed: u64,
     encoder: &[u16],
     head: &[u16],
+    arena: &mut [u8],
+    out: &'o mut [u8],
+) -> Result<&'o [u8]> {
+    random_int8_blob_with(seed, encoder, head, false, arena, out)
+}
+
+/// As [`random_int8_blob_into`], choosing whether the model centres sources.
+pub fn random_int8_blob_with<'o>(
+    seed: u64,
+    encoder: &[u16],
+    head: &[u16],
+    centre_source: bool,
     arena: &mut [u8],
     out: &'o mut [u8],
 ) -> Result<&'o [u8]> {
@@ -158,6 +170,7 @@ pub fn random_int8_blob_into<'o>(
     }
     let mut payload = Int8Payload {
         arch,
+        centre_source,
         input_scale: RANDOM_INPUT_SCALE,
         encoder: enc,
         head: hd,
@@ -220,6 +233,7 @@ pub fn random_f32_blob_into<'o>(
     zeros.fill(0);
     let mut payload = F32Payload {
         arch,
+        centre_source: false,
         layers,
         template_feature: zeros,
     };

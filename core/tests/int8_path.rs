@@ -266,3 +266,43 @@ fn iterative_registration_is_repeated_single_passes() {
         1
     );
 }
+
+#[test]
+fn centring_models_see_the_centred_source() {
+    use pcrnet_core::pose::{Rigid, centring};
+    use pcrnet_core::testing::random_int8_blob_with;
+    let (mut arena, mut out) = (vec![0u8; 1 << 20], vec![0u8; 1 << 20]);
+    let centred = random_int8_blob_with(81, SMALL_ENC, SMALL_HEAD, true, &mut arena, &mut out)
+        .unwrap()
+        .to_vec();
+    let plain = blob(81, SMALL_ENC, SMALL_HEAD);
+    let (mc, mp) = (
+        Int8Model::from_bytes(&centred).unwrap(),
+        Int8Model::from_bytes(&plain).unwrap(),
+    );
+    assert!(mc.centres_source() && !mp.centres_source());
+    let pts: Vec<[f32; 3]> = cloud(82, 200, 0.5)
+        .iter()
+        .map(|p| [p[0] + 1.0, p[1] - 0.7, p[2] + 0.3])
+        .collect();
+    let start = centring(&pts, true).unwrap();
+    let moved: Vec<[f32; 3]> = pts.iter().map(|&p| Rigid::from(&start).apply(p)).collect();
+    let mut s1 = vec![0i8; mc.scratch_len(MAX_TILE)];
+    let mut s2 = vec![0i8; mp.scratch_len(MAX_TILE)];
+    let a = mc.infer(&pts, &mut s1).unwrap();
+    let b = mp.infer(&moved, &mut s2).unwrap();
+    // Same weights (same seed): the centring model encodes the raw cloud as
+    // the plain model encodes the centred cloud, bit for bit. (The template
+    // features differ: each model encoded the random template its own way.)
+    assert_eq!(a.feature, b.feature);
+    assert_eq!(a.centring, start);
+    let head = a.head;
+    let pose = mc.register(&pts, &mut s1).unwrap();
+    assert_eq!(pose, start.then(&mc.pose(&head).unwrap()));
+    // The rotation does not depend on where the cloud is.
+    let shifted: Vec<[f32; 3]> = pts.iter().map(|p| [p[0] - 1.5, p[1], p[2] + 2.0]).collect();
+    let other = mc.register(&shifted, &mut s1).unwrap();
+    for (x, y) in pose.rotation.iter().zip(other.rotation) {
+        assert!((x - y).abs() < 1e-3, "{pose:?} vs {other:?}");
+    }
+}

@@ -77,8 +77,14 @@ impl F32Params {
         Ok(net.encode(cloud, &mut scratch)?.to_vec())
     }
 
-    /// Serialises an f32 blob whose template feature is `template`'s encoding.
-    pub fn to_f32_blob(&self, template: &[[f32; 3]]) -> pcrnet_core::Result<Vec<u8>> {
+    /// Serialises an f32 blob whose template feature is `template`'s
+    /// encoding; `centre_source` records whether the network was trained on
+    /// sources centred on their centroid (see `pcrnet_core::pose::centring`).
+    pub fn to_f32_blob(
+        &self,
+        template: &[[f32; 3]],
+        centre_source: bool,
+    ) -> pcrnet_core::Result<Vec<u8>> {
         let feature = self.encode(template)?;
         let bytes: Vec<(Vec<u8>, Vec<u8>)> = self
             .layers
@@ -99,6 +105,7 @@ impl F32Params {
         }
         let payload = F32Payload {
             arch: self.arch.clone(),
+            centre_source,
             layers,
             template_feature: &template_bytes,
         };

@@ -30,6 +30,7 @@
 use pcrnet_core::fixed::quantize_multiplier;
 use pcrnet_core::float::{Layer, dense};
 use pcrnet_core::format::{Int8Layer, Int8Output, Int8Payload, ModelKind, blob_len, write_blob};
+use pcrnet_core::pose::Rigid;
 use pcrnet_core::{Int8Model, POSE_DIM};
 
 use crate::net::{F32Params, le_bytes};
@@ -230,12 +231,29 @@ fn quantize_layer(
 
 /// Quantizes `params` with calibration clouds and returns the int8 blob,
 /// its template feature computed from `template` by the int8 encoder.
+/// With `centre_source` (a network trained on centred sources) the blob
+/// says so, and the calibration clouds are centred as the device will
+/// centre its sources (`pcrnet_core::pose::centring`).
 pub fn quantize(
     params: &F32Params,
     template: &[[f32; 3]],
     calibration: &[Vec<[f32; 3]>],
     rule: CalibrationRule,
+    centre_source: bool,
 ) -> Result<Vec<u8>, QuantizeError> {
+    let centred: Vec<Vec<[f32; 3]>>;
+    let calibration = if centre_source {
+        centred = calibration
+            .iter()
+            .map(|c| {
+                let moved = Rigid::from(&pcrnet_core::pose::centring(c, true)?);
+                Ok(c.iter().map(|&p| moved.apply(p)).collect())
+            })
+            .collect::<Result<_, pcrnet_core::Error>>()?;
+        &centred[..]
+    } else {
+        calibration
+    };
     let ranges = calibrate(params, template, calibration)?;
     let arch = &params.arch;
     let n_enc = arch.encoder.len();
@@ -269,6 +287,7 @@ pub fn quantize(
     let zeros = vec![0u8; arch.feature_dim()];
     let draft = Int8Payload {
         arch: arch.clone(),
+        centre_source,
         input_scale,
         encoder: layers[..n_enc].iter().map(QLayer::view).collect(),
         head: layers[n_enc..].iter().map(QLayer::view).collect(),

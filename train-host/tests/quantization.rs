@@ -42,9 +42,16 @@ fn measure(enc: &[u16], head: &[u16], seed: u64, coarsen: Option<f32>) -> Errors
     let calib: Vec<Vec<[f32; 3]>> = (0..16)
         .map(|i| random_transform(&template, 45.0, 1.0, 1000 + i))
         .collect();
-    let blob = quantize(&params, &template, &calib, CalibrationRule::default()).unwrap();
+    let blob = quantize(
+        &params,
+        &template,
+        &calib,
+        CalibrationRule::default(),
+        false,
+    )
+    .unwrap();
     let q = Int8Model::from_bytes(&blob).unwrap();
-    let fblob = params.to_f32_blob(&template).unwrap();
+    let fblob = params.to_f32_blob(&template, false).unwrap();
     let f = F32Model::from_bytes(&fblob).unwrap();
     let mut qs = vec![0i8; q.scratch_len(MAX_TILE)];
     let mut fs = vec![0f32; f.scratch_len()];

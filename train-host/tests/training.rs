@@ -95,7 +95,7 @@ fn batched_forward_matches_core() {
             );
         }
         // Through the blob: same pose as the trainer's.
-        let blob = params.to_f32_blob(tpl).unwrap();
+        let blob = params.to_f32_blob(tpl, false).unwrap();
         let m = F32Model::from_bytes(&blob).unwrap();
         let mut s = vec![0.0; m.scratch_len()];
         let pose: Pose = m.register(src, &mut s).unwrap();
@@ -455,7 +455,7 @@ fn checkpoint_and_export() {
 
     let tpl = &train.clouds[0];
     let cal = export::calibration_clouds(tpl, &t.config.pairs, 8, 1);
-    let written = export::export(&t.params, tpl, Some(&cal), &dir).unwrap();
+    let written = export::export(&t.params, tpl, Some(&cal), true, &dir).unwrap();
     assert_eq!(written.len(), 2);
     let f = std::fs::read(dir.join(export::F32_BLOB)).unwrap();
     let m = F32Model::from_bytes(&f).unwrap();

@@ -215,8 +215,15 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
     let calibration: Vec<_> = (0..32)
         .map(|i| random_transform(&template, 45.0, 1.0, seed * 1000 + i))
         .collect();
-    let int8_blob = quantize(&params, &template, &calibration, CalibrationRule::default())?;
-    let f32_blob = params.to_f32_blob(&template)?;
+    // Like a trained default, the demo model centres its sources.
+    let int8_blob = quantize(
+        &params,
+        &template,
+        &calibration,
+        CalibrationRule::default(),
+        true,
+    )?;
+    let f32_blob = params.to_f32_blob(&template, true)?;
     let source = random_transform(&template, 45.0, 1.0, seed.wrapping_add(77));
     if let Some(dir) = out {
         std::fs::create_dir_all(&dir)?;

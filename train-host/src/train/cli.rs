@@ -375,7 +375,14 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
     let cal = args.export.then(|| {
         exp::calibration_clouds(&template, &trainer.config.pairs, 64, trainer.config.seed)
     });
-    for p in exp::export(&trainer.params, &template, cal.as_deref(), &args.out)? {
+    let centre = trainer.config.pairs.centre;
+    for p in exp::export(
+        &trainer.params,
+        &template,
+        cal.as_deref(),
+        centre,
+        &args.out,
+    )? {
         eprintln!("wrote {}", p.display());
     }
     Ok(())
@@ -386,7 +393,8 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ck = Checkpoint::load(&args.checkpoint)?;
     let template = load_template(&args.template, args.points, ck.config.seed)?;
     let cal = exp::calibration_clouds(&template, &ck.config.pairs, 64, ck.config.seed);
-    for p in exp::export(&ck.params(), &template, Some(&cal), &args.out)? {
+    let centre = ck.config.pairs.centre;
+    for p in exp::export(&ck.params(), &template, Some(&cal), centre, &args.out)? {
         eprintln!("wrote {}", p.display());
     }
     Ok(())

@@ -26,21 +26,28 @@ pub fn calibration_clouds(
 
 /// Writes the f32 blob (template feature embedded) into `dir`, and the
 /// int8 blob too when `calibration` is given. Files are written atomically.
-/// Returns the paths written.
+/// `centre_source` must be the training pairs' `centre`. Returns the paths written.
 pub fn export(
     params: &F32Params,
     template: &[[f32; 3]],
     calibration: Option<&[Vec<[f32; 3]>]>,
+    centre_source: bool,
     dir: &Path,
 ) -> anyhow::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)?;
     let mut written = Vec::new();
-    let f32_blob = params.to_f32_blob(template)?;
+    let f32_blob = params.to_f32_blob(template, centre_source)?;
     let p = dir.join(F32_BLOB);
     write_atomic(&p, &f32_blob)?;
     written.push(p);
     if let Some(cal) = calibration {
-        let int8 = quantize(params, template, cal, CalibrationRule::default())?;
+        let int8 = quantize(
+            params,
+            template,
+            cal,
+            CalibrationRule::default(),
+            centre_source,
+        )?;
         let p = dir.join(INT8_BLOB);
         write_atomic(&p, &int8)?;
         written.push(p);
