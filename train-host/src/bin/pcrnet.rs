@@ -53,6 +53,28 @@ enum Command {
     /// Export a training checkpoint to the f32 and int8 blobs, with the
     /// template's feature embedded.
     Export(pcrnet_train::train::cli::ExportArgs),
+    /// Write a generated shape (centred, in the unit box) as XYZ text, and
+    /// optionally a source made from it: the shape under a seeded random
+    /// rigid transform (Euler U[-45, 45] deg, translation U[-1, 1]) as
+    /// little-endian f32 x y z (the firmware example's input) and as XYZ.
+    Shape {
+        /// box, torus or ell.
+        #[arg(long, default_value = "ell")]
+        kind: String,
+        /// Number of points.
+        #[arg(long, default_value_t = 512)]
+        points: usize,
+        /// Seed of the sampling.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output XYZ file of the shape.
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed of the source's transform; with it, SOURCE.f32 and SOURCE.xyz
+        /// are written next to --out.
+        #[arg(long)]
+        source_seed: Option<u64>,
+    },
     /// Register SOURCE onto TEMPLATE (files: .pcd .ply .off .xyz .txt) and
     /// print the pose as quaternion + translation and as a 4x4 matrix.
     Register {
@@ -111,6 +133,32 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Train(args) => pcrnet_train::train::cli::train(*args)?,
         Command::Export(args) => pcrnet_train::train::cli::export(args)?,
+        Command::Shape {
+            kind,
+            points,
+            seed,
+            out,
+            source_seed,
+        } => {
+            let shape = match kind.as_str() {
+                "box" => Shape::Box,
+                "torus" => Shape::Torus,
+                "ell" => Shape::Ell,
+                other => anyhow::bail!("unknown shape {other} (box, torus, ell)"),
+            };
+            let cloud = sample(shape, points, seed);
+            write_xyz(&out, &cloud)?;
+            if let Some(s) = source_seed {
+                let source = random_transform(&cloud, 45.0, 1.0, s);
+                let bytes: Vec<u8> = source
+                    .iter()
+                    .flatten()
+                    .flat_map(|v| v.to_le_bytes())
+                    .collect();
+                std::fs::write(out.with_extension("source.f32"), bytes)?;
+                write_xyz(&out.with_extension("source.xyz"), &source)?;
+            }
+        }
         Command::Register {
             template,
             source,
@@ -189,17 +237,20 @@ fn register(
         );
     }
     if let Some(out) = aligned {
-        let text: String = source
-            .iter()
-            .map(|&p| {
-                let q = pose.transform_point(p);
-                format!("{} {} {}\n", q[0], q[1], q[2])
-            })
-            .collect();
-        std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+        let moved: Vec<[f32; 3]> = source.iter().map(|&p| pose.transform_point(p)).collect();
+        write_xyz(&out, &moved)?;
         println!("aligned source written to {}", out.display());
     }
     Ok(())
+}
+
+/// Writes a cloud as XYZ text (one `x y z` line per point, exact f32 values).
+fn write_xyz(path: &Path, cloud: &[[f32; 3]]) -> anyhow::Result<()> {
+    let text: String = cloud
+        .iter()
+        .map(|p| format!("{:?} {:?} {:?}\n", p[0], p[1], p[2]))
+        .collect();
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
 fn read_cloud(path: &Path) -> anyhow::Result<Vec<[f32; 3]>> {
