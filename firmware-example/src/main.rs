@@ -28,10 +28,10 @@ macro_rules! log {
 }
 
 /// The int8 model, used in place from flash (no alignment needed).
-static MODEL: &[u8] = include_bytes!("../../models/demo-untrained-int8.pcrn");
+static MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
 /// A stored source cloud: x, y, z as f32 little-endian per point. On a real
 /// device a sensor driver fills the cloud buffer instead.
-const SOURCE: &[u8] = include_bytes!("../../models/demo-source.f32");
+const SOURCE: &[u8] = include_bytes!("../../models/embedded-default-source.f32");
 const POINTS: usize = SOURCE.len() / 12;
 /// Scratch for the model's architecture at the largest tile; `Int8Model::load`
 /// checks it is big enough.

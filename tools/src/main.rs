@@ -15,7 +15,8 @@ cargo xtask <command>
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
                 the QEMU harness, then the host tests
-  demo          the main job on the embedded default (pcrnet demo)
+  demo          the main job: register the shipped source with the trained
+                embedded default (int8), extra arguments go to `pcrnet register`
   qemu-test     run core on an emulated Cortex-M4F and compare every output
                 with the host bit for bit; then prove a changed rounding on
                 the device is caught
@@ -207,6 +208,8 @@ fn run_in_with_env(
     }
 }
 
+/// The main job on the embedded default: register the shipped source onto
+/// the shipped template with the trained int8 model (the device's path).
 fn demo(extra: &[String]) -> Result<(), String> {
     let mut args = vec![
         "run",
@@ -216,7 +219,11 @@ fn demo(extra: &[String]) -> Result<(), String> {
         "--bin",
         "pcrnet",
         "--",
-        "demo",
+        "register",
+        "models/embedded-default-template.xyz",
+        "models/embedded-default-source.xyz",
+        "--model",
+        "models/embedded-default-int8.pcrn",
     ];
     args.extend(extra.iter().map(String::as_str));
     cargo(&args)
