@@ -13,27 +13,14 @@ pub type Mat3 = [[f32; 3]; 3];
 /// The identity matrix.
 pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
-/// Rotation matrix of a unit quaternion `[w, x, y, z]` (same formula as
-/// [`pcrnet_core::Pose::rotation_matrix`]).
+/// Rotation matrix of a unit quaternion `[w, x, y, z]`: the device's own
+/// formula, [`pcrnet_core::Pose::rotation_matrix`].
 pub fn quat_to_mat(q: [f32; 4]) -> Mat3 {
-    let [w, x, y, z] = q;
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
+    pcrnet_core::Pose {
+        rotation: q,
+        translation: [0.0; 3],
+    }
+    .rotation_matrix()
 }
 
 /// `(R, t)` from a raw head output. A zero quaternion gives the identity
