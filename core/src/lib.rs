@@ -48,10 +48,10 @@
 //!   for bit.
 //! - Encoder output is invariant to the order of the points and to the tile
 //!   size, bit for bit. For models that centre the source, the centroid is
-//!   an f64 sum in point order: exact, hence order-independent, as long as
-//!   the coordinates' magnitudes span less than about 2^29 (for example
-//!   sub-micrometre detail beside metre-scale points breaks exactness, not
-//!   determinism: the same order always gives the same bits).
+//!   an f64 sum in point order: exact, hence order-independent, while the
+//!   largest coordinate magnitude over the smallest non-zero one stays below
+//!   2^29 / N for N points (about 5e5 for 1024 points); beyond that only
+//!   exactness is lost, not determinism: the same order gives the same bits.
 #![no_std]
 #![cfg_attr(docsrs, feature(doc_cfg))]
 

@@ -155,8 +155,8 @@ impl Rigid {
 /// The centroid of a cloud, accumulated in f64 (IEEE-754 on every target:
 /// hardware on the host, correctly rounded soft-float on Cortex-M4) and
 /// rounded to f32 once. The f64 sum of f32 coordinates is exact, so the
-/// result does not depend on the order of the points, unless their
-/// magnitudes span more than about 2^29.
+/// result does not depend on the order of the points, while the largest
+/// magnitude over the smallest non-zero one stays below `2^29 / N`.
 pub fn centroid(points: &[[f32; 3]]) -> Result<[f32; 3]> {
     if points.is_empty() {
         return Err(Error::EmptyCloud);
