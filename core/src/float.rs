@@ -179,8 +179,7 @@ impl<P: Params> F32Network<P> {
 
     /// Registers `source` to the template (pose maps source onto template).
     pub fn register(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<Pose> {
-        let centring = pose::centring(source, self.centre_source)?;
-        let raw = self.infer(source, scratch)?;
+        let (raw, centring) = self.infer_centred(source, scratch)?;
         Ok(centring.then(&Pose::from_head_output(&raw)?))
     }
 
@@ -188,20 +187,32 @@ impl<P: Params> F32Network<P> {
     /// the head, returning the raw 7 outputs. The feature is left in
     /// `scratch[..F]`.
     pub fn infer(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<[f32; POSE_DIM]> {
-        let (feature, work) = self.split(scratch)?;
-        self.encode_centred(source, feature, work)?;
-        self.head(feature, work)
+        Ok(self.infer_centred(source, scratch)?.0)
     }
 
+    /// [`Self::infer`], also returning how the source was moved first.
+    fn infer_centred(
+        &self,
+        source: &[[f32; 3]],
+        scratch: &mut [f32],
+    ) -> Result<([f32; POSE_DIM], Pose)> {
+        let (feature, work) = self.split(scratch)?;
+        let centring = self.encode_centred(source, feature, work)?;
+        Ok((self.head(feature, work)?, centring))
+    }
+
+    /// Encodes `source`, centred first if the network says so; returns how
+    /// it was moved (the identity otherwise).
     fn encode_centred(
         &self,
         source: &[[f32; 3]],
         feature: &mut [f32],
         work: &mut [f32],
-    ) -> Result<()> {
+    ) -> Result<Pose> {
         let centring = pose::centring(source, self.centre_source)?;
         let moved = self.centre_source.then(|| Rigid::from(&centring));
-        self.encode_into(source, moved.as_ref(), feature, work)
+        self.encode_into(source, moved.as_ref(), feature, work)?;
+        Ok(centring)
     }
 
     /// Iterative registration (i-PCRNet), as [`crate::Int8Model::register_iterative`].

@@ -181,10 +181,8 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &'s mut [i8],
     ) -> Result<Int8Inference<'s>> {
-        let centring = pose::centring(source, self.p.centre_source)?;
-        let moved = self.p.centre_source.then(|| Rigid::from(&centring));
         let (feature, work) = self.split_scratch(tile, scratch)?;
-        self.encode_into(source, moved.as_ref(), tile, feature, work)?;
+        let centring = self.encode_centred(source, tile, feature, work)?;
         let head = self.head(feature, work)?;
         Ok(Int8Inference {
             feature,
@@ -207,11 +205,24 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &'s mut [i8],
     ) -> Result<&'s [i8]> {
+        let (feature, work) = self.split_scratch(tile, scratch)?;
+        self.encode_centred(source, tile, feature, work)?;
+        Ok(feature)
+    }
+
+    /// Encodes `source`, centred first if the model says so; returns how it
+    /// was moved (the identity otherwise).
+    fn encode_centred(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        feature: &mut [i8],
+        work: &mut [i8],
+    ) -> Result<Pose> {
         let centring = pose::centring(source, self.p.centre_source)?;
         let moved = self.p.centre_source.then(|| Rigid::from(&centring));
-        let (feature, work) = self.split_scratch(tile, scratch)?;
         self.encode_into(source, moved.as_ref(), tile, feature, work)?;
-        Ok(feature)
+        Ok(centring)
     }
 
     fn split_scratch<'s>(
