@@ -130,8 +130,8 @@ pub enum DataError {
     Empty(String),
 }
 
-/// A class name and its preprocessed cloud.
-type Labelled = (String, Vec<[f32; 3]>);
+/// A class name, a file name and its preprocessed cloud.
+type Labelled = (String, String, Vec<[f32; 3]>);
 
 /// A set of preprocessed shapes, all with the same number of points.
 #[derive(Debug, Clone, PartialEq)]
@@ -140,6 +140,9 @@ pub struct Dataset {
     pub clouds: Vec<Vec<[f32; 3]>>,
     /// Class name of each cloud.
     pub labels: Vec<String>,
+    /// Where each cloud came from: its path below the data root
+    /// (`chair/test/chair_0890.pcd`), or `generated/<kind>/<index>`.
+    pub names: Vec<String>,
     /// Points per cloud.
     pub points: usize,
 }
@@ -355,7 +358,8 @@ fn list_dir(path: &Path) -> Result<Vec<PathBuf>, DataError> {
 impl Dataset {
     /// Loads `<root>/<class>/<split>/*` (every file [`io::read_cloud`]
     /// understands), classes in name order, files in name order, keeping
-    /// only `classes` when given. Preprocessing (see the module docs) is
+    /// only `classes` when given; a root with `<root>/<split>/` is one
+    /// class named after the root folder. Preprocessing (see the module docs) is
     /// seeded per file by `seed` and the file's position.
     pub fn load_modelnet(
         root: &Path,
@@ -366,7 +370,15 @@ impl Dataset {
         seed: u64,
     ) -> Result<Self, DataError> {
         let mut files = Vec::new();
-        for class_dir in list_dir(root)? {
+        // A root that holds the split itself (`<root>/<split>/*`, as the
+        // ModelNet40 airplanes) is one class named after the root.
+        let single = root.join(split.dir()).is_dir();
+        let class_dirs = if single {
+            vec![root.to_path_buf()]
+        } else {
+            list_dir(root)?
+        };
+        for class_dir in class_dirs {
             if !class_dir.is_dir() {
                 continue;
             }
@@ -400,17 +412,24 @@ impl Dataset {
             .enumerate()
             .map(|(i, (label, path))| {
                 let raw = io::read_cloud(path)?;
+                let name = path
+                    .strip_prefix(root)
+                    .unwrap_or(path)
+                    .to_string_lossy()
+                    .into_owned();
                 Ok(
                     preprocess(&raw, points, sampling, mix_seed(seed, 0x10AD, i as u64))
-                        .map(|c| (label.clone(), c)),
+                        .map(|c| (label.clone(), name, c)),
                 )
             })
             .collect();
         let mut clouds = Vec::new();
         let mut labels = Vec::new();
+        let mut names = Vec::new();
         for r in loaded {
-            if let Some((l, c)) = r? {
+            if let Some((l, n, c)) = r? {
                 labels.push(l);
+                names.push(n);
                 clouds.push(c);
             }
         }
@@ -420,6 +439,7 @@ impl Dataset {
         Ok(Dataset {
             clouds,
             labels,
+            names,
             points,
         })
     }
@@ -435,6 +455,7 @@ impl Dataset {
         ];
         let mut clouds = Vec::with_capacity(count);
         let mut labels = Vec::with_capacity(count);
+        let mut names = Vec::with_capacity(count);
         for i in 0..count {
             let (kind, name) = kinds[i % kinds.len()];
             let s = mix_seed(seed, 0x6E7, i as u64);
@@ -447,11 +468,13 @@ impl Dataset {
             if let Some(c) = preprocess(&raw, points, Sampling::Random, s) {
                 clouds.push(c);
                 labels.push(name.to_string());
+                names.push(format!("generated/{name}/{i}"));
             }
         }
         Dataset {
             clouds,
             labels,
+            names,
             points,
         }
     }
@@ -461,6 +484,7 @@ impl Dataset {
         let i = index.min(self.clouds.len().saturating_sub(1));
         self.clouds = self.clouds.drain(i..=i).collect();
         self.labels = self.labels.drain(i..=i).collect();
+        self.names = self.names.drain(i..=i).collect();
         self
     }
 
