@@ -4,7 +4,7 @@
 
 use pcrnet_core::{F32Model, Int8Model, MAX_TILE, Pose};
 
-use crate::eval::pointnetlk::PointNetLk;
+use crate::eval::pointnetlk::{LkResult, PointNetLk};
 use crate::net::F32Params;
 use crate::shapes::Normalisation;
 
@@ -68,13 +68,13 @@ pub fn register(
 /// Registers `source` onto `template` with PointNetLK on the encoder of an
 /// **f32** blob (Jacobian by finite differences on the template, up to
 /// `iterations` Lucas-Kanade steps), with the same normalisation as
-/// [`register`]. Returns the pose in the input coordinates and the steps run.
+/// [`register`]. The pose and its trajectory are in the input coordinates.
 pub fn register_pointnetlk(
     blob: &[u8],
     template: &[[f32; 3]],
     source: &[[f32; 3]],
     iterations: usize,
-) -> Result<(Pose, usize), pcrnet_core::Error> {
+) -> Result<LkResult, pcrnet_core::Error> {
     let params = F32Params::from_network(&F32Model::from_bytes(blob)?);
     let norm = Normalisation::of(template);
     let (mut t, mut s) = (template.to_vec(), source.to_vec());
@@ -82,7 +82,15 @@ pub fn register_pointnetlk(
     norm.apply(&mut s);
     let lk = PointNetLk::new(&params, &t, 1e-2)?;
     let result = lk.register(&s, iterations, 1e-7)?;
-    Ok((denormalise(&result.pose, &norm), result.iterations))
+    Ok(LkResult {
+        pose: denormalise(&result.pose, &norm),
+        iterations: result.iterations,
+        trajectory: result
+            .trajectory
+            .iter()
+            .map(|p| denormalise(p, &norm))
+            .collect(),
+    })
 }
 
 fn register_int8(

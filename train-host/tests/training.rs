@@ -29,7 +29,7 @@ fn small_config() -> TrainConfig {
         lr: 2e-3,
         seed: 5,
         pairs: PairConfig {
-            noise: Some(0.02),
+            noise: Some([0.0, 0.02]),
             ..PairConfig::default()
         },
         val_pairs: 8,
@@ -225,7 +225,7 @@ fn training_learns() {
         let after = t.validate();
         assert!(last < 0.7 * first, "{loss:?}: loss {first} -> {last}");
         assert!(
-            after.rot_mean_deg < before.rot_mean_deg,
+            after.rotation_deg.mean < before.rotation_deg.mean,
             "{loss:?}: rotation error {before:?} -> {after:?}"
         );
     }
@@ -257,7 +257,7 @@ fn learns_rotation_under_large_translations() {
     let mut t = Trainer::new(cfg, train, val).unwrap();
     let before = t.validate();
     assert!(
-        before.rot_mean_deg > 30.0,
+        before.rotation_deg.mean > 30.0,
         "untrained (identity) error {before:?}"
     );
     for _ in 0..300 {
@@ -265,7 +265,7 @@ fn learns_rotation_under_large_translations() {
     }
     let after = t.validate();
     assert!(
-        after.rot_mean_deg < 0.4 * before.rot_mean_deg,
+        after.rotation_deg.mean < 0.4 * before.rotation_deg.mean,
         "rotation error {before:?} -> {after:?}"
     );
 }
@@ -279,7 +279,7 @@ fn centred_pairs_keep_the_pose() {
     let ds = Dataset::generated(2, 100, 8);
     let tpl = &ds.clouds[1];
     let cfg = PairConfig {
-        noise: Some(0.02),
+        noise: Some([0.0, 0.02]),
         partial: Some([0.5, 0.8]),
         ..PairConfig::default()
     };
@@ -318,11 +318,15 @@ fn centred_pairs_keep_the_pose() {
     }
     // Validation compares the estimate with this same pose: a perfect
     // predictor scores zero.
-    let s = pcrnet_train::train::ErrorSummary::from_errors(
+    let s = pcrnet_train::train::Summary::of(
         &[rotation_error_deg(&r, &r)],
         &[pcrnet_train::train::translation_error(&t, &t)],
+        None,
     );
-    assert!(s.rot_mean_deg < 1e-2 && s.trans_mean < 1e-6, "{s:?}");
+    assert!(
+        s.rotation_deg.mean < 1e-2 && s.translation.mean < 1e-6,
+        "{s:?}"
+    );
 }
 
 /// The true pose of a clean pair maps the source exactly onto the template;
@@ -361,7 +365,7 @@ fn pairs_and_preprocessing() {
     assert_eq!(distinct.len(), 100);
     // Noise: the registered source is off the template by about sigma.
     let cfg = PairConfig {
-        noise: Some(0.04),
+        noise: Some([0.0, 0.04]),
         ..PairConfig::default()
     };
     let (src, r, t) = data::make_pair(tpl, &cfg, 3);

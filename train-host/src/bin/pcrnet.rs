@@ -1,12 +1,11 @@
 //! `pcrnet`: the host command line (train, export, inspect, register, demo).
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
-use pcrnet_train::eval::icp::{IcpConfig, icp};
+use pcrnet_train::eval::methods::{self, Method, MethodKind};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::{
     CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, inspect, quantize,
@@ -83,8 +82,8 @@ enum Command {
         /// The source cloud (what the sensor sees).
         source: PathBuf,
         /// Method: pcrnet (one pass), ipcrnet (iterative), pointnetlk (f32 blob) or icp.
-        #[arg(long, value_enum, default_value_t = Method::Pcrnet)]
-        method: Method,
+        #[arg(long, value_enum, default_value_t = MethodKind::Pcrnet)]
+        method: MethodKind,
         /// Model blob: int8 or f32 for pcrnet / ipcrnet, f32 for pointnetlk.
         #[arg(long)]
         model: Option<PathBuf>,
@@ -92,23 +91,13 @@ enum Command {
         /// iterations of icp (100).
         #[arg(long)]
         iterations: Option<usize>,
+        /// Refine the network's pose with ICP.
+        #[arg(long)]
+        refine_icp: bool,
         /// Write the source moved onto the template here (XYZ text).
         #[arg(long)]
         aligned: Option<PathBuf>,
     },
-}
-
-/// Registration methods of `pcrnet register`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum Method {
-    /// One network pass.
-    Pcrnet,
-    /// Iterative network passes (i-PCRNet).
-    Ipcrnet,
-    /// Lucas-Kanade on the encoder's features (PointNetLK).
-    Pointnetlk,
-    /// Point-to-point ICP.
-    Icp,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -165,8 +154,14 @@ fn main() -> anyhow::Result<()> {
             method,
             model,
             iterations,
+            refine_icp,
             aligned,
-        } => register(&template, &source, method, model, iterations, aligned)?,
+        } => {
+            let mut m = Method::new(method);
+            m.iterations = iterations.unwrap_or(m.iterations);
+            m.refine_icp = refine_icp;
+            register(&template, &source, m, model, aligned)?
+        }
     }
     Ok(())
 }
@@ -176,57 +171,27 @@ fn register(
     source_path: &Path,
     method: Method,
     model: Option<PathBuf>,
-    iterations: Option<usize>,
     aligned: Option<PathBuf>,
 ) -> anyhow::Result<()> {
     let template = read_cloud(template_path)?;
     let source = read_cloud(source_path)?;
-    let start = Instant::now();
-    let pose = match method {
-        Method::Icp => {
-            let config = IcpConfig {
-                max_iterations: iterations.unwrap_or(IcpConfig::default().max_iterations),
-                ..IcpConfig::default()
-            };
-            let r = icp(&template, &source, config)?;
-            println!(
-                "method: ICP, {} iterations, final MSE {:.3e}",
-                r.iterations, r.mse
-            );
-            r.pose
+    let blob = model
+        .as_ref()
+        .map(|path| std::fs::read(path).with_context(|| format!("reading {}", path.display())))
+        .transpose()?;
+    let out = methods::run(&method, blob.as_deref(), &template, &source).with_context(|| {
+        match &model {
+            Some(path) => format!("registering with {}", path.display()),
+            None => "registering".into(),
         }
-        Method::Pointnetlk => {
-            let path = model.context("--model F32_BLOB is needed for pointnetlk")?;
-            let blob =
-                std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-            let (pose, steps) = pcrnet_train::register::register_pointnetlk(
-                &blob,
-                &template,
-                &source,
-                iterations.unwrap_or(20),
-            )
-            .with_context(|| format!("registering with {}", path.display()))?;
-            println!("method: PointNetLK (f32 encoder), {steps} step(s)");
-            pose
-        }
-        Method::Pcrnet | Method::Ipcrnet => {
-            let path = model.context("--model BLOB is needed for pcrnet and ipcrnet")?;
-            let blob =
-                std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-            let passes = match method {
-                Method::Pcrnet => 1,
-                _ => iterations.unwrap_or(20),
-            };
-            let r = pcrnet_train::register::register(&blob, &template, &source, passes)
-                .with_context(|| format!("registering with {}", path.display()))?;
-            println!(
-                "method: {method:?} ({:?}), {} pass(es)",
-                r.precision, r.passes
-            );
-            r.pose
-        }
-    };
-    println!("time: {:.3} ms", start.elapsed().as_secs_f64() * 1e3);
+    })?;
+    let pose = out.pose;
+    println!(
+        "method: {}, {} step(s)",
+        method.name(out.precision),
+        out.iterations
+    );
+    println!("time: {:.3} ms", out.seconds * 1e3);
     println!("quaternion (w, x, y, z): {:?}", pose.rotation);
     println!("translation: {:?}", pose.translation);
     println!("matrix (maps source onto template):");

@@ -1,6 +1,10 @@
 //! Evaluation: the baselines the networks are compared with (ICP, PointNetLK).
 
 pub mod icp;
+pub mod plot;
+pub mod methods;
+pub mod metrics;
+pub mod pairs;
 pub mod pointnetlk;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};

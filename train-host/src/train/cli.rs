@@ -237,7 +237,7 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         pairs: PairConfig {
             max_deg: args.max_deg,
             max_t: args.max_t,
-            noise: args.noise,
+            noise: args.noise.map(|s| [0.0, s]),
             partial: args.partial.as_deref().map(parse_range).transpose()?,
             sparse: args.sparse.as_deref().map(parse_range).transpose()?,
             centre: !args.no_centre,
@@ -344,10 +344,10 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
             e.epoch,
             e.train_loss,
             e.lr,
-            e.val.rot_mean_deg,
-            e.val.rot_median_deg,
-            e.val.trans_mean,
-            e.val.trans_median,
+            e.val.rotation_deg.mean,
+            e.val.rotation_deg.median,
+            e.val.translation.mean,
+            e.val.translation.median,
             e.seconds
         );
     }

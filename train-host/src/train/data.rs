@@ -15,7 +15,7 @@
 //! thinned to a random subset (a fraction in `sparse`), then padded back to
 //! `points` points by repeating random kept points (max-pooling ignores
 //! repeats), then perturbed by Gaussian noise of a standard deviation drawn
-//! from `U[0, noise]`. The true pose maps the source onto the template:
+//! from `U[lo, hi]` (`PairConfig::noise`). The true pose maps the source onto the template:
 //! `(R^T, -R^T t)`.
 //!
 //! # Centring (default)
@@ -67,8 +67,9 @@ pub struct PairConfig {
     pub max_deg: f32,
     /// Largest translation per axis.
     pub max_t: f32,
-    /// Largest noise standard deviation (drawn per pair from `U[0, noise]`).
-    pub noise: Option<f32>,
+    /// Range of the noise standard deviation, drawn per pair from
+    /// `U[lo, hi]` (fixed when `lo == hi`; the paper trains with `[0, 0.04]`).
+    pub noise: Option<[f32; 2]>,
     /// Fraction range kept by the plane crop (partial source).
     pub partial: Option<[f32; 2]>,
     /// Fraction range kept by random thinning (sparse source).
@@ -251,6 +252,18 @@ pub fn make_pair(
     cfg: &PairConfig,
     seed: u64,
 ) -> (Vec<[f32; 3]>, Mat3, [f32; 3]) {
+    let (source, r_gt, t_gt, _) = make_pair_with_centroid(template, cfg, seed);
+    (source, r_gt, t_gt)
+}
+
+/// [`make_pair`], also returning the centroid the source had before
+/// centring (zero when `cfg.centre` is off): with it, a pose of the centred
+/// source converts to one of the source as made ([`uncentre_translation`]).
+pub fn make_pair_with_centroid(
+    template: &[[f32; 3]],
+    cfg: &PairConfig,
+    seed: u64,
+) -> (Vec<[f32; 3]>, Mat3, [f32; 3], [f32; 3]) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = template.len();
     let angles: [f32; 3] =
@@ -290,10 +303,11 @@ pub fn make_pair(
         pts = random_subset(&pts, keep, &mut rng);
     }
     pad(&mut pts, n, &mut rng);
-    let sigma = cfg
-        .noise
-        .filter(|&s| s > 0.0)
-        .map_or(0.0, |s| rng.random_range(0.0..=s));
+    let sigma = match cfg.noise {
+        Some([lo, hi]) if hi > lo => rng.random_range(lo..=hi),
+        Some([lo, _]) => lo.max(0.0),
+        None => 0.0,
+    };
     let mut source: Vec<[f32; 3]> = pts
         .iter()
         .map(|p| {
@@ -306,13 +320,14 @@ pub fn make_pair(
         })
         .collect();
     let (r_gt, mut t_gt) = invert(&r, &t);
+    let mut c = [0.0; 3];
     if cfg.centre {
         // p_template = R_gt (s' + c) + t_gt = R_gt s' + (t_gt + R_gt c).
-        let c = centre_cloud(&mut source);
+        c = centre_cloud(&mut source);
         let rc = mat_vec(&r_gt, &c);
         t_gt = std::array::from_fn(|k| t_gt[k] + rc[k]);
     }
-    (source, r_gt, t_gt)
+    (source, r_gt, t_gt, c)
 }
 
 /// Moves `pts` so its centroid (summed in f64) is at the origin; returns
@@ -506,8 +521,8 @@ impl Dataset {
             .zip(seeds.par_iter())
             .map(|(&s, &seed)| {
                 let tpl = &self.clouds[s];
-                let (src, r, t) = make_pair(tpl, cfg, seed);
-                (s, src, r, t)
+                let (src, r, t, c) = make_pair_with_centroid(tpl, cfg, seed);
+                (s, src, r, t, c)
             })
             .collect();
         let mut batch = Batch {
@@ -517,12 +532,14 @@ impl Dataset {
             source: Vec::with_capacity(shapes.len() * self.points),
             r_gt: Vec::with_capacity(shapes.len()),
             t_gt: Vec::with_capacity(shapes.len()),
+            centroids: Vec::with_capacity(shapes.len()),
         };
-        for (s, src, r, t) in pairs {
+        for (s, src, r, t, c) in pairs {
             batch.template.extend_from_slice(&self.clouds[s]);
             batch.source.extend_from_slice(&src);
             batch.r_gt.push(r);
             batch.t_gt.push(t);
+            batch.centroids.push(c);
         }
         batch
     }

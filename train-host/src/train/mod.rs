@@ -35,7 +35,6 @@ pub mod data;
 pub mod export;
 pub mod geometry;
 pub mod loss;
-pub mod metrics;
 pub mod model;
 pub mod ops;
 
@@ -53,7 +52,7 @@ pub use adam::{Adam, Schedule};
 pub use checkpoint::{Checkpoint, CheckpointError, Progress};
 pub use data::{Dataset, PairConfig, Sampling, Split};
 pub use loss::LossKind;
-pub use metrics::{ErrorSummary, rotation_error_deg, translation_error};
+pub use crate::eval::metrics::{Summary, rotation_error_deg, translation_error};
 pub use model::{Batch, ModelKind};
 
 use crate::F32Params;
@@ -164,7 +163,7 @@ pub struct EpochLog {
     /// Mean training loss over the epoch.
     pub train_loss: f64,
     /// Validation errors.
-    pub val: ErrorSummary,
+    pub val: Summary,
     /// Wall time of the epoch's steps and validation, seconds.
     pub seconds: f64,
 }
@@ -388,7 +387,7 @@ impl Trainer {
     }
 
     /// Rotation and translation errors on the validation pairs.
-    pub fn validate(&self) -> ErrorSummary {
+    pub fn validate(&self) -> Summary {
         evaluate(&self.params, self.config.model, &self.validation_batches())
     }
 
@@ -491,16 +490,22 @@ impl Trainer {
     }
 }
 
-/// Rotation and translation errors of a model on batches of pairs.
-pub fn evaluate(params: &F32Params, model: ModelKind, batches: &[Batch]) -> ErrorSummary {
+/// Rotation and translation errors of a model on batches of pairs (the
+/// translation of the pose between the clouds as made; see [`crate::eval::metrics`]).
+pub fn evaluate(params: &F32Params, model: ModelKind, batches: &[Batch]) -> Summary {
     let mut rot = Vec::new();
     let mut trans = Vec::new();
     for b in batches {
         let poses = model::predict(params, model, &b.template, &b.source, b.size, b.points);
         for (i, (r, t)) in poses.iter().enumerate() {
+            // Translations of the poses between the clouds as made, not
+            // of the centred frame the network sees.
+            let c = &b.centroids[i];
+            let t_est = data::uncentre_translation(r, t, c);
+            let t_gt = data::uncentre_translation(&b.r_gt[i], &b.t_gt[i], c);
             rot.push(rotation_error_deg(r, &b.r_gt[i]));
-            trans.push(translation_error(t, &b.t_gt[i]));
+            trans.push(translation_error(&t_est, &t_gt));
         }
     }
-    ErrorSummary::from_errors(&rot, &trans)
+    Summary::of(&rot, &trans, None)
 }

@@ -306,6 +306,9 @@ pub struct Batch {
     pub r_gt: Vec<Mat3>,
     /// True translations (source onto template).
     pub t_gt: Vec<[f32; 3]>,
+    /// Centroid each source had before centring (zero when not centred):
+    /// poses of the clouds as made, for validation ([`super::data::make_pair_with_centroid`]).
+    pub centroids: Vec<[f32; 3]>,
 }
 
 /// Loss, gradient and the estimated poses of one batch.
