@@ -1,4 +1,5 @@
-//! `pcrnet`: the host command line (train, export, inspect, register, demo).
+//! `pcrnet`: the host command line (train, export, inspect, register,
+//! pairs, eval, experiment, results, shape, demo).
 
 use std::path::{Path, PathBuf};
 
@@ -52,6 +53,17 @@ enum Command {
     /// Export a training checkpoint to the f32 and int8 blobs, with the
     /// template's feature embedded.
     Export(pcrnet_train::train::cli::ExportArgs),
+    /// Make a saved, seeded test set of pairs (from ModelNet-style folders,
+    /// your own clouds, or generated shapes).
+    Pairs(pcrnet_train::eval::cli::PairsArgs),
+    /// Score a method on a saved pair set (rotation / translation errors,
+    /// AUC, success ratios, time).
+    Eval(pcrnet_train::eval::cli::EvalArgs),
+    /// Run one of the paper's experiments (or `all`): trains missing
+    /// models, scores every method, writes JSON and plots.
+    Experiment(pcrnet_train::eval::cli::ExperimentArgs),
+    /// Write RESULTS.md from the experiment reports.
+    Results(pcrnet_train::eval::cli::ResultsArgs),
     /// Write a generated shape (centred, in the unit box) as XYZ text, and
     /// optionally a source made from it: the shape under a seeded random
     /// rigid transform (Euler U[-45, 45] deg, translation U[-1, 1]) as
@@ -122,6 +134,10 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Train(args) => pcrnet_train::train::cli::train(*args)?,
         Command::Export(args) => pcrnet_train::train::cli::export(args)?,
+        Command::Pairs(args) => pcrnet_train::eval::cli::pairs(args)?,
+        Command::Eval(args) => pcrnet_train::eval::cli::eval(args)?,
+        Command::Experiment(args) => pcrnet_train::eval::cli::experiment(args)?,
+        Command::Results(args) => pcrnet_train::eval::cli::results(args)?,
         Command::Shape {
             kind,
             points,
@@ -179,12 +195,13 @@ fn register(
         .as_ref()
         .map(|path| std::fs::read(path).with_context(|| format!("reading {}", path.display())))
         .transpose()?;
-    let out = methods::run(&method, blob.as_deref(), &template, &source).with_context(|| {
-        match &model {
-            Some(path) => format!("registering with {}", path.display()),
-            None => "registering".into(),
-        }
-    })?;
+    let out =
+        methods::run(&method, blob.as_deref(), &template, &source).with_context(
+            || match &model {
+                Some(path) => format!("registering with {}", path.display()),
+                None => "registering".into(),
+            },
+        )?;
     let pose = out.pose;
     println!(
         "method: {}, {} step(s)",

@@ -201,7 +201,10 @@ mod tests {
     fn names_and_defaults() {
         let m = Method::new(MethodKind::Ipcrnet);
         assert_eq!(m.iterations, 20);
-        assert_eq!(m.then_icp().name(Some(Precision::Int8)), "i-PCRNet int8 + ICP");
+        assert_eq!(
+            m.then_icp().name(Some(Precision::Int8)),
+            "i-PCRNet int8 + ICP"
+        );
         assert_eq!(Method::new(MethodKind::Icp).iterations, 100);
         assert_eq!(Method::new(MethodKind::Icp).name(None), "ICP");
         assert!(!Method::new(MethodKind::Icp).needs_model());

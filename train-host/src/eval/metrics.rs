@@ -236,7 +236,11 @@ mod tests {
         assert_eq!(curve.len(), 361);
         assert_eq!(curve[2], (1.0, 0.5));
         assert_eq!(curve[10], (5.0, 1.0));
-        let s = Summary::of(&[1.0, 4.0, 9.0, 50.0], &[0.01, 0.2, 0.05, 0.0], Some(&[0.002; 4]));
+        let s = Summary::of(
+            &[1.0, 4.0, 9.0, 50.0],
+            &[0.01, 0.2, 0.05, 0.0],
+            Some(&[0.002; 4]),
+        );
         let ratios: Vec<f64> = s.success.iter().map(|x| x.ratio).collect();
         assert_eq!(ratios, vec![0.25, 0.5, 0.75]);
         assert!((s.time_ms.unwrap().mean - 2.0).abs() < 1e-12);

@@ -1,14 +1,25 @@
-//! Evaluation: the baselines the networks are compared with (ICP, PointNetLK).
+//! Evaluation: the baselines the networks are compared with (ICP,
+//! PointNetLK), the metrics ([`metrics`]), saved pair sets ([`pairs`]),
+//! scoring a method on a set ([`score`]), the paper's experiments
+//! ([`experiments`]) and their plots ([`plot`]).
 
+pub mod cli;
+pub mod experiments;
 pub mod icp;
-pub mod plot;
 pub mod methods;
 pub mod metrics;
 pub mod pairs;
+pub mod plot;
 pub mod pointnetlk;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use pcrnet_core::Pose;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::register::Precision;
+use methods::Method;
+use pairs::Pair;
 
 /// A [`Pose`] from an f64 rotation matrix and translation (quaternion with
 /// `w >= 0`, as `pcrnet-core` makes them).
@@ -24,4 +35,98 @@ pub fn pose_from_matrix(r: &Matrix3<f64>, t: &Vector3<f64>) -> Pose {
         ],
         translation: [t.x as f32, t.y as f32, t.z as f32],
     }
+}
+
+/// The errors of one registration.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PairScore {
+    /// Rotation error, degrees.
+    pub rot_deg: f64,
+    /// Translation error.
+    pub trans: f64,
+    /// Time of the registration, milliseconds.
+    pub ms: f64,
+    /// Passes, steps or iterations run.
+    pub iterations: usize,
+}
+
+/// A method's scores on a set of pairs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MethodScore {
+    /// Display name (`i-PCRNet int8 + ICP`).
+    pub method: String,
+    /// The model blob's name, for network methods.
+    pub model: Option<String>,
+    /// The summary ([`metrics::Summary`]), times included.
+    pub summary: metrics::Summary,
+    /// Per-pair scores, in the set's order.
+    pub pairs: Vec<PairScore>,
+}
+
+/// Why a pair could not be registered.
+#[derive(Debug, thiserror::Error)]
+#[error("pair {index} ({method}): {error}")]
+pub struct ScoreError {
+    /// Pair index.
+    pub index: usize,
+    /// Method name.
+    pub method: String,
+    /// What failed.
+    pub error: methods::MethodError,
+}
+
+/// Scores `method` (with the named model blob for network methods) on
+/// `pairs`. `parallel` spreads pairs over the rayon pool (results are
+/// identical; times then include contention, so timing runs use `false`).
+pub fn score(
+    method: &Method,
+    model: Option<(&str, &[u8])>,
+    pairs: &[Pair],
+    parallel: bool,
+) -> Result<MethodScore, ScoreError> {
+    let blob = model.map(|(_, b)| b);
+    let one = |(index, p): (usize, &Pair)| {
+        methods::run(method, blob, &p.template, &p.source)
+            .map(|o| {
+                let r = o.pose.rotation_matrix();
+                (
+                    PairScore {
+                        rot_deg: metrics::rotation_error_deg(&r, &p.r_gt),
+                        trans: metrics::translation_error(&o.pose.translation, &p.t_gt),
+                        ms: o.seconds * 1e3,
+                        iterations: o.iterations,
+                    },
+                    o.precision,
+                )
+            })
+            .map_err(|error| ScoreError {
+                index,
+                method: method.name(None),
+                error,
+            })
+    };
+    let results: Vec<(PairScore, Option<Precision>)> = if parallel {
+        pairs
+            .par_iter()
+            .enumerate()
+            .map(one)
+            .collect::<Result<_, _>>()?
+    } else {
+        pairs
+            .iter()
+            .enumerate()
+            .map(one)
+            .collect::<Result<_, _>>()?
+    };
+    let precision = results.first().and_then(|r| r.1);
+    let scores: Vec<PairScore> = results.into_iter().map(|r| r.0).collect();
+    let rot: Vec<f64> = scores.iter().map(|s| s.rot_deg).collect();
+    let trans: Vec<f64> = scores.iter().map(|s| s.trans).collect();
+    let secs: Vec<f64> = scores.iter().map(|s| s.ms / 1e3).collect();
+    Ok(MethodScore {
+        method: method.name(precision),
+        model: model.map(|(n, _)| n.to_string()),
+        summary: metrics::Summary::of(&rot, &trans, Some(&secs)),
+        pairs: scores,
+    })
 }

@@ -48,11 +48,11 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+pub use crate::eval::metrics::{Summary, rotation_error_deg, translation_error};
 pub use adam::{Adam, Schedule};
 pub use checkpoint::{Checkpoint, CheckpointError, Progress};
 pub use data::{Dataset, PairConfig, Sampling, Split};
 pub use loss::LossKind;
-pub use crate::eval::metrics::{Summary, rotation_error_deg, translation_error};
 pub use model::{Batch, ModelKind};
 
 use crate::F32Params;

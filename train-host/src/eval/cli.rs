@@ -1,0 +1,281 @@
+//! The evaluation commands: `pairs` (make a saved test set), `eval` (score
+//! a method on a set), `experiment NAME` and `results` (RESULTS.md).
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::Args;
+
+use super::experiments::{self, Context, EXPERIMENTS};
+use super::methods::{Method, MethodKind};
+use super::pairs::{PairSet, PairSetSpec, Shapes};
+use crate::train::data::{PairConfig, Sampling};
+
+/// Arguments of `pcrnet pairs`.
+#[derive(Debug, Clone, Args)]
+pub struct PairsArgs {
+    /// ModelNet-style folder (`<root>/<class>/<split>/*` or `<root>/<split>/*`)
+    /// holding your own clouds in any format `pcrnet` reads.
+    #[arg(long, conflicts_with = "generated")]
+    pub data: Option<PathBuf>,
+    /// Use this many generated shapes instead (no files needed).
+    #[arg(long)]
+    pub generated: Option<usize>,
+    /// Take the training split instead of the test split.
+    #[arg(long)]
+    pub train_split: bool,
+    /// Only these classes (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub classes: Option<Vec<String>>,
+    /// Points per cloud.
+    #[arg(long, default_value_t = experiments::POINTS)]
+    pub points: usize,
+    /// Number of pairs (0: one per shape).
+    #[arg(long, default_value_t = 0)]
+    pub count: usize,
+    /// Seed of preprocessing, template order and pairs.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Largest Euler angle per axis (degrees).
+    #[arg(long, default_value_t = 45.0)]
+    pub max_deg: f32,
+    /// Largest translation per axis.
+    #[arg(long, default_value_t = 1.0)]
+    pub max_t: f32,
+    /// Gaussian noise: a fixed SIGMA or a range LO,HI drawn per pair.
+    #[arg(long)]
+    pub noise: Option<String>,
+    /// Partial source: fraction kept by a plane crop, FRAC or LO,HI.
+    #[arg(long)]
+    pub partial: Option<String>,
+    /// Sparse source: fraction of points kept, FRAC or LO,HI.
+    #[arg(long)]
+    pub sparse: Option<String>,
+    /// Output file (JSON).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Arguments of `pcrnet eval`.
+#[derive(Debug, Clone, Args)]
+pub struct EvalArgs {
+    /// A pair set written by `pcrnet pairs` or an experiment.
+    #[arg(long)]
+    pub pairs: PathBuf,
+    /// The method.
+    #[arg(long, value_enum)]
+    pub method: MethodKind,
+    /// Model blob (int8 or f32; f32 for pointnetlk).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Most passes / steps / iterations (default: the paper's).
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Refine the network's pose with ICP.
+    #[arg(long)]
+    pub refine_icp: bool,
+    /// Register one pair at a time (for timing; default: all cores).
+    #[arg(long)]
+    pub sequential: bool,
+    /// Also write the scores (summary and per pair) as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Arguments of `pcrnet experiment`.
+#[derive(Debug, Clone, Args)]
+pub struct ExperimentArgs {
+    /// Experiment name, or `all`.
+    pub name: String,
+    /// Data root holding `ModelNet10/` and `ModelNet40-airplane/`.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Models, pair sets and per-pair scores.
+    #[arg(long, default_value = "target/experiments")]
+    pub work: PathBuf,
+    /// Reports and plots.
+    #[arg(long, default_value = "results")]
+    pub results: PathBuf,
+    /// Pairs per set.
+    #[arg(long, default_value_t = 200)]
+    pub pairs: usize,
+    /// Seed of the pair sets.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// Arguments of `pcrnet results`.
+#[derive(Debug, Clone, Args)]
+pub struct ResultsArgs {
+    /// Folder with the experiment reports.
+    #[arg(long, default_value = "results")]
+    pub results: PathBuf,
+    /// The Markdown file to write.
+    #[arg(long, default_value = "RESULTS.md")]
+    pub out: PathBuf,
+}
+
+/// Parses `X` (fixed) or `LO,HI`.
+fn range(s: &str, what: &str) -> anyhow::Result<[f32; 2]> {
+    let (a, b) = s.split_once(',').unwrap_or((s, s));
+    let r: [f32; 2] = [a.trim().parse()?, b.trim().parse()?];
+    anyhow::ensure!(
+        r[0].is_finite() && r[1].is_finite() && 0.0 <= r[0] && r[0] <= r[1],
+        "{what} {s:?}: expected X or LO,HI with 0 <= LO <= HI"
+    );
+    Ok(r)
+}
+
+fn fraction(s: &str, what: &str) -> anyhow::Result<[f32; 2]> {
+    let r = range(s, what)?;
+    anyhow::ensure!(
+        r[0] > 0.0 && r[1] <= 1.0,
+        "{what} {s:?}: fractions lie in (0, 1]"
+    );
+    Ok(r)
+}
+
+/// Runs `pcrnet pairs`.
+pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
+    let shapes = match (&args.data, args.generated) {
+        (Some(root), _) => Shapes::Folder {
+            root: root.clone(),
+            test_split: !args.train_split,
+            classes: args.classes.clone(),
+        },
+        (None, Some(count)) => Shapes::Generated { count },
+        (None, None) => anyhow::bail!("give --data FOLDER or --generated COUNT"),
+    };
+    let spec = PairSetSpec {
+        shapes,
+        points: args.points,
+        sampling: Sampling::Fps,
+        pairs: PairConfig {
+            max_deg: args.max_deg,
+            max_t: args.max_t,
+            noise: args
+                .noise
+                .as_deref()
+                .map(|s| range(s, "--noise"))
+                .transpose()?,
+            partial: args
+                .partial
+                .as_deref()
+                .map(|s| fraction(s, "--partial"))
+                .transpose()?,
+            sparse: args
+                .sparse
+                .as_deref()
+                .map(|s| fraction(s, "--sparse"))
+                .transpose()?,
+            centre: false,
+        },
+        count: args.count,
+        seed: args.seed,
+    };
+    let loaded = spec.load_shapes()?;
+    let set = PairSet::generate(spec, &loaded);
+    set.save(&args.out)?;
+    eprintln!(
+        "wrote {} pairs over {} shapes to {}",
+        set.pairs.len(),
+        loaded.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Runs `pcrnet eval`.
+pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
+    let set = PairSet::load(&args.pairs)?;
+    let pairs = set.materialise(&set.spec.load_shapes()?)?;
+    let mut method = Method::new(args.method);
+    method.iterations = args.iterations.unwrap_or(method.iterations);
+    method.refine_icp = args.refine_icp;
+    let blob = args
+        .model
+        .as_ref()
+        .map(|p| std::fs::read(p).with_context(|| format!("reading {}", p.display())))
+        .transpose()?;
+    let name = args
+        .model
+        .as_ref()
+        .map(|p| p.display().to_string())
+        .unwrap_or_default();
+    let model = blob.as_deref().map(|b| (name.as_str(), b));
+    let s = super::score(&method, model, &pairs, !args.sequential)?;
+    let m = &s.summary;
+    println!(
+        "{} on {} ({} pairs)",
+        s.method,
+        args.pairs.display(),
+        m.count
+    );
+    println!(
+        "rotation error (deg): mean {:.3}, median {:.3}, std {:.3}, max {:.3}",
+        m.rotation_deg.mean, m.rotation_deg.median, m.rotation_deg.std, m.rotation_deg.max
+    );
+    println!(
+        "translation error:    mean {:.4}, median {:.4}, std {:.4}, max {:.4}",
+        m.translation.mean, m.translation.median, m.translation.std, m.translation.max
+    );
+    println!("AUC (0-180 deg): {:.4}", m.auc);
+    for x in &m.success {
+        println!(
+            "success (rot <= {}°, trans <= {}): {:.3}",
+            x.rot_deg, x.trans, x.ratio
+        );
+    }
+    if let Some(t) = m.time_ms {
+        println!(
+            "time per registration: mean {:.2} ms, median {:.2} ms{}",
+            t.mean,
+            t.median,
+            if args.sequential {
+                ""
+            } else {
+                " (pairs ran in parallel; use --sequential for timing)"
+            }
+        );
+    }
+    if let Some(out) = &args.out {
+        std::fs::write(out, serde_json::to_string_pretty(&s)?)
+            .with_context(|| format!("writing {}", out.display()))?;
+    }
+    Ok(())
+}
+
+/// Runs `pcrnet experiment`.
+pub fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
+    let ctx = Context {
+        data: args.data,
+        work: args.work,
+        results: args.results,
+        pairs: args.pairs,
+        seed: args.seed,
+    };
+    let names: Vec<&str> = if args.name == "all" {
+        EXPERIMENTS.to_vec()
+    } else {
+        vec![args.name.as_str()]
+    };
+    for name in names {
+        eprintln!("experiment {name}");
+        let report = experiments::run_experiment(&ctx, name)?;
+        eprintln!(
+            "wrote {} and {} plot(s) in {:.0} s",
+            ctx.results.join(format!("{name}.json")).display(),
+            report.plots.len(),
+            report.provenance.seconds
+        );
+    }
+    Ok(())
+}
+
+/// Runs `pcrnet results`.
+pub fn results(args: ResultsArgs) -> anyhow::Result<()> {
+    let md = experiments::render_results(&args.results)?;
+    std::fs::write(&args.out, md).with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!("wrote {}", args.out.display());
+    Ok(())
+}
