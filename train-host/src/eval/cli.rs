@@ -220,6 +220,15 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
         m.translation.mean, m.translation.median, m.translation.std, m.translation.max
     );
     println!("AUC (0-180 deg): {:.4}", m.auc);
+    if !s.failures.is_empty() {
+        println!(
+            "{} registration(s) failed and score as the identity pose:",
+            s.failures.len()
+        );
+        for f in &s.failures {
+            println!("  {f}");
+        }
+    }
     for x in &m.success {
         println!(
             "success (rot <= {}°, trans <= {}): {:.3}",

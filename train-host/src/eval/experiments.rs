@@ -322,6 +322,8 @@ pub struct Run {
     pub model: Option<String>,
     /// The summary.
     pub summary: Summary,
+    /// Registrations that failed (scored as the identity pose).
+    pub failures: usize,
 }
 
 /// Where and how an experiment ran.
@@ -417,7 +419,11 @@ impl<'a> Recorder<'a> {
             method: s.method.clone(),
             model: s.model.clone(),
             summary: s.summary.clone(),
+            failures: s.failures.len(),
         });
+        for f in &s.failures {
+            eprintln!("    failed (scored as identity): {f}");
+        }
         let summary = s.summary.clone();
         self.raw.push((set.to_string(), s));
         Ok(summary)
@@ -506,9 +512,14 @@ fn summary_header(first: &str) -> Vec<String> {
 
 fn summary_row(set: &str, run: &Run) -> Vec<String> {
     let s = &run.summary;
+    let failed = if run.failures > 0 {
+        format!(", {} failed", run.failures)
+    } else {
+        String::new()
+    };
     let mut row = vec![
         set.to_string(),
-        label(&run.method, run.model.as_deref()),
+        format!("{}{failed}", label(&run.method, run.model.as_deref())),
         format!("{:.2}°", s.rotation_deg.mean),
         format!("{:.2}°", s.rotation_deg.median),
         format!("{:.2}°", s.rotation_deg.std),
@@ -952,6 +963,43 @@ fn speed(ctx: &Context) -> anyhow::Result<Report> {
     .iter()
     .map(|s| s.to_string())
     .collect();
+    let mn10 = rec.model("mn10-pcrnet")?;
+    let mn10_pairs = pair_set(ctx, "int8-mn10-noisy", modelnet10(ctx, None, cfg))?;
+    let mut gap_rows = Vec::new();
+    for (m, model, set, pairs) in [
+        (pcrnet(), &pc, "airplane, noisy", &pairs),
+        (ipcrnet(), &ipc, "airplane, noisy", &pairs),
+        (pcrnet(), &mn10, "ModelNet10, noisy", &mn10_pairs),
+    ] {
+        let (rot, trans) = precision_gap(&m, model, pairs)?;
+        gap_rows.push(vec![
+            label(&m.name(None), Some(&model.name)),
+            set.to_string(),
+            format!("{:.3}°", rot.mean),
+            format!("{:.3}°", rot.median),
+            format!("{:.3}°", rot.max),
+            format!("{:.4}", trans.mean),
+            format!("{:.4}", trans.median),
+            format!("{:.4}", trans.max),
+        ]);
+    }
+    let gap = Table {
+        caption: "How far int8 poses are from f32 poses of the same model, per pair".into(),
+        header: [
+            "model",
+            "pairs",
+            "rot mean",
+            "rot median",
+            "rot max",
+            "trans mean",
+            "trans median",
+            "trans max",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect(),
+        rows: gap_rows,
+    };
     let raw: Vec<&MethodScore> = rec.raw.iter().map(|r| &r.1).collect();
     let chart = success_chart("Airplanes with noise: success ratio", &raw, 90.0);
     rec.plot("success", &chart)?;
@@ -969,9 +1017,32 @@ fn speed(ctx: &Context) -> anyhow::Result<Report> {
                 .into(),
             header,
             rows,
-        }],
+        }, gap],
         started,
     )
+}
+
+/// Per pair, the rotation angle and translation distance between the
+/// int8 and the f32 pose of `model` under `method`.
+fn precision_gap(
+    method: &Method,
+    model: &Model,
+    pairs: &[Pair],
+) -> anyhow::Result<(metrics::Stats, metrics::Stats)> {
+    use rayon::prelude::*;
+    let gaps: Vec<(f64, f64)> = pairs
+        .par_iter()
+        .map(|p| {
+            let a = run(method, Some(&model.int8), &p.template, &p.source)?.pose;
+            let b = run(method, Some(&model.f32), &p.template, &p.source)?.pose;
+            Ok((
+                metrics::rotation_error_deg(&a.rotation_matrix(), &b.rotation_matrix()),
+                metrics::translation_error(&a.translation, &b.translation),
+            ))
+        })
+        .collect::<Result<_, super::methods::MethodError>>()?;
+    let (rot, trans): (Vec<f64>, Vec<f64>) = gaps.into_iter().unzip();
+    Ok((metrics::Stats::of(&rot), metrics::Stats::of(&trans)))
 }
 
 /// Mean rotation error after each step of a trajectory method (PointNetLK,

@@ -61,6 +61,8 @@ pub struct MethodScore {
     pub summary: metrics::Summary,
     /// Per-pair scores, in the set's order.
     pub pairs: Vec<PairScore>,
+    /// Registrations that failed (scored as the identity pose), with why.
+    pub failures: Vec<String>,
 }
 
 /// Why a pair could not be registered.
@@ -78,6 +80,11 @@ pub struct ScoreError {
 /// Scores `method` (with the named model blob for network methods) on
 /// `pairs`. `parallel` spreads pairs over the rayon pool (results are
 /// identical; times then include contention, so timing runs use `false`).
+///
+/// A registration that fails (for example an int8 i-PCRNet estimate that
+/// drifts until the moved points leave the input range) is scored as the
+/// identity pose, the answer of a method that gives up, and listed in
+/// [`MethodScore::failures`]. A missing model is an error.
 pub fn score(
     method: &Method,
     model: Option<(&str, &[u8])>,
@@ -85,27 +92,39 @@ pub fn score(
     parallel: bool,
 ) -> Result<MethodScore, ScoreError> {
     let blob = model.map(|(_, b)| b);
-    let one = |(index, p): (usize, &Pair)| {
-        methods::run(method, blob, &p.template, &p.source)
-            .map(|o| {
-                let r = o.pose.rotation_matrix();
-                (
-                    PairScore {
-                        rot_deg: metrics::rotation_error_deg(&r, &p.r_gt),
-                        trans: metrics::translation_error(&o.pose.translation, &p.t_gt),
-                        ms: o.seconds * 1e3,
-                        iterations: o.iterations,
-                    },
-                    o.precision,
-                )
-            })
-            .map_err(|error| ScoreError {
-                index,
-                method: method.name(None),
-                error,
-            })
+    type Scored = (PairScore, Option<Precision>, Option<String>);
+    let one = |(index, p): (usize, &Pair)| -> Result<Scored, ScoreError> {
+        let started = std::time::Instant::now();
+        let (pose, iterations, seconds, precision, failure) =
+            match methods::run(method, blob, &p.template, &p.source) {
+                Ok(o) => (o.pose, o.iterations, o.seconds, o.precision, None),
+                Err(error @ methods::MethodError::NoModel(_)) => {
+                    return Err(ScoreError {
+                        index,
+                        method: method.name(None),
+                        error,
+                    });
+                }
+                Err(e) => (
+                    Pose::IDENTITY,
+                    0,
+                    started.elapsed().as_secs_f64(),
+                    None,
+                    Some(format!("pair {index}: {e}")),
+                ),
+            };
+        Ok((
+            PairScore {
+                rot_deg: metrics::rotation_error_deg(&pose.rotation_matrix(), &p.r_gt),
+                trans: metrics::translation_error(&pose.translation, &p.t_gt),
+                ms: seconds * 1e3,
+                iterations,
+            },
+            precision,
+            failure,
+        ))
     };
-    let results: Vec<(PairScore, Option<Precision>)> = if parallel {
+    let results: Vec<Scored> = if parallel {
         pairs
             .par_iter()
             .enumerate()
@@ -118,7 +137,8 @@ pub fn score(
             .map(one)
             .collect::<Result<_, _>>()?
     };
-    let precision = results.first().and_then(|r| r.1);
+    let precision = results.iter().find_map(|r| r.1);
+    let failures: Vec<String> = results.iter().filter_map(|r| r.2.clone()).collect();
     let scores: Vec<PairScore> = results.into_iter().map(|r| r.0).collect();
     let rot: Vec<f64> = scores.iter().map(|s| s.rot_deg).collect();
     let trans: Vec<f64> = scores.iter().map(|s| s.trans).collect();
@@ -128,5 +148,6 @@ pub fn score(
         model: model.map(|(n, _)| n.to_string()),
         summary: metrics::Summary::of(&rot, &trans, Some(&secs)),
         pairs: scores,
+        failures,
     })
 }
