@@ -19,7 +19,7 @@ use super::adam::Adam;
 use crate::F32Params;
 
 /// Version 2: [`super::PairConfig::centre`] added to the configuration.
-const MAGIC: &[u8; 8] = b"PCRNCKP2";
+const MAGIC: &[u8; 8] = b"PCRNCKP3";
 
 /// Where a run is.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]

@@ -162,9 +162,10 @@ pub struct ExportArgs {
     /// The template cloud (any format `pcrnet` reads).
     #[arg(long)]
     pub template: PathBuf,
-    /// Points the template is reduced to (as in training).
-    #[arg(long, default_value_t = 1024)]
-    pub points: usize,
+    /// Points the template is reduced to (default: as in training,
+    /// recorded in the checkpoint).
+    #[arg(long)]
+    pub points: Option<usize>,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -245,6 +246,8 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         clip_norm: args.clip,
         checkpoint_every: args.checkpoint_every,
         val_pairs: args.val_pairs,
+        points: args.points,
+        sampling: sampling(args.sampling),
     })
 }
 
@@ -289,13 +292,21 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
     let ck_path = args.out.join(CHECKPOINT_FILE);
     let resume = args.resume && ck_path.exists();
-    let seed = if resume {
-        Checkpoint::load(&ck_path)?.config.seed
+    // A resumed run loads its data as the checkpoint says.
+    let (seed, data_args) = if resume {
+        let ck = Checkpoint::load(&ck_path)?;
+        let mut a = args.clone();
+        a.points = ck.config.points;
+        a.sampling = match ck.config.sampling {
+            Sampling::Fps => SamplingArg::Fps,
+            Sampling::Random => SamplingArg::Random,
+        };
+        (ck.config.seed, a)
     } else {
-        config.seed
+        (config.seed, args.clone())
     };
     let t0 = std::time::Instant::now();
-    let (train, val) = load_data(&args, seed)?;
+    let (train, val) = load_data(&data_args, seed)?;
     eprintln!(
         "data: {} training shapes, {} validation shapes, {} points each ({:.1} s)",
         train.len(),
@@ -391,7 +402,8 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
 /// Runs `pcrnet export`.
 pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ck = Checkpoint::load(&args.checkpoint)?;
-    let template = load_template(&args.template, args.points, ck.config.seed)?;
+    let points = args.points.unwrap_or(ck.config.points);
+    let template = load_template(&args.template, points, ck.config.seed)?;
     let cal = exp::calibration_clouds(&template, &ck.config.pairs, 64, ck.config.seed);
     let centre = ck.config.pairs.centre;
     for p in exp::export(&ck.params(), &template, Some(&cal), centre, &args.out)? {

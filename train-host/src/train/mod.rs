@@ -96,6 +96,11 @@ pub struct TrainConfig {
     pub checkpoint_every: usize,
     /// Validation pairs (0: one per validation shape).
     pub val_pairs: usize,
+    /// Points per cloud the data was reduced to (recorded so that export
+    /// and resume reduce clouds the same way).
+    pub points: usize,
+    /// How clouds were reduced to `points`.
+    pub sampling: Sampling,
 }
 
 impl Default for TrainConfig {
@@ -117,6 +122,8 @@ impl Default for TrainConfig {
             clip_norm: None,
             checkpoint_every: 0,
             val_pairs: 0,
+            points: 1024,
+            sampling: Sampling::Fps,
         }
     }
 }
