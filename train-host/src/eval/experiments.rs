@@ -758,6 +758,7 @@ fn noise(ctx: &Context) -> anyhow::Result<Report> {
         (lk(), ipc.f32()),
         (pcrnet(), pc.int8()),
         (ipcrnet(), ipc.int8()),
+        (ipcrnet().then_icp(), ipc.int8()),
     ];
     sweep(&mut rec, "noise", &sets, &methods)?;
     let names: Vec<String> = sets.iter().map(|s| s.0.clone()).collect();
@@ -867,6 +868,7 @@ fn sparse(ctx: &Context) -> anyhow::Result<Report> {
         (lk(), ipc.f32()),
         (pcrnet(), pc.int8()),
         (ipcrnet(), ipc.int8()),
+        (ipcrnet().then_icp(), ipc.int8()),
     ];
     sweep(&mut rec, "sparse", &sets, &methods)?;
     let names: Vec<String> = sets.iter().map(|s| s.0.clone()).collect();

@@ -7,6 +7,8 @@
 //! skips it). The transform maps the source onto the template:
 //! `p_template = R p_source + t`.
 
+use pcrnet_core::pose::Rigid;
+
 /// A 3x3 matrix, row-major.
 pub type Mat3 = [[f32; 3]; 3];
 
@@ -92,9 +94,13 @@ pub fn transform_points(r: &Mat3, t: &[f32; 3], pts: &[[f32; 3]]) -> Vec<[f32; 3
     pts.iter().map(|p| apply(r, t, p)).collect()
 }
 
-/// `R p + t`.
+/// `R p + t`, by `pcrnet-core`'s [`Rigid::apply`] (the device's arithmetic).
 pub fn apply(r: &Mat3, t: &[f32; 3], p: &[f32; 3]) -> [f32; 3] {
-    std::array::from_fn(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + t[i])
+    Rigid {
+        rotation: *r,
+        translation: *t,
+    }
+    .apply(*p)
 }
 
 /// Backward of [`transform_points`] with respect to `R` and `t`, given the
