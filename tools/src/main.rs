@@ -23,6 +23,9 @@ cargo xtask <command>
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
   bench         host benchmarks (criterion): encoder throughput, training step
+  results [DATA] run the paper's six experiments on DATA (default
+                ../shared/data; trains the models they need into
+                target/experiments) and regenerate RESULTS.md
   help          this text
 
 Missing tools are installed: the thumbv7em-none-eabihf target (rustup) and
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
         Some("demo") => demo(&args[1..]),
         Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "-p", "pcrnet-train"]),
         Some("qemu-test") => qemu_test(),
+        Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
         Some("firmware-run") => firmware_run(),
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
         Some("help") | None => {
@@ -206,6 +210,17 @@ fn run_in_with_env(
     } else {
         Err(format!("`{program} {}` failed ({status})", args.join(" ")))
     }
+}
+
+/// Every experiment of issue 5 on `data`, then RESULTS.md from their reports.
+fn results(data: &str) -> Result<(), String> {
+    let pcrnet = ["run", "--release", "-p", "pcrnet-train", "--bin", "pcrnet", "--"];
+    let mut experiment = pcrnet.to_vec();
+    experiment.extend(["experiment", "all", "--data", data]);
+    cargo(&experiment)?;
+    let mut results = pcrnet.to_vec();
+    results.push("results");
+    cargo(&results)
 }
 
 /// The main job on the embedded default: register the shipped source onto
