@@ -214,7 +214,15 @@ fn run_in_with_env(
 
 /// Every experiment of issue 5 on `data`, then RESULTS.md from their reports.
 fn results(data: &str) -> Result<(), String> {
-    let pcrnet = ["run", "--release", "-p", "pcrnet-train", "--bin", "pcrnet", "--"];
+    let pcrnet = [
+        "run",
+        "--release",
+        "-p",
+        "pcrnet-train",
+        "--bin",
+        "pcrnet",
+        "--",
+    ];
     let mut experiment = pcrnet.to_vec();
     experiment.extend(["experiment", "all", "--data", data]);
     cargo(&experiment)?;

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 use super::methods::{Method, MethodKind, run};
 use super::metrics::{self, Summary};
 use super::pairs::{Pair, PairSet, PairSetSpec, Shapes};
-use super::plot::{Chart, Series, draw};
+use super::plot::{Chart, Corner, Series, draw};
 use super::{MethodScore, score};
 use crate::train::data::{PairConfig, Sampling};
 use crate::train::export::{F32_BLOB, INT8_BLOB};
@@ -595,6 +595,7 @@ fn success_chart(title: &str, runs: &[&MethodScore], max_deg: f64) -> Chart {
             })
             .collect(),
         log_y: false,
+        legend: Corner::LowerRight,
     }
 }
 
@@ -640,6 +641,7 @@ fn sweep_chart(
         y_range: (0.0, 1.02),
         series,
         log_y: false,
+        legend: Corner::LowerLeft,
     }
 }
 
@@ -1133,6 +1135,7 @@ fn iterations(ctx: &Context) -> anyhow::Result<Report> {
             })
             .collect(),
         log_y: true,
+        legend: Corner::UpperRight,
     };
     rec.plot("rotation", &chart)?;
     let at = [1usize, 2, 3, 5, 8, 10, 20, 50, 100];

@@ -57,6 +57,21 @@ pub struct Chart {
     pub series: Vec<Series>,
     /// Logarithmic y axis; points with `y <= 0` are then left out.
     pub log_y: bool,
+    /// Corner of the legend (pick the one the lines leave free).
+    pub legend: Corner,
+}
+
+/// A corner of the plotting area.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Corner {
+    /// Top left.
+    UpperLeft,
+    /// Top right.
+    UpperRight,
+    /// Bottom left.
+    LowerLeft,
+    /// Bottom right.
+    LowerRight,
 }
 
 /// Why a chart could not be drawn.
@@ -205,7 +220,12 @@ where
 
     if !chart.series.is_empty() {
         ctx.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(match chart.legend {
+                Corner::UpperLeft => SeriesLabelPosition::UpperLeft,
+                Corner::UpperRight => SeriesLabelPosition::UpperRight,
+                Corner::LowerLeft => SeriesLabelPosition::LowerLeft,
+                Corner::LowerRight => SeriesLabelPosition::LowerRight,
+            })
             .label_font((FONT_FAMILY, 16))
             .background_style(WHITE)
             .border_style(BLACK)
@@ -242,6 +262,7 @@ mod tests {
                 line("val-loss", |e| 9.0 * (-e / 4.0).exp() + 0.01),
             ],
             log_y,
+            legend: Corner::LowerLeft,
         }
     }
 
