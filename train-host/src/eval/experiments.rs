@@ -1217,3 +1217,25 @@ pub fn render_results(results: &Path) -> anyhow::Result<String> {
     }
     Ok(md)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every recipe is a valid `pcrnet train` command line (the experiments
+    /// train missing models through it), at the experiments' point count.
+    #[test]
+    fn recipes_parse_as_train_commands() {
+        for r in RECIPES.iter().chain(std::iter::once(&PARTIAL_RECIPE)) {
+            let args = r.command(Path::new("/data"), Path::new("/work/m"));
+            let cmd =
+                TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))
+                    .unwrap_or_else(|e| panic!("{}: {e}", r.name));
+            assert_eq!(cmd.args.points, POINTS, "{}", r.name);
+            assert!(cmd.args.export, "{}", r.name);
+            assert_eq!(cmd.args.out, Path::new("/work/m"));
+            assert_eq!(Recipe::named(r.name).map(|x| x.name), Some(r.name));
+        }
+        assert!(Recipe::named("nope").is_none());
+    }
+}
