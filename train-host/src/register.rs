@@ -17,7 +17,9 @@ pub enum Precision {
     F32,
 }
 
-/// Stop rule of iterative registration: `||dT - I||_F` below this (the paper's).
+/// The paper's stop rule of iterative registration: `||dT - I||_F` below
+/// this. In practice no pass gets there (int8 or f32), so all passes run;
+/// a device may prefer a looser tolerance (see the README).
 pub const ITERATIVE_TOLERANCE: f32 = 1e-7;
 
 /// What a registration produced.
@@ -32,7 +34,8 @@ pub struct Registration {
 }
 
 /// Registers `source` onto `template` with a model blob of either kind, in
-/// up to `passes` passes (1: PCRNet; more: i-PCRNet, stopping early by
+/// up to `passes` passes (1: PCRNet; more: i-PCRNet, stopping early once a
+/// pass's `||dT - I||_F` is below `tolerance`, the paper's being
 /// [`ITERATIVE_TOLERANCE`]).
 ///
 /// Both clouds are normalised with the template's normalisation (centroid,
@@ -45,15 +48,19 @@ pub fn register(
     template: &[[f32; 3]],
     source: &[[f32; 3]],
     passes: usize,
+    tolerance: f32,
 ) -> Result<Registration, pcrnet_core::Error> {
     let norm = Normalisation::of(template);
     let (mut t, mut s) = (template.to_vec(), source.to_vec());
     norm.apply(&mut t);
     norm.apply(&mut s);
     let ((pose, passes), precision) = match Int8Model::from_bytes(blob) {
-        Ok(model) => (register_int8(&model, &t, &s, passes)?, Precision::Int8),
+        Ok(model) => (
+            register_int8(&model, &t, &s, passes, tolerance)?,
+            Precision::Int8,
+        ),
         Err(pcrnet_core::Error::WrongKind { .. }) => (
-            register_f32(&F32Model::from_bytes(blob)?, &t, &s, passes)?,
+            register_f32(&F32Model::from_bytes(blob)?, &t, &s, passes, tolerance)?,
             Precision::F32,
         ),
         Err(e) => return Err(e),
@@ -98,6 +105,7 @@ fn register_int8(
     template: &[[f32; 3]],
     source: &[[f32; 3]],
     passes: usize,
+    tolerance: f32,
 ) -> Result<(Pose, usize), pcrnet_core::Error> {
     let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
     let feature: Vec<u8> = model
@@ -109,12 +117,7 @@ fn register_int8(
         template_feature: &feature,
         ..model.payload().clone()
     };
-    Int8Model::from_payload(payload)?.register_iterative(
-        source,
-        passes,
-        ITERATIVE_TOLERANCE,
-        &mut scratch,
-    )
+    Int8Model::from_payload(payload)?.register_iterative(source, passes, tolerance, &mut scratch)
 }
 
 fn register_f32(
@@ -122,6 +125,7 @@ fn register_f32(
     template: &[[f32; 3]],
     source: &[[f32; 3]],
     passes: usize,
+    tolerance: f32,
 ) -> Result<(Pose, usize), pcrnet_core::Error> {
     let params = F32Params::from_network(model);
     let feature = params.encode(template)?;
@@ -129,7 +133,7 @@ fn register_f32(
         .network(&feature)?
         .with_centring(model.centres_source());
     let mut scratch = vec![0f32; net.scratch_len()];
-    net.register_iterative(source, passes, ITERATIVE_TOLERANCE, &mut scratch)
+    net.register_iterative(source, passes, tolerance, &mut scratch)
 }
 
 /// Turns a pose between normalised clouds (`q = s (p - c)`) into one
@@ -188,8 +192,8 @@ mod tests {
             .map(|p| [p[0] * 20.0 + 5.0, p[1] * 20.0, p[2] * 20.0 - 3.0])
             .collect();
         let source = random_transform(&world, 30.0, 0.0, 9);
-        let r8 = register(&int8, &world, &source, 1).unwrap();
-        let rf = register(&f32_blob, &world, &source, 1).unwrap();
+        let r8 = register(&int8, &world, &source, 1, ITERATIVE_TOLERANCE).unwrap();
+        let rf = register(&f32_blob, &world, &source, 1, ITERATIVE_TOLERANCE).unwrap();
         assert_eq!(
             (r8.precision, rf.precision),
             (Precision::Int8, Precision::F32)
@@ -205,7 +209,7 @@ mod tests {
             .sum();
         assert!(2.0 * dot.abs().min(1.0).acos().to_degrees() < 10.0);
         assert!(matches!(
-            register(&int8, &world, &[], 1),
+            register(&int8, &world, &[], 1, ITERATIVE_TOLERANCE),
             Err(pcrnet_core::Error::EmptyCloud)
         ));
     }

@@ -106,6 +106,10 @@ enum Command {
         /// Refine the network's pose with ICP.
         #[arg(long)]
         refine_icp: bool,
+        /// i-PCRNet stop rule: stop once a pass moves the pose by less
+        /// than this (`||dT - I||_F`; the paper: 1e-7).
+        #[arg(long)]
+        tolerance: Option<f32>,
         /// Write the source moved onto the template here (XYZ text).
         #[arg(long)]
         aligned: Option<PathBuf>,
@@ -171,11 +175,13 @@ fn main() -> anyhow::Result<()> {
             model,
             iterations,
             refine_icp,
+            tolerance,
             aligned,
         } => {
             let mut m = Method::new(method);
             m.iterations = iterations.unwrap_or(m.iterations);
             m.refine_icp = refine_icp;
+            m.tolerance = tolerance.unwrap_or(m.tolerance);
             register(&template, &source, m, model, aligned)?
         }
     }

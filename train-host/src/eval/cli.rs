@@ -74,6 +74,10 @@ pub struct EvalArgs {
     /// Refine the network's pose with ICP.
     #[arg(long)]
     pub refine_icp: bool,
+    /// i-PCRNet stop rule: stop once a pass moves the pose by less than
+    /// this (`||dT - I||_F`; the paper: 1e-7).
+    #[arg(long)]
+    pub tolerance: Option<f32>,
     /// Register one pair at a time (for timing; default: all cores).
     #[arg(long)]
     pub sequential: bool,
@@ -192,6 +196,7 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let mut method = Method::new(args.method);
     method.iterations = args.iterations.unwrap_or(method.iterations);
     method.refine_icp = args.refine_icp;
+    method.tolerance = args.tolerance.unwrap_or(method.tolerance);
     let blob = args
         .model
         .as_ref()
@@ -210,6 +215,12 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
         s.method,
         args.pairs.display(),
         m.count
+    );
+    let passes: Vec<f64> = s.pairs.iter().map(|p| p.iterations as f64).collect();
+    let passes = super::metrics::Stats::of(&passes);
+    println!(
+        "iterations: mean {:.2}, median {:.1}, max {:.0}",
+        passes.mean, passes.median, passes.max
     );
     println!(
         "rotation error (deg): mean {:.3}, median {:.3}, std {:.3}, max {:.3}",

@@ -4,7 +4,7 @@
 //! | method | what runs | model |
 //! |---|---|---|
 //! | `pcrnet` | one network pass | int8 or f32 blob |
-//! | `ipcrnet` | up to [`Method::iterations`] passes (the paper: 20), stopping when `\|\|dT - I\|\|_F < 1e-7` | int8 or f32 blob |
+//! | `ipcrnet` | up to [`Method::iterations`] passes (the paper: 20), stopping when `\|\|dT - I\|\|_F <` [`Method::tolerance`] (the paper: 1e-7) | int8 or f32 blob |
 //! | `pointnetlk` | inverse-compositional Lucas-Kanade on the encoder's features, up to 20 steps | f32 blob |
 //! | `icp` | point-to-point ICP from the identity, up to 100 iterations | none |
 //!
@@ -22,7 +22,7 @@ use pcrnet_core::Pose;
 use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
-use crate::register::{Precision, register, register_pointnetlk};
+use crate::register::{ITERATIVE_TOLERANCE, Precision, register, register_pointnetlk};
 
 /// A method family.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -38,7 +38,7 @@ pub enum MethodKind {
 }
 
 /// A method with its settings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Method {
     /// Which family.
     pub kind: MethodKind,
@@ -46,11 +46,14 @@ pub struct Method {
     pub iterations: usize,
     /// Refine the network's pose with ICP (network methods only).
     pub refine_icp: bool,
+    /// i-PCRNet stops once a pass's `||dT - I||_F` is below this.
+    pub tolerance: f32,
 }
 
 impl Method {
-    /// `kind` with the paper's iteration limit: PCRNet 1, i-PCRNet 20,
-    /// PointNetLK 20, ICP 100; no refinement.
+    /// `kind` with the paper's iteration limit (PCRNet 1, i-PCRNet 20,
+    /// PointNetLK 20, ICP 100) and i-PCRNet stop rule
+    /// ([`ITERATIVE_TOLERANCE`]); no refinement.
     pub fn new(kind: MethodKind) -> Self {
         let iterations = match kind {
             MethodKind::Pcrnet => 1,
@@ -61,6 +64,7 @@ impl Method {
             kind,
             iterations,
             refine_icp: false,
+            tolerance: ITERATIVE_TOLERANCE,
         }
     }
 
@@ -169,7 +173,7 @@ pub fn run(
                 MethodKind::Pcrnet => 1,
                 _ => method.iterations,
             };
-            let r = register(model()?, template, source, passes)?;
+            let r = register(model()?, template, source, passes, method.tolerance)?;
             Outcome {
                 pose: r.pose,
                 iterations: r.passes,
