@@ -146,6 +146,12 @@ impl<'a> Int8Model<'a> {
     /// stopping early once a pass changes the pose by less than `tolerance`
     /// (`||delta - I||_F`, see [`pose::iterate`]). Returns the pose and the
     /// number of passes. One pass equals [`Self::register`] bit for bit.
+    ///
+    /// Choosing `tolerance`: the paper's 1e-7 is never reached. A quantized
+    /// pass keeps moving the pose by about 3e-3 to 1e-2, so that rule always
+    /// runs every pass. On 200 ModelNet10 test pairs, 1e-2 to 2e-2 stopped
+    /// after 8-10 passes on average instead of 20, at the same accuracy
+    /// (measured with `pcrnet eval --tolerance`; see the README).
     pub fn register_iterative(
         &self,
         source: &[[f32; 3]],
