@@ -212,9 +212,9 @@ fn run_in_with_env(
     }
 }
 
-/// Every experiment of issue 5 on `data`, then RESULTS.md from their reports.
-fn results(data: &str) -> Result<(), String> {
-    let pcrnet = [
+/// Runs the host CLI, `pcrnet <args>`, built in release mode.
+fn pcrnet(args: &[&str]) -> Result<(), String> {
+    let mut all = vec![
         "run",
         "--release",
         "-p",
@@ -223,25 +223,20 @@ fn results(data: &str) -> Result<(), String> {
         "pcrnet",
         "--",
     ];
-    let mut experiment = pcrnet.to_vec();
-    experiment.extend(["experiment", "all", "--data", data]);
-    cargo(&experiment)?;
-    let mut results = pcrnet.to_vec();
-    results.push("results");
-    cargo(&results)
+    all.extend_from_slice(args);
+    cargo(&all)
+}
+
+/// Every experiment of issue 5 on `data`, then RESULTS.md from their reports.
+fn results(data: &str) -> Result<(), String> {
+    pcrnet(&["experiment", "all", "--data", data])?;
+    pcrnet(&["results"])
 }
 
 /// The main job on the embedded default: register the shipped source onto
 /// the shipped template with the trained int8 model (the device's path).
 fn demo(extra: &[String]) -> Result<(), String> {
     let mut args = vec![
-        "run",
-        "--release",
-        "-p",
-        "pcrnet-train",
-        "--bin",
-        "pcrnet",
-        "--",
         "register",
         "models/embedded-default-template.xyz",
         "models/embedded-default-source.xyz",
@@ -249,5 +244,5 @@ fn demo(extra: &[String]) -> Result<(), String> {
         "models/embedded-default-int8.pcrn",
     ];
     args.extend(extra.iter().map(String::as_str));
-    cargo(&args)
+    pcrnet(&args)
 }
