@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
-use pcrnet_train::eval::methods::{self, Method, MethodKind};
+use pcrnet_train::eval::cli::MethodOptions;
+use pcrnet_train::eval::methods::{self, MethodKind};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::{
     CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, inspect, quantize,
@@ -96,20 +97,9 @@ enum Command {
         /// Method: pcrnet (one pass), ipcrnet (iterative), pointnetlk (f32 blob) or icp.
         #[arg(long, value_enum, default_value_t = MethodKind::Pcrnet)]
         method: MethodKind,
-        /// Model blob: int8 or f32 for pcrnet / ipcrnet, f32 for pointnetlk.
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Most passes of ipcrnet / steps of pointnetlk (the paper: 20) or
-        /// iterations of icp (100).
-        #[arg(long)]
-        iterations: Option<usize>,
-        /// Refine the network's pose with ICP.
-        #[arg(long)]
-        refine_icp: bool,
-        /// i-PCRNet stop rule: stop once a pass moves the pose by less
-        /// than this (`||dT - I||_F`; the paper: 1e-7).
-        #[arg(long)]
-        tolerance: Option<f32>,
+        /// Model and settings of the method.
+        #[command(flatten)]
+        options: MethodOptions,
         /// Write the source moved onto the template here (XYZ text).
         #[arg(long)]
         aligned: Option<PathBuf>,
@@ -172,18 +162,9 @@ fn main() -> anyhow::Result<()> {
             template,
             source,
             method,
-            model,
-            iterations,
-            refine_icp,
-            tolerance,
+            options,
             aligned,
-        } => {
-            let mut m = Method::new(method);
-            m.iterations = iterations.unwrap_or(m.iterations);
-            m.refine_icp = refine_icp;
-            m.tolerance = tolerance.unwrap_or(m.tolerance);
-            register(&template, &source, m, model, aligned)?
-        }
+        } => register(&template, &source, method, &options, aligned)?,
     }
     Ok(())
 }
@@ -191,19 +172,17 @@ fn main() -> anyhow::Result<()> {
 fn register(
     template_path: &Path,
     source_path: &Path,
-    method: Method,
-    model: Option<PathBuf>,
+    kind: MethodKind,
+    options: &MethodOptions,
     aligned: Option<PathBuf>,
 ) -> anyhow::Result<()> {
     let template = read_cloud(template_path)?;
     let source = read_cloud(source_path)?;
-    let blob = model
-        .as_ref()
-        .map(|path| std::fs::read(path).with_context(|| format!("reading {}", path.display())))
-        .transpose()?;
+    let method = options.method(kind);
+    let blob = options.read_model()?;
     let out =
         methods::run(&method, blob.as_deref(), &template, &source).with_context(
-            || match &model {
+            || match &options.model {
                 Some(path) => format!("registering with {}", path.display()),
                 None => "registering".into(),
             },

@@ -65,10 +65,26 @@ pub struct EvalArgs {
     /// The method.
     #[arg(long, value_enum)]
     pub method: MethodKind,
-    /// Model blob (int8 or f32; f32 for pointnetlk).
+    /// Model and settings of the method.
+    #[command(flatten)]
+    pub options: MethodOptions,
+    /// Register one pair at a time (for timing; default: all cores).
+    #[arg(long)]
+    pub sequential: bool,
+    /// Also write the scores (summary and per pair) as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// A method's model and settings on the command line (`pcrnet register`
+/// and `pcrnet eval`).
+#[derive(Debug, Clone, Args)]
+pub struct MethodOptions {
+    /// Model blob: int8 or f32 for pcrnet / ipcrnet, f32 for pointnetlk.
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Most passes / steps / iterations (default: the paper's).
+    /// Most passes of ipcrnet / steps of pointnetlk (the paper: 20) or
+    /// iterations of icp (100).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Refine the network's pose with ICP.
@@ -78,12 +94,25 @@ pub struct EvalArgs {
     /// this (`||dT - I||_F`; the paper: 1e-7).
     #[arg(long)]
     pub tolerance: Option<f32>,
-    /// Register one pair at a time (for timing; default: all cores).
-    #[arg(long)]
-    pub sequential: bool,
-    /// Also write the scores (summary and per pair) as JSON here.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+}
+
+impl MethodOptions {
+    /// `kind` with these settings (the paper's where not given).
+    pub fn method(&self, kind: MethodKind) -> Method {
+        let mut m = Method::new(kind);
+        m.iterations = self.iterations.unwrap_or(m.iterations);
+        m.refine_icp = self.refine_icp;
+        m.tolerance = self.tolerance.unwrap_or(m.tolerance);
+        m
+    }
+
+    /// The model blob's bytes, when `--model` is given.
+    pub fn read_model(&self) -> anyhow::Result<Option<Vec<u8>>> {
+        self.model
+            .as_ref()
+            .map(|p| std::fs::read(p).with_context(|| format!("reading {}", p.display())))
+            .transpose()
+    }
 }
 
 /// Arguments of `pcrnet experiment`.
@@ -193,16 +222,10 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
 pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let set = PairSet::load(&args.pairs)?;
     let pairs = set.materialise(&set.spec.load_shapes()?)?;
-    let mut method = Method::new(args.method);
-    method.iterations = args.iterations.unwrap_or(method.iterations);
-    method.refine_icp = args.refine_icp;
-    method.tolerance = args.tolerance.unwrap_or(method.tolerance);
-    let blob = args
-        .model
-        .as_ref()
-        .map(|p| std::fs::read(p).with_context(|| format!("reading {}", p.display())))
-        .transpose()?;
+    let method = args.options.method(args.method);
+    let blob = args.options.read_model()?;
     let name = args
+        .options
         .model
         .as_ref()
         .map(|p| p.display().to_string())
