@@ -160,12 +160,7 @@ fn range(s: &str, what: &str) -> anyhow::Result<[f32; 2]> {
 }
 
 fn fraction(s: &str, what: &str) -> anyhow::Result<[f32; 2]> {
-    let r = range(s, what)?;
-    anyhow::ensure!(
-        r[0] > 0.0 && r[1] <= 1.0,
-        "{what} {s:?}: fractions lie in (0, 1]"
-    );
-    Ok(r)
+    crate::train::cli::parse_range(s).with_context(|| what.to_string())
 }
 
 /// Runs `pcrnet pairs`.
@@ -321,4 +316,24 @@ pub fn results(args: ResultsArgs) -> anyhow::Result<()> {
     std::fs::write(&args.out, md).with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_and_fractions() {
+        assert_eq!(range("0.02", "--noise").unwrap(), [0.02, 0.02]);
+        assert_eq!(range("0, 0.04", "--noise").unwrap(), [0.0, 0.04]);
+        for bad in ["-0.1", "0.04,0.01", "nan", "inf", "x"] {
+            assert!(range(bad, "--noise").is_err(), "{bad}");
+        }
+        assert_eq!(fraction("0.3,0.8", "--partial").unwrap(), [0.3, 0.8]);
+        assert_eq!(fraction("1", "--sparse").unwrap(), [1.0, 1.0]);
+        for bad in ["0", "1.5", "0.8,0.3", "x"] {
+            let e = fraction(bad, "--partial").unwrap_err();
+            assert!(format!("{e:#}").starts_with("--partial"), "{e:#}");
+        }
+    }
 }

@@ -198,7 +198,9 @@ pub fn parse_arch(s: &str) -> anyhow::Result<(Vec<u16>, Vec<u16>)> {
     })
 }
 
-fn parse_range(s: &str) -> anyhow::Result<[f32; 2]> {
+/// Parses a fraction `F` or a range `LO,HI` with `0 < LO <= HI <= 1`
+/// (`--partial`, `--sparse`).
+pub fn parse_range(s: &str) -> anyhow::Result<[f32; 2]> {
     let (a, b) = s.split_once(',').unwrap_or((s, s));
     let (a, b): (f32, f32) = (a.trim().parse()?, b.trim().parse()?);
     if !(0.0 < a && a <= b && b <= 1.0) {
