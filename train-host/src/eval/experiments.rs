@@ -604,9 +604,8 @@ fn sweep_chart(
     title: &str,
     x_label: &str,
     y_label: &str,
-    xs: &[f64],
+    sets: &[SweepSet],
     runs: &[Run],
-    sets: &[String],
     value: impl Fn(&Summary) -> f64,
 ) -> Chart {
     let mut names: Vec<String> = Vec::new();
@@ -620,19 +619,18 @@ fn sweep_chart(
         .iter()
         .map(|n| Series {
             name: n.clone(),
-            points: xs
+            points: sets
                 .iter()
-                .zip(sets)
-                .filter_map(|(&x, set)| {
+                .filter_map(|set| {
                     runs.iter()
-                        .find(|r| &r.set == set && &label(&r.method, r.model.as_deref()) == n)
-                        .map(|r| (x, value(&r.summary)))
+                        .find(|r| r.set == set.name && &label(&r.method, r.model.as_deref()) == n)
+                        .map(|r| (set.x, value(&r.summary)))
                 })
                 .collect(),
         })
         .collect();
-    let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let lo = sets.iter().map(|s| s.x).fold(f64::INFINITY, f64::min);
+    let hi = sets.iter().map(|s| s.x).fold(f64::NEG_INFINITY, f64::max);
     Chart {
         title: title.to_string(),
         x_label: x_label.to_string(),
@@ -727,16 +725,27 @@ fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
 fn sweep(
     rec: &mut Recorder<'_>,
     set_prefix: &str,
-    sets: &[(String, PairSetSpec)],
+    sets: &[SweepSet],
     methods: &[(Method, Option<NamedBlob<'_>>)],
 ) -> anyhow::Result<()> {
-    for (set, spec) in sets {
-        let pairs = pair_set(rec.ctx, &format!("{set_prefix}-{set}"), spec.clone())?;
+    for set in sets {
+        let pairs = pair_set(
+            rec.ctx,
+            &format!("{set_prefix}-{}", set.name),
+            set.spec.clone(),
+        )?;
         for (m, model) in methods {
-            rec.score(set, *m, *model, &pairs, true)?;
+            rec.score(&set.name, *m, *model, &pairs, true)?;
         }
     }
     Ok(())
+}
+
+/// One point of a sweep: its value on the x axis, its name, its pairs.
+struct SweepSet {
+    x: f64,
+    name: String,
+    spec: PairSetSpec,
 }
 
 fn noise(ctx: &Context) -> anyhow::Result<Report> {
@@ -745,14 +754,18 @@ fn noise(ctx: &Context) -> anyhow::Result<Report> {
     let pc = rec.model("mn10-pcrnet")?;
     let ipc = rec.model("mn10-ipcrnet")?;
     let sigmas = [0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06];
-    let sets: Vec<(String, PairSetSpec)> = sigmas
+    let sets: Vec<SweepSet> = sigmas
         .iter()
         .map(|&s| {
             let cfg = PairConfig {
                 noise: (s > 0.0).then_some([s, s]),
                 ..PairConfig::default()
             };
-            (format!("sigma {s:.2}"), modelnet10(ctx, None, cfg))
+            SweepSet {
+                x: s as f64,
+                name: format!("sigma {s:.2}"),
+                spec: modelnet10(ctx, None, cfg),
+            }
         })
         .collect();
     let methods = [
@@ -763,9 +776,6 @@ fn noise(ctx: &Context) -> anyhow::Result<Report> {
         (ipcrnet().then_icp(), ipc.int8()),
     ];
     sweep(&mut rec, "noise", &sets, &methods)?;
-    let names: Vec<String> = sets.iter().map(|s| s.0.clone()).collect();
-    let runs = rec.runs.clone();
-    let xs: Vec<f64> = sigmas.iter().map(|&s| s as f64).collect();
     for (stem, what, f) in [
         ("auc", "AUC", (|s: &Summary| s.auc) as fn(&Summary) -> f64),
         ("success", "success ratio (10°, 0.1)", |s: &Summary| {
@@ -776,20 +786,20 @@ fn noise(ctx: &Context) -> anyhow::Result<Report> {
             &format!("Gaussian noise on the source: {what}"),
             "noise standard deviation",
             what,
-            &xs,
-            &runs,
-            &names,
+            &sets,
+            &rec.runs,
             f,
         );
         rec.plot(stem, &chart)?;
     }
+    let table = summary_table("Errors per noise level", "noise", &rec.runs);
     rec.finish(
         "Gaussian noise on the source",
         vec![
             "ModelNet10 test split (all 10 classes), the same templates and transforms at every noise level; noise N(0, sigma^2) per coordinate.".into(),
             "Networks trained on ModelNet10 with sigma ~ U[0, 0.04]. PointNetLK uses mn10-ipcrnet's f32 encoder.".into(),
         ],
-        vec![summary_table("Errors per noise level", "noise", &runs)],
+        vec![table],
         started,
     )
 }
@@ -800,7 +810,7 @@ fn partial(ctx: &Context) -> anyhow::Result<Report> {
     let full = rec.model("air-ipcrnet")?;
     let part = rec.model(PARTIAL_RECIPE.name)?;
     let cuts = [0.0, 0.2, 0.5, 0.7];
-    let sets: Vec<(String, PairSetSpec)> = cuts
+    let sets: Vec<SweepSet> = cuts
         .iter()
         .map(|&c| {
             let keep = 1.0 - c;
@@ -808,10 +818,11 @@ fn partial(ctx: &Context) -> anyhow::Result<Report> {
                 partial: (c > 0.0).then_some([keep, keep]),
                 ..PairConfig::default()
             };
-            (
-                format!("{:.0}% cut", c * 100.0),
-                folder(ctx, "ModelNet40-airplane", None, cfg),
-            )
+            SweepSet {
+                x: c as f64 * 100.0,
+                name: format!("{:.0}% cut", c * 100.0),
+                spec: folder(ctx, "ModelNet40-airplane", None, cfg),
+            }
         })
         .collect();
     let methods = [
@@ -822,26 +833,23 @@ fn partial(ctx: &Context) -> anyhow::Result<Report> {
         (ipcrnet().then_icp(), part.int8()),
     ];
     sweep(&mut rec, "partial", &sets, &methods)?;
-    let names: Vec<String> = sets.iter().map(|s| s.0.clone()).collect();
-    let runs = rec.runs.clone();
-    let xs: Vec<f64> = cuts.iter().map(|&c| c as f64 * 100.0).collect();
     let chart = sweep_chart(
         "Partial source (ModelNet40 airplanes): AUC",
         "part of the source removed (%)",
         "AUC",
-        &xs,
-        &runs,
-        &names,
+        &sets,
+        &rec.runs,
         |s| s.auc,
     );
     rec.plot("auc", &chart)?;
+    let table = summary_table("Errors per incompleteness", "cut", &rec.runs);
     rec.finish(
         "Partial source",
         vec![
             "ModelNet40 airplanes, test split (100 shapes; pairs repeat shapes with new transforms). A plane with a random normal cuts away the given share of the source's points (then padded back to 512 by repeats); no noise.".into(),
             "air-ipcrnet is trained on full sources, air-partial-ipcrnet on sources keeping 30-80%; both with noise U[0, 0.04]. + ICP: ICP (100 iterations) starts from the network's pose.".into(),
         ],
-        vec![summary_table("Errors per incompleteness", "cut", &runs)],
+        vec![table],
         started,
     )
 }
@@ -852,17 +860,18 @@ fn sparse(ctx: &Context) -> anyhow::Result<Report> {
     let pc = rec.model("mn10-pcrnet")?;
     let ipc = rec.model("mn10-ipcrnet")?;
     let keeps = [1.0, 0.5, 0.25, 0.1, 0.05];
-    let sets: Vec<(String, PairSetSpec)> = keeps
+    let sets: Vec<SweepSet> = keeps
         .iter()
         .map(|&k| {
             let cfg = PairConfig {
                 sparse: (k < 1.0).then_some([k, k]),
                 ..PairConfig::default()
             };
-            (
-                format!("{:.0}% kept", k * 100.0),
-                modelnet10(ctx, None, cfg),
-            )
+            SweepSet {
+                x: k as f64 * 100.0,
+                name: format!("{:.0}% kept", k * 100.0),
+                spec: modelnet10(ctx, None, cfg),
+            }
         })
         .collect();
     let methods = [
@@ -873,26 +882,23 @@ fn sparse(ctx: &Context) -> anyhow::Result<Report> {
         (ipcrnet().then_icp(), ipc.int8()),
     ];
     sweep(&mut rec, "sparse", &sets, &methods)?;
-    let names: Vec<String> = sets.iter().map(|s| s.0.clone()).collect();
-    let runs = rec.runs.clone();
-    let xs: Vec<f64> = keeps.iter().map(|&k| k as f64 * 100.0).collect();
     let chart = sweep_chart(
         "Sparse source (ModelNet10): AUC",
         "points of the source kept (%)",
         "AUC",
-        &xs,
-        &runs,
-        &names,
+        &sets,
+        &rec.runs,
         |s| s.auc,
     );
     rec.plot("auc", &chart)?;
+    let table = summary_table("Errors per density", "density", &rec.runs);
     rec.finish(
         "Sparse source",
         vec![
             "ModelNet10 test split; the source keeps a random subset of its 512 points (padded back to 512 by repeats, which max-pooling ignores); no noise.".into(),
             "Networks trained on full sources with noise.".into(),
         ],
-        vec![summary_table("Errors per density", "density", &runs)],
+        vec![table],
         started,
     )
 }
