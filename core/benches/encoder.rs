@@ -49,7 +49,12 @@ fn encoder(c: &mut Criterion) {
         let mut scratch = vec![0f32; model.scratch_len()];
         let id = BenchmarkId::new("f32", format!("{name}_{macs}mac"));
         group.bench_function(id, |b| {
-            b.iter(|| model.encode(black_box(&cloud), &mut scratch).map(|f| f[0]))
+            b.iter(|| {
+                model
+                    .network()
+                    .encode(black_box(&cloud), &mut scratch)
+                    .map(|f| f[0])
+            })
         });
     }
     group.finish();

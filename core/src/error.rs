@@ -90,6 +90,16 @@ pub enum Error {
     /// The network's quaternion output has zero (or non-finite) norm, so no
     /// rotation can be formed from it.
     DegeneratePose,
+    /// A result (pose, residual) came out NaN or infinite: the cloud's
+    /// coordinates are too large for f32 arithmetic after the model's frame
+    /// is applied. Bring the cloud near the template's frame first.
+    NonFiniteResult,
+    /// A registration option is outside its range (zero passes, a negative
+    /// or non-finite tolerance or distance, ...).
+    InvalidOption {
+        /// Which option.
+        what: &'static str,
+    },
 }
 
 impl fmt::Display for Error {
@@ -99,7 +109,7 @@ impl fmt::Display for Error {
             Error::UnsupportedVersion { found } => {
                 write!(
                     f,
-                    "unsupported model format version {found} (this build reads {})",
+                    "unsupported model format version {found} (this build reads {}); re-export the model with `pcrnet export`, or upgrade a version-2 f32 blob with `pcrnet upgrade`",
                     crate::format::FORMAT_VERSION
                 )
             }
@@ -139,6 +149,11 @@ impl fmt::Display for Error {
                 write!(f, "point {index} lies outside the model's input range")
             }
             Error::DegeneratePose => write!(f, "network output has a zero quaternion"),
+            Error::NonFiniteResult => write!(
+                f,
+                "the pose or residual is not finite: the cloud's coordinates are too large for f32 once moved into the model's frame"
+            ),
+            Error::InvalidOption { what } => write!(f, "invalid registration option: {what}"),
         }
     }
 }

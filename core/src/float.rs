@@ -10,8 +10,10 @@
 
 use crate::arch::{Arch, INPUT_DIM, POSE_DIM, ping_pong};
 use crate::error::{Error, Result};
-use crate::format::{self, F32Layer, F32Payload, ModelKind, expect_len};
-use crate::pose::{self, Pose, Rigid};
+use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, expect_len};
+use crate::pose::{self, PointMap, Pose};
+use crate::registration::{self, Options, Registration};
+use crate::template::Template;
 
 /// Read access to an array of f32 parameters.
 pub trait Params: Copy {
@@ -70,13 +72,74 @@ pub struct F32Network<P> {
     template: P,
 }
 
-/// The f32 model read from a blob.
-pub type F32Model<'a> = F32Network<LeF32<'a>>;
+/// The f32 model read from a blob: the network, its frame and the
+/// template's points, so it runs the same pipeline as [`crate::Int8Model`].
+#[derive(Debug, Clone)]
+pub struct F32Model<'a> {
+    network: F32Network<LeF32<'a>>,
+    frame: Frame,
+    template: Template<'a>,
+}
 
 impl<'a> F32Model<'a> {
     /// Parses and validates an f32 blob. Weights stay in `blob`.
     pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
         Self::from_payload(format::decode(format::open(blob, ModelKind::F32)?)?)
+    }
+
+    /// The network (model frame).
+    pub fn network(&self) -> &F32Network<LeF32<'a>> {
+        &self.network
+    }
+
+    /// User units -> model frame.
+    pub fn frame(&self) -> &Frame {
+        &self.frame
+    }
+
+    /// The template's points (model frame).
+    pub fn template(&self) -> &Template<'a> {
+        &self.template
+    }
+
+    /// Elements of f32 scratch needed.
+    pub fn scratch_len(&self) -> usize {
+        self.network.scratch_len()
+    }
+
+    /// Whether the network sees the source centred on its centroid.
+    pub fn centres_source(&self) -> bool {
+        self.network.centre_source
+    }
+
+    /// The main job, as [`crate::Int8Model::register`], with the f32 network.
+    pub fn register(
+        &self,
+        source: &[[f32; 3]],
+        options: &Options,
+        scratch: &mut [f32],
+    ) -> Result<Registration> {
+        let net = &self.network;
+        registration::run(
+            &self.frame,
+            net.centre_source,
+            &self.template,
+            source,
+            options,
+            |map| Ok((net.pass(source, map, scratch)?, 0)),
+        )
+    }
+
+    /// The network alone, in user units, as [`crate::Int8Model::network_pose`].
+    pub fn network_pose(
+        &self,
+        source: &[[f32; 3]],
+        passes: usize,
+        tolerance: f32,
+        scratch: &mut [f32],
+    ) -> Result<(Pose, usize)> {
+        self.network
+            .network_pose_in(&self.frame, source, passes, tolerance, scratch)
     }
 
     /// Validates an already decoded payload.
@@ -96,8 +159,14 @@ impl<'a> F32Model<'a> {
             4,
             "template feature",
         )?;
-        Ok(F32Network::new(p.arch, layers, LeF32(p.template_feature))?
-            .with_centring(p.centre_source))
+        crate::int8::check_frame(&p.frame)?;
+        let network = F32Network::new(p.arch, layers, LeF32(p.template_feature))?
+            .with_centring(p.centre_source);
+        Ok(F32Model {
+            network,
+            frame: p.frame,
+            template: Template::new(p.template)?,
+        })
     }
 }
 
@@ -177,28 +246,13 @@ impl<P: Params> F32Network<P> {
         self.arch.f32_scratch_len()
     }
 
-    /// Registers `source` to the template (pose maps source onto template).
-    pub fn register(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<Pose> {
-        let (raw, centring) = self.infer_centred(source, scratch)?;
-        Ok(centring.then(&Pose::from_head_output(&raw)?))
-    }
-
     /// Encodes the source (centred first if the network says so) and runs
     /// the head, returning the raw 7 outputs. The feature is left in
     /// `scratch[..F]`.
     pub fn infer(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<[f32; POSE_DIM]> {
-        Ok(self.infer_centred(source, scratch)?.0)
-    }
-
-    /// [`Self::infer`], also returning how the source was moved first.
-    fn infer_centred(
-        &self,
-        source: &[[f32; 3]],
-        scratch: &mut [f32],
-    ) -> Result<([f32; POSE_DIM], Pose)> {
         let (feature, work) = self.split(scratch)?;
-        let centring = self.encode_centred(source, feature, work)?;
-        Ok((self.head(feature, work)?, centring))
+        self.encode_centred(source, feature, work)?;
+        self.head(feature, work)
     }
 
     /// Encodes `source`, centred first if the network says so; returns how
@@ -209,27 +263,45 @@ impl<P: Params> F32Network<P> {
         feature: &mut [f32],
         work: &mut [f32],
     ) -> Result<Pose> {
-        let centring = pose::centring(source, self.centre_source)?;
-        let moved = self.centre_source.then(|| Rigid::from(&centring));
-        self.encode_into(source, moved.as_ref(), feature, work)?;
+        let centring = pose::centring(source, self.centre_source, &Frame::IDENTITY)?;
+        let map = PointMap::new(Frame::IDENTITY, &centring);
+        self.encode_into(source, &map, feature, work)?;
         Ok(centring)
     }
 
-    /// Iterative registration (i-PCRNet), as [`crate::Int8Model::register_iterative`].
-    pub fn register_iterative(
+    /// The network alone on clouds in its own frame, as
+    /// [`crate::Int8Model::network_pose`]: up to `passes` passes composed,
+    /// stopping once a pass's `||dT - I||_F` is below `tolerance`.
+    pub fn network_pose(
         &self,
         source: &[[f32; 3]],
-        iterations: usize,
+        passes: usize,
         tolerance: f32,
         scratch: &mut [f32],
     ) -> Result<(Pose, usize)> {
-        let start = pose::centring(source, self.centre_source)?;
-        pose::iterate(start, iterations, tolerance, |current| {
-            let moved = Rigid::from(current);
-            let (feature, work) = self.split(scratch)?;
-            self.encode_into(source, Some(&moved), feature, work)?;
-            Pose::from_head_output(&self.head(feature, work)?)
-        })
+        self.network_pose_in(&Frame::IDENTITY, source, passes, tolerance, scratch)
+    }
+
+    fn network_pose_in(
+        &self,
+        frame: &Frame,
+        source: &[[f32; 3]],
+        passes: usize,
+        tolerance: f32,
+        scratch: &mut [f32],
+    ) -> Result<(Pose, usize)> {
+        let start = pose::centring(source, self.centre_source, frame)?;
+        let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
+            self.pass(source, &PointMap::new(*frame, current), scratch)
+        })?;
+        Ok((frame.pose_to_user(&pose), n))
+    }
+
+    /// One pass on the source moved by `map`: the pose in the model frame.
+    fn pass(&self, source: &[[f32; 3]], map: &PointMap, scratch: &mut [f32]) -> Result<Pose> {
+        let (feature, work) = self.split(scratch)?;
+        self.encode_into(source, map, feature, work)?;
+        Pose::from_head_output(&self.head(feature, work)?)
     }
 
     /// Encodes `source` into its global feature (a view into `scratch`).
@@ -248,11 +320,11 @@ impl<P: Params> F32Network<P> {
         Ok(s.split_at_mut(self.arch.feature_dim()))
     }
 
-    /// Encodes `source`, each point first moved by `moved` if given.
+    /// Encodes `source`, each point first moved by `map`.
     fn encode_into(
         &self,
         source: &[[f32; 3]],
-        moved: Option<&Rigid>,
+        map: &PointMap,
         feature: &mut [f32],
         work: &mut [f32],
     ) -> Result<()> {
@@ -266,7 +338,7 @@ impl<P: Params> F32Network<P> {
             if p.iter().any(|x| !x.is_finite()) {
                 return Err(Error::NonFiniteCoordinate { index });
             }
-            let p = moved.map_or(*p, |m| m.apply(*p));
+            let p = map.apply(*p);
             let mut inputs = INPUT_DIM;
             for (l, (layer, shape)) in self.layers[..n_enc]
                 .iter()

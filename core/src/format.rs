@@ -3,15 +3,16 @@
 //! ```text
 //! offset  size  field
 //! 0       4     magic  b"PCRN"
-//! 4       2     format version, u16 little-endian (currently 2)
+//! 4       2     format version, u16 little-endian (currently 3)
 //! 6       1     kind: 0 = int8 (device), 1 = f32 (host reference)
 //! 7       4     payload length P, u32 little-endian
 //! 11      P     payload: postcard encoding of Int8Payload or F32Payload
 //! 11+P    4     CRC-32 (ISO-HDLC, as zlib) of bytes 0 .. 11+P, little-endian
 //! ```
 //!
-//! The payload starts with the architecture ([`Arch`]) and, for int8, the
-//! quantization parameters, followed by the layers. Every multi-byte number
+//! The payload starts with the architecture ([`Arch`]), the template's
+//! [`Frame`] and [`TemplateCloud`] and, for int8, the quantization
+//! parameters, followed by the layers. Every multi-byte number
 //! inside the weight arrays is little-endian and read with `from_le_bytes`,
 //! so a blob needs **no alignment** and is used in place: the parsed model
 //! borrows its weights from the blob (e.g. a `&'static [u8]` from
@@ -29,7 +30,9 @@ use crate::error::{Error, Result};
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"PCRN";
 /// Format version written and read by this build.
-pub const FORMAT_VERSION: u16 = 2;
+pub const FORMAT_VERSION: u16 = 3;
+/// Most symmetry turns a blob may store (so at most `1 + MAX_TURNS` hypotheses).
+pub const MAX_TURNS: usize = 15;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 11;
 /// Bytes after the payload.
@@ -45,6 +48,64 @@ pub enum ModelKind {
     Int8 = 0,
     /// f32 reference network ([`F32Payload`]).
     F32 = 1,
+}
+
+/// How the user's coordinates (the template file's and the sensor's units
+/// and axes) map to the frame the network works in:
+/// `p_model = scale * (p_user - centre)`.
+///
+/// The exporter takes `centre` = the template's centroid and `scale` =
+/// `0.5 / max_k |p_k - centre_k|` over the template's points, so the
+/// template fills `[-0.5, 0.5]^3` as the training shapes did. `pcrnet-core`
+/// applies it to every source point and turns the network's pose back into
+/// user units, so callers never see the model frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Frame {
+    /// Where the model frame's origin lies, user units.
+    pub centre: [f32; 3],
+    /// Model units per user unit (finite, > 0).
+    pub scale: f32,
+}
+
+impl Frame {
+    /// The identity: model frame = user frame.
+    pub const IDENTITY: Frame = Frame {
+        centre: [0.0; 3],
+        scale: 1.0,
+    };
+}
+
+/// The template's points (subsampled), in the model frame, for checking
+/// and refining a pose on the device, laid out for nearest-neighbour search.
+///
+/// - `points`: `M x 3` int16 little-endian, `p_model = q * step`, sorted
+///   by grid cell (x slowest, z fastest);
+/// - the grid has `grid^3` cubic cells of `cell` int16 steps, its lowest
+///   corner at `origin` (int16 steps); `cells` holds `grid^3 + 1` u16
+///   little-endian offsets into the points: cell `c` holds points
+///   `cells[c] .. cells[c + 1]`;
+/// - `turns`: unit quaternions `[w, x, y, z]` in the model frame (half and
+///   quarter turns about the template's principal axes through its
+///   centroid), the extra starting poses tried by flip resolution.
+///
+/// Built by [`crate::template::build`]; checked by [`crate::template::Template::new`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TemplateCloud<'a> {
+    /// Model units per int16 step.
+    pub step: f32,
+    /// Points, `M x 3` int16 little-endian, sorted by cell.
+    pub points: &'a [u8],
+    /// Cells per axis (1..=32).
+    pub grid: u8,
+    /// Lowest corner of the grid, int16 steps.
+    pub origin: [i16; 3],
+    /// Edge of a cell, int16 steps (>= 1).
+    pub cell: u16,
+    /// `grid^3 + 1` u16 little-endian offsets into the points.
+    pub cells: &'a [u8],
+    /// Symmetry turns (unit quaternions, model frame).
+    pub turns: heapless::Vec<[f32; 4], MAX_TURNS>,
 }
 
 /// One quantized hidden layer (encoder or head).
@@ -90,6 +151,11 @@ pub struct Int8Payload<'a> {
     /// Whether the network expects the source centred on its centroid
     /// (see [`crate::pose::centring`]); the pose is then composed back.
     pub centre_source: bool,
+    /// User units and axes -> model frame.
+    pub frame: Frame,
+    /// The template's points, for checking and refining.
+    #[serde(borrow)]
+    pub template: TemplateCloud<'a>,
     /// Real value of one step of the int16 input coordinates (zero point 0).
     pub input_scale: f32,
     /// Encoder layers, in order; the last one's output parameters are the feature's.
@@ -121,6 +187,11 @@ pub struct F32Payload<'a> {
     pub arch: Arch,
     /// Whether the network expects the source centred on its centroid.
     pub centre_source: bool,
+    /// User units and axes -> model frame.
+    pub frame: Frame,
+    /// The template's points, for checking and refining.
+    #[serde(borrow)]
+    pub template: TemplateCloud<'a>,
     /// Encoder layers then head layers (hidden and output), in order.
     #[serde(borrow)]
     pub layers: heapless::Vec<F32Layer<'a>, { 2 * MAX_LAYERS + 1 }>,

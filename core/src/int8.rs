@@ -24,12 +24,15 @@ use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
 use crate::kernel::{QValue, Requant, dense_tile, dot};
-use crate::pose::{self, Pose, Rigid};
+use crate::pose::{self, PointMap, Pose};
+use crate::registration::{self, Options, Registration};
+use crate::template::Template;
 
 /// A validated int8 model borrowing its weights from a blob.
 #[derive(Debug, Clone)]
 pub struct Int8Model<'a> {
     p: Int8Payload<'a>,
+    template: Template<'a>,
 }
 
 /// Everything one inference produces besides the pose.
@@ -40,10 +43,14 @@ pub struct Int8Inference<'s> {
     /// The head's raw i32 outputs `[qw, qx, qy, qz, tx, ty, tz]`: the
     /// network's estimate for the source as it saw it (centred or not).
     pub head: [i32; POSE_DIM],
-    /// How the source was moved before the network: the identity, or the
-    /// centring translation for models trained on centred sources. The
-    /// registered pose is `centring.then(&model.pose(&head)?)`.
+    /// How the source was moved before the network, in the model frame:
+    /// the identity, or the centring translation for models trained on
+    /// centred sources. The network's pose in the model frame is
+    /// `centring.then(&model.pose(&head)?)`; `frame.pose_to_user` of that
+    /// is the pose in user units.
     pub centring: Pose,
+    /// Feature entries and head activations at the top of the int8 range.
+    pub saturated: u32,
 }
 
 impl<'a> Int8Model<'a> {
@@ -99,7 +106,19 @@ impl<'a> Int8Model<'a> {
             1,
             "template feature",
         )?;
-        Ok(Int8Model { p })
+        check_frame(&p.frame)?;
+        let template = Template::new(p.template.clone())?;
+        Ok(Int8Model { p, template })
+    }
+
+    /// The template's points (model frame) used to check and refine poses.
+    pub fn template(&self) -> &Template<'a> {
+        &self.template
+    }
+
+    /// User units -> model frame.
+    pub fn frame(&self) -> &format::Frame {
+        &self.p.frame
     }
 
     /// The network shape.
@@ -128,11 +147,25 @@ impl<'a> Int8Model<'a> {
             })
     }
 
-    /// Registers `source` to the model's template: the pose that maps the
-    /// source onto the template.
-    pub fn register(&self, source: &[[f32; 3]], scratch: &mut [i8]) -> Result<Pose> {
-        let inference = self.infer(source, scratch)?;
-        Ok(inference.centring.then(&self.pose(&inference.head)?))
+    /// Registers `source` (user units, any number of points from 1) to the
+    /// model's template: the network, then flip resolution and ICP against
+    /// the template's points as `options` say, returning the pose in user
+    /// units with its residual and flags. See [`crate::registration`].
+    pub fn register(
+        &self,
+        source: &[[f32; 3]],
+        options: &Options,
+        scratch: &mut [i8],
+    ) -> Result<Registration> {
+        let tile = self.tile_for(scratch.len())?;
+        registration::run(
+            &self.p.frame,
+            self.p.centre_source,
+            &self.template,
+            source,
+            options,
+            |map| self.pass(source, map, tile, scratch),
+        )
     }
 
     /// Whether the network sees the source centred on its centroid.
@@ -140,33 +173,50 @@ impl<'a> Int8Model<'a> {
         self.p.centre_source
     }
 
-    /// Iterative registration (i-PCRNet): up to `iterations` passes, each on
-    /// the source moved by the pose so far (moved point by point while
-    /// quantizing: no copy of the cloud), composing the estimates, and
-    /// stopping early once a pass changes the pose by less than `tolerance`
-    /// (`||delta - I||_F`, see [`pose::iterate`]). Returns the pose and the
-    /// number of passes. One pass equals [`Self::register`] bit for bit.
+    /// The network alone, in user units: up to `passes` passes (1: PCRNet;
+    /// more: i-PCRNet), each on the source moved by the pose so far (moved
+    /// point by point while quantizing: no copy of the cloud), composing the
+    /// estimates, and stopping early once a pass changes the pose by less
+    /// than `tolerance` (`||delta - I||_F`, see [`pose::iterate`]). Returns
+    /// the pose and the number of passes. No check, no refinement: use
+    /// [`Self::register`] for the main job.
     ///
     /// Choosing `tolerance`: the paper's 1e-7 is never reached. A quantized
     /// pass keeps moving the pose by about 3e-3 to 1e-2, so that rule always
     /// runs every pass. On 200 ModelNet10 test pairs, 1e-2 to 2e-2 stopped
     /// after 8-10 passes on average instead of 20, at the same accuracy
     /// (measured with `pcrnet eval --tolerance`; see the README).
-    pub fn register_iterative(
+    pub fn network_pose(
         &self,
         source: &[[f32; 3]],
-        iterations: usize,
+        passes: usize,
         tolerance: f32,
         scratch: &mut [i8],
     ) -> Result<(Pose, usize)> {
         let tile = self.tile_for(scratch.len())?;
-        let start = pose::centring(source, self.p.centre_source)?;
-        pose::iterate(start, iterations, tolerance, |current| {
-            let moved = Rigid::from(current);
-            let (feature, work) = self.split_scratch(tile, scratch)?;
-            self.encode_into(source, Some(&moved), tile, feature, work)?;
-            self.pose(&self.head(feature, work)?)
-        })
+        let frame = self.p.frame;
+        let start = pose::centring(source, self.p.centre_source, &frame)?;
+        let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
+            Ok(self
+                .pass(source, &PointMap::new(frame, current), tile, scratch)?
+                .0)
+        })?;
+        Ok((frame.pose_to_user(&pose), n))
+    }
+
+    /// One network pass on the source moved by `map`: the pose (model
+    /// frame) and the saturation count.
+    fn pass(
+        &self,
+        source: &[[f32; 3]],
+        map: &PointMap,
+        tile: usize,
+        scratch: &mut [i8],
+    ) -> Result<(Pose, u32)> {
+        let (feature, work) = self.split_scratch(tile, scratch)?;
+        self.encode_into(source, map, tile, feature, work)?;
+        let (head, saturated) = self.head_counted(feature, work)?;
+        Ok((self.pose(&head)?, saturated))
     }
 
     /// Encodes `source` and runs the head, returning the raw results.
@@ -189,11 +239,12 @@ impl<'a> Int8Model<'a> {
     ) -> Result<Int8Inference<'s>> {
         let (feature, work) = self.split_scratch(tile, scratch)?;
         let centring = self.encode_centred(source, tile, feature, work)?;
-        let head = self.head(feature, work)?;
+        let (head, saturated) = self.head_counted(feature, work)?;
         Ok(Int8Inference {
             feature,
             head,
             centring,
+            saturated,
         })
     }
 
@@ -225,9 +276,9 @@ impl<'a> Int8Model<'a> {
         feature: &mut [i8],
         work: &mut [i8],
     ) -> Result<Pose> {
-        let centring = pose::centring(source, self.p.centre_source)?;
-        let moved = self.p.centre_source.then(|| Rigid::from(&centring));
-        self.encode_into(source, moved.as_ref(), tile, feature, work)?;
+        let centring = pose::centring(source, self.p.centre_source, &self.p.frame)?;
+        let map = PointMap::new(self.p.frame, &centring);
+        self.encode_into(source, &map, tile, feature, work)?;
         Ok(centring)
     }
 
@@ -250,17 +301,13 @@ impl<'a> Int8Model<'a> {
     }
 
     /// Quantizes point `index` to the model's int16 input grid, after
-    /// moving it by `moved` if given (a moved point may leave the input range).
-    pub fn quantize_point(
-        &self,
-        index: usize,
-        p: &[f32; 3],
-        moved: Option<&Rigid>,
-    ) -> Result<[i16; 3]> {
+    /// moving it by `map` (into the model frame, then by the current pose;
+    /// a moved point may leave the input range).
+    pub fn quantize_point(&self, index: usize, p: &[f32; 3], map: &PointMap) -> Result<[i16; 3]> {
         if p.iter().any(|x| !x.is_finite()) {
             return Err(Error::NonFiniteCoordinate { index });
         }
-        let p = moved.map_or(*p, |m| m.apply(*p));
+        let p = map.apply(*p);
         let mut q = [0i16; 3];
         for (q, x) in q.iter_mut().zip(p) {
             *q = quantize_coordinate(x, self.p.input_scale)
@@ -269,11 +316,11 @@ impl<'a> Int8Model<'a> {
         Ok(q)
     }
 
-    /// Encodes `source`, each point first moved by `moved` if given.
+    /// Encodes `source`, each point first moved by `map`.
     fn encode_into(
         &self,
         source: &[[f32; 3]],
-        moved: Option<&Rigid>,
+        map: &PointMap,
         tile: usize,
         feature: &mut [i8],
         work: &mut [i8],
@@ -288,7 +335,7 @@ impl<'a> Int8Model<'a> {
         for (chunk_index, chunk) in source.chunks(tile).enumerate() {
             let mut q = [[0i16; INPUT_DIM]; MAX_TILE];
             for (i, (q, p)) in q.iter_mut().zip(chunk).enumerate() {
-                *q = self.quantize_point(chunk_index * tile + i, p, moved)?;
+                *q = self.quantize_point(chunk_index * tile + i, p, map)?;
             }
             let x0 = q[..chunk.len()].as_flattened();
             let mut inputs = INPUT_DIM;
@@ -330,7 +377,18 @@ impl<'a> Int8Model<'a> {
     /// Runs the head on a source feature: returns the output layer's raw
     /// i32 accumulators. `work` needs `2 x` the widest hidden head layer.
     pub fn head(&self, source_feature: &[i8], work: &mut [i8]) -> Result<[i32; POSE_DIM]> {
+        Ok(self.head_counted(source_feature, work)?.0)
+    }
+
+    /// [`Self::head`], also counting the feature entries and hidden head
+    /// activations at `i8::MAX` (saturated).
+    fn head_counted(
+        &self,
+        source_feature: &[i8],
+        work: &mut [i8],
+    ) -> Result<([i32; POSE_DIM], u32)> {
         let f = self.p.arch.feature_dim();
+        let mut saturated = count_saturated(source_feature);
         if source_feature.len() != f {
             return Err(Error::InconsistentDimensions {
                 what: "source feature length",
@@ -354,6 +412,7 @@ impl<'a> Int8Model<'a> {
                 dense_tile(layer.weights, len, rq, &a[..len], store);
             }
             len = width as usize;
+            saturated += count_saturated(&b[..len]);
             core::mem::swap(&mut a, &mut b);
         }
         let out = &self.p.output;
@@ -367,7 +426,7 @@ impl<'a> Int8Model<'a> {
                 bias.wrapping_add(dot(row, &a[..len]))
             };
         }
-        Ok(raw)
+        Ok((raw, saturated))
     }
 
     /// Converts raw head accumulators to reals with the output scales.
@@ -391,6 +450,22 @@ impl<'a> Int8Model<'a> {
                 *o = (q as i32 - last.out_zero_point as i32) as f32 * last.out_scale;
             }
         }
+    }
+}
+
+/// Values at `i8::MAX`, the top of the activation range.
+fn count_saturated(values: &[i8]) -> u32 {
+    values.iter().filter(|&&v| v == i8::MAX).count() as u32
+}
+
+/// Checks a blob's frame: finite centre, finite positive scale.
+pub(crate) fn check_frame(frame: &format::Frame) -> Result<()> {
+    if frame.centre.iter().all(|c| c.is_finite()) && frame.scale.is_finite() && frame.scale > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter {
+            what: "frame centre or scale",
+        })
     }
 }
 

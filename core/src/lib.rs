@@ -4,15 +4,17 @@
 //! PointNet encoder and a PCRNet pose head (Sarode et al., *One Framework to
 //! Register Them All*, AAAI 2020), for microcontrollers.
 //!
-//! Data flows **points -> quantize -> encode -> head -> pose**:
+//! Data flows **points -> quantize -> encode -> head -> pose -> check/refine**:
 //!
 //! | step | where | what |
 //! |---|---|---|
-//! | points | caller | `&[[f32; 3]]`, any count from 1 |
+//! | points | caller | `&[[f32; 3]]` in the user's units and axes, any count from 1 |
+//! | frame | [`Frame`] (blob) | into the model frame: `scale (p - centre)` |
 //! | quantize | [`fixed::quantize_coordinate`] | int16 coordinates, scale stored in the model |
 //! | encode | [`Int8Model::encode`] | per-point MLP, streamed in tiles, running max-pool -> int8 feature |
 //! | head | [`Int8Model::head`] | FC layers over (template feature, source feature) -> 7 i32 |
 //! | pose | [`Pose::from_head_output`] | unit quaternion + translation (f32, `libm`) |
+//! | check/refine | [`registration`], [`refine`] | flip hypotheses, ICP against the template's points, residual -> [`Registration`] |
 //!
 //! The model is a blob ([`format`]) whose weights are used in place (flash),
 //! and all working memory is a caller-owned scratch slice, so the crate
@@ -22,7 +24,7 @@
 //! # fn main() -> Result<(), pcrnet_core::Error> {
 //! # let (mut arena, mut out) = ([0u8; 16384], [0u8; 16384]);
 //! # let blob = pcrnet_core::testing::random_int8_blob_into(7, &[16, 32], &[32], &mut arena, &mut out)?;
-//! use pcrnet_core::{Int8Model, int8_scratch_len};
+//! use pcrnet_core::{Int8Model, Options, int8_scratch_len};
 //!
 //! // Sized at compile time for the architecture (here encoder 16-32, head 32, tile 8).
 //! const SCRATCH: usize = int8_scratch_len(&[16, 32], &[32], 8);
@@ -30,15 +32,22 @@
 //!
 //! let model = Int8Model::load(blob, &scratch)?; // checks magic, version, CRC, sizes, scratch
 //! let source = [[0.1, 0.2, 0.3], [0.0, -0.1, 0.25], [-0.2, 0.05, 0.0]];
-//! let pose = model.register(&source, &mut scratch)?;
-//! let m = pose.matrix(); // 4x4, maps the source onto the template
-//! # let _ = m;
+//! let result = model.register(&source, &Options::default(), &mut scratch)?;
+//! let m = result.pose.matrix(); // 4x4, maps the source onto the template, user units
+//! if !result.reliable {
+//!     // residual too high or a degenerate source: do not act on this pose
+//! }
+//! # let _ = (m, result.residual, result.fitness);
 //! # Ok(())
 //! # }
 //! ```
 //!
 //! The f32 reference of the same network is [`F32Model`] (blob kind
 //! `F32`), or [`float::F32Network`] over the trainer's own arrays.
+//!
+//! [`Int8Model::network_pose`] is the network alone (no check, no
+//! refinement); [`Int8Model::infer`], [`Int8Model::encode`] and
+//! [`Int8Model::head`] expose the raw feature and head outputs.
 //!
 //! ## Guarantees
 //! - No allocation, no panic reachable from any blob or any cloud: every
@@ -56,6 +65,7 @@
 #![cfg_attr(docsrs, feature(doc_cfg))]
 
 pub mod arch;
+pub mod eigen;
 mod error;
 pub mod fixed;
 pub mod float;
@@ -63,11 +73,17 @@ pub mod format;
 pub mod int8;
 mod kernel;
 pub mod pose;
+pub mod refine;
+pub mod registration;
+pub mod template;
 #[doc(hidden)]
 pub mod testing;
 
 pub use arch::{Arch, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch_len};
 pub use error::{Error, Result};
 pub use float::F32Model;
+pub use format::Frame;
 pub use int8::{Int8Inference, Int8Model};
 pub use pose::Pose;
+pub use refine::Degeneracy;
+pub use registration::{Options, Registration};

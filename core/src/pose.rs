@@ -11,6 +11,7 @@
 
 use crate::arch::POSE_DIM;
 use crate::error::{Error, Result};
+use crate::format::Frame;
 
 /// A rigid transform: unit quaternion (scalar first) and translation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -152,6 +153,70 @@ impl Rigid {
     }
 }
 
+impl Frame {
+    /// A user-unit point in the model frame: `(p - centre) * scale`, per axis.
+    pub fn to_model(&self, p: [f32; 3]) -> [f32; 3] {
+        [0, 1, 2].map(|k| (p[k] - self.centre[k]) * self.scale)
+    }
+
+    /// A pose between model-frame clouds as a pose between user-unit
+    /// clouds: with `N(p) = s (p - c)`, `N^-1 . P . N` keeps `R` and has
+    /// `t = t_model / s + c - R c`.
+    pub fn pose_to_user(&self, pose: &Pose) -> Pose {
+        let r = Pose {
+            rotation: pose.rotation,
+            translation: [0.0; 3],
+        };
+        let rc = r.transform_point(self.centre);
+        let t = pose.translation;
+        Pose {
+            rotation: pose.rotation,
+            translation: [0, 1, 2].map(|k| t[k] / self.scale + self.centre[k] - rc[k]),
+        }
+    }
+
+    /// A pose between user-unit clouds as one between model-frame clouds
+    /// (the inverse of [`Self::pose_to_user`]): `t_model = s (t + R c - c)`.
+    pub fn pose_to_model(&self, pose: &Pose) -> Pose {
+        let r = Pose {
+            rotation: pose.rotation,
+            translation: [0.0; 3],
+        };
+        let rc = r.transform_point(self.centre);
+        let t = pose.translation;
+        Pose {
+            rotation: pose.rotation,
+            translation: [0, 1, 2].map(|k| (t[k] + rc[k] - self.centre[k]) * self.scale),
+        }
+    }
+}
+
+/// How a source point is moved before the network or the template search:
+/// from user units into the model frame ([`Frame::to_model`]), then by a
+/// pose in that frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointMap {
+    /// User units -> model frame.
+    pub frame: Frame,
+    /// The pose applied in the model frame.
+    pub rigid: Rigid,
+}
+
+impl PointMap {
+    /// Into `frame`, then by `pose`.
+    pub fn new(frame: Frame, pose: &Pose) -> Self {
+        PointMap {
+            frame,
+            rigid: Rigid::from(pose),
+        }
+    }
+
+    /// `pose(frame(p))`.
+    pub fn apply(&self, p: [f32; 3]) -> [f32; 3] {
+        self.rigid.apply(self.frame.to_model(p))
+    }
+}
+
 /// The centroid of a cloud, accumulated in f64 (IEEE-754 on every target:
 /// hardware on the host, correctly rounded soft-float on Cortex-M4) and
 /// rounded to f32 once. The f64 sum of f32 coordinates is exact, so the
@@ -174,16 +239,17 @@ pub fn centroid(points: &[[f32; 3]]) -> Result<[f32; 3]> {
     Ok(sum.map(|s| (s / n) as f32))
 }
 
-/// Where registration starts: the identity, or for a network trained on
-/// centred sources (as the reference PCRNet implementation does), the
-/// translation by minus the source's centroid. The network then sees the
-/// centred source, and composing its estimate after this pose gives the pose
-/// of the source as given.
-pub fn centring(points: &[[f32; 3]], centre_source: bool) -> Result<Pose> {
+/// Where registration starts, in the model frame: the identity, or for a
+/// network trained on centred sources (as the reference PCRNet
+/// implementation does), the translation by minus the source's centroid
+/// (computed in user units, then moved into the model frame). The network
+/// then sees the centred source, and composing its estimate after this pose
+/// gives the pose of the source as given.
+pub fn centring(points: &[[f32; 3]], centre_source: bool, frame: &Frame) -> Result<Pose> {
     if !centre_source {
         return Ok(Pose::IDENTITY);
     }
-    let c = centroid(points)?;
+    let c = frame.to_model(centroid(points)?);
     Ok(Pose {
         rotation: Pose::IDENTITY.rotation,
         translation: [-c[0], -c[1], -c[2]],
@@ -273,14 +339,42 @@ mod tests {
     fn centring_moves_the_centroid_to_the_origin() {
         let pts = [[1.0, 2.0, 3.0], [3.0, 2.0, 1.0]];
         assert_eq!(centroid(&pts), Ok([2.0, 2.0, 2.0]));
-        let c = centring(&pts, true).unwrap();
+        let c = centring(&pts, true, &Frame::IDENTITY).unwrap();
         assert_eq!(c.transform_point([2.0, 2.0, 2.0]), [0.0; 3]);
-        assert_eq!(centring(&pts, false), Ok(Pose::IDENTITY));
+        assert_eq!(centring(&pts, false, &Frame::IDENTITY), Ok(Pose::IDENTITY));
+        let frame = Frame {
+            centre: [1.0, 1.0, 1.0],
+            scale: 0.5,
+        };
+        let c = centring(&pts, true, &frame).unwrap();
+        assert_eq!(c.transform_point(frame.to_model([2.0, 2.0, 2.0])), [0.0; 3]);
         assert_eq!(centroid(&[]), Err(Error::EmptyCloud));
         assert_eq!(
             centroid(&[[0.0; 3], [f32::NAN, 0.0, 0.0]]),
             Err(Error::NonFiniteCoordinate { index: 1 })
         );
+    }
+
+    #[test]
+    fn frame_round_trips_poses() {
+        let frame = Frame {
+            centre: [3.0, -2.0, 10.0],
+            scale: 0.05,
+        };
+        let h = core::f32::consts::FRAC_1_SQRT_2;
+        let model = Pose::from_head_output(&[h, 0.0, h, 0.0, 0.3, -0.2, 0.1]).unwrap();
+        let user = frame.pose_to_user(&model);
+        for p in [[1.0f32, 2.0, 3.0], [-4.0, 0.5, 12.0]] {
+            let lhs = frame.to_model(user.transform_point(p));
+            let rhs = model.transform_point(frame.to_model(p));
+            for k in 0..3 {
+                assert!((lhs[k] - rhs[k]).abs() < 1e-5, "{lhs:?} vs {rhs:?}");
+            }
+        }
+        let back = frame.pose_to_model(&user);
+        for k in 0..3 {
+            assert!((back.translation[k] - model.translation[k]).abs() < 1e-5);
+        }
     }
 
     #[test]

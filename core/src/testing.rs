@@ -8,9 +8,11 @@ use crate::arch::{Arch, MAX_LAYERS, POSE_DIM};
 use crate::error::{Error, Result};
 use crate::fixed::quantize_multiplier;
 use crate::format::{
-    F32Layer, F32Payload, Int8Layer, Int8Output, Int8Payload, ModelKind, write_blob,
+    F32Layer, F32Payload, Frame, Int8Layer, Int8Output, Int8Payload, ModelKind, TemplateCloud,
+    write_blob,
 };
 use crate::int8::Int8Model;
+use crate::template;
 
 /// SplitMix64: a tiny, well-mixed, seedable generator.
 #[derive(Debug, Clone)]
@@ -124,15 +126,41 @@ pub fn random_int8_blob_into<'o>(
     arena: &mut [u8],
     out: &'o mut [u8],
 ) -> Result<&'o [u8]> {
-    random_int8_blob_with(seed, encoder, head, false, arena, out)
+    random_int8_blob_with(seed, encoder, head, false, Frame::IDENTITY, arena, out)
 }
 
-/// As [`random_int8_blob_into`], choosing whether the model centres sources.
+/// Model units per int16 step of the random models' template points.
+pub const RANDOM_TEMPLATE_STEP: f32 = 1.0 / 16384.0;
+
+/// The template cloud of a random model: `cloud` (model frame) on the
+/// int16 grid, a 4^3 grid, and half turns about the three axes.
+fn random_template<'o>(cloud: &[[f32; 3]], arena: &mut &'o mut [u8]) -> Result<TemplateCloud<'o>> {
+    let mut q = [[0i16; 3]; 64];
+    let q = q.get_mut(..cloud.len()).ok_or(Error::InvalidParameter {
+        what: "random template wider than 64 points",
+    })?;
+    for (q, p) in q.iter_mut().zip(cloud) {
+        *q = p.map(|x| libm::roundf(x / RANDOM_TEMPLATE_STEP) as i16);
+    }
+    let (np, nc) = template::build_len(q.len(), 4);
+    let points = take(arena, np)?;
+    let cells = take(arena, nc)?;
+    let turns = [
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    template::build(q, RANDOM_TEMPLATE_STEP, 4, &turns, points, cells)
+}
+
+/// As [`random_int8_blob_into`], choosing whether the model centres sources
+/// and its frame (user units -> model frame).
 pub fn random_int8_blob_with<'o>(
     seed: u64,
     encoder: &[u16],
     head: &[u16],
     centre_source: bool,
+    frame: Frame,
     arena: &mut [u8],
     out: &'o mut [u8],
 ) -> Result<&'o [u8]> {
@@ -168,9 +196,13 @@ pub fn random_int8_blob_with<'o>(
     for c in scale.chunks_exact_mut(4) {
         c.copy_from_slice(&rng.uniform(1e-5, 1e-4).to_le_bytes());
     }
+    let cloud: [[f32; 3]; 64] = random_cloud(&mut rng);
+    let template_cloud = random_template(&cloud, &mut arena)?;
     let mut payload = Int8Payload {
         arch,
         centre_source,
+        frame,
+        template: template_cloud,
         input_scale: RANDOM_INPUT_SCALE,
         encoder: enc,
         head: hd,
@@ -181,8 +213,9 @@ pub fn random_int8_blob_with<'o>(
         },
         template_feature: &ZEROS[..f],
     };
-    // Encode a random template with the model itself, as the exporter does.
-    let cloud: [[f32; 3]; 64] = random_cloud(&mut rng);
+    // Encode the template with the model itself, as the exporter does: in
+    // user units, which the model moves into its frame.
+    let user = cloud.map(|p| [0, 1, 2].map(|k| p[k] / frame.scale + frame.centre[k]));
     let mut buf = [0i8; 3 * 4096];
     let model = Int8Model::from_payload(payload.clone())?;
     let needed = model.scratch_len(1);
@@ -190,7 +223,7 @@ pub fn random_int8_blob_with<'o>(
     let scratch = buf
         .get_mut(..needed)
         .ok_or(Error::BufferTooSmall { needed, available })?;
-    let feature = model.encode_tiled(&cloud, 1, scratch)?;
+    let feature = model.encode_tiled(&user, 1, scratch)?;
     for (t, &v) in template.iter_mut().zip(feature) {
         *t = v as u8;
     }
@@ -231,13 +264,16 @@ pub fn random_f32_blob_into<'o>(
     let template = take(&mut arena, 4 * f)?;
     let zeros = take(&mut arena, 4 * f)?;
     zeros.fill(0);
+    let cloud: [[f32; 3]; 64] = random_cloud(&mut rng);
+    let template_cloud = random_template(&cloud, &mut arena)?;
     let mut payload = F32Payload {
         arch,
         centre_source: false,
+        frame: Frame::IDENTITY,
+        template: template_cloud,
         layers,
         template_feature: zeros,
     };
-    let cloud: [[f32; 3]; 64] = random_cloud(&mut rng);
     let model = crate::F32Model::from_payload(payload.clone())?;
     let mut scratch = [0f32; 3 * 4096];
     let needed = model.scratch_len();
@@ -245,7 +281,7 @@ pub fn random_f32_blob_into<'o>(
     let scratch = scratch
         .get_mut(..needed)
         .ok_or(Error::BufferTooSmall { needed, available })?;
-    let feature = model.encode(&cloud, scratch)?;
+    let feature = model.network().encode(&cloud, scratch)?;
     for (c, &v) in template.chunks_exact_mut(4).zip(feature) {
         c.copy_from_slice(&v.to_le_bytes());
     }

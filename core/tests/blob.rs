@@ -143,11 +143,11 @@ fn resealed_corruption_never_panics() {
             reseal(&mut b);
             if let Ok(m) = Int8Model::from_bytes(&b) {
                 let mut s = vec![0i8; m.scratch_len(8)];
-                let _ = m.register(&pts, &mut s);
+                let _ = m.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0);
             }
             if let Ok(m) = F32Model::from_bytes(&b) {
                 let mut s = vec![0f32; m.scratch_len()];
-                let _ = m.register(&pts, &mut s);
+                let _ = m.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0);
             }
         }
     }

@@ -39,13 +39,14 @@ fn permutation_invariant_and_deterministic() {
     let m = F32Model::from_bytes(&b).unwrap();
     let mut s = vec![0f32; m.scratch_len()];
     let mut pts = cloud(4, 100);
-    let f1 = m.encode(&pts, &mut s).unwrap().to_vec();
-    let raw1 = m.infer(&pts, &mut s).unwrap();
+    let net = m.network();
+    let f1 = net.encode(&pts, &mut s).unwrap().to_vec();
+    let raw1 = net.infer(&pts, &mut s).unwrap();
     pts.reverse();
     pts.swap(3, 50);
-    assert_eq!(m.encode(&pts, &mut s).unwrap(), &f1[..]);
-    assert_eq!(m.infer(&pts, &mut s).unwrap(), raw1);
-    let pose = m.register(&pts, &mut s).unwrap();
+    assert_eq!(net.encode(&pts, &mut s).unwrap(), &f1[..]);
+    assert_eq!(net.infer(&pts, &mut s).unwrap(), raw1);
+    let pose = m.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0).unwrap();
     let n: f32 = pose.rotation.iter().map(|q| q * q).sum();
     assert!((n - 1.0).abs() < 1e-5);
 }
@@ -55,14 +56,18 @@ fn bad_input_is_a_typed_error() {
     let b = blob(5);
     let m = F32Model::from_bytes(&b).unwrap();
     let mut s = vec![0f32; m.scratch_len()];
-    assert_eq!(m.register(&[], &mut s), Err(Error::EmptyCloud));
     assert_eq!(
-        m.register(&[[0.0, f32::NAN, 0.0]], &mut s),
+        m.network_pose(&[], 1, 0.0, &mut s).map(|r| r.0),
+        Err(Error::EmptyCloud)
+    );
+    assert_eq!(
+        m.network_pose(&[[0.0, f32::NAN, 0.0]], 1, 0.0, &mut s)
+            .map(|r| r.0),
         Err(Error::NonFiniteCoordinate { index: 0 })
     );
     let mut small = vec![0f32; m.scratch_len() - 1];
     assert!(matches!(
-        m.register(&[[0.0; 3]], &mut small),
+        m.register(&[[0.0; 3]], &pcrnet_core::Options::default(), &mut small),
         Err(Error::ScratchTooSmall { .. })
     ));
 }
@@ -78,10 +83,7 @@ fn iterative_registration_is_repeated_single_passes() {
     for _ in 0..2 {
         let rigid = Rigid::from(&current);
         let moved: Vec<[f32; 3]> = pts.iter().map(|&p| rigid.apply(p)).collect();
-        current = current.then(&m.register(&moved, &mut s).unwrap());
+        current = current.then(&m.network_pose(&moved, 1, 0.0, &mut s).map(|r| r.0).unwrap());
     }
-    assert_eq!(
-        m.register_iterative(&pts, 2, 0.0, &mut s).unwrap(),
-        (current, 2)
-    );
+    assert_eq!(m.network_pose(&pts, 2, 0.0, &mut s).unwrap(), (current, 2));
 }

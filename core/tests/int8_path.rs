@@ -160,7 +160,10 @@ fn register_gives_a_unit_quaternion() {
     let b = blob(31, SMALL_ENC, SMALL_HEAD);
     let model = Int8Model::from_bytes(&b).unwrap();
     let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
-    let pose = model.register(&cloud(32, 50, 1.0), &mut s).unwrap();
+    let pose = model
+        .network_pose(&cloud(32, 50, 1.0), 1, 0.0, &mut s)
+        .map(|r| r.0)
+        .unwrap();
     let n: f32 = pose.rotation.iter().map(|q| q * q).sum();
     assert!((n - 1.0).abs() < 1e-5);
     assert!(pose.rotation[0] >= 0.0);
@@ -171,26 +174,34 @@ fn bad_clouds_are_typed_errors() {
     let b = blob(41, SMALL_ENC, SMALL_HEAD);
     let model = Int8Model::from_bytes(&b).unwrap();
     let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
-    assert_eq!(model.register(&[], &mut s), Err(Error::EmptyCloud));
+    assert_eq!(
+        model.network_pose(&[], 1, 0.0, &mut s).map(|r| r.0),
+        Err(Error::EmptyCloud)
+    );
     let mut pts = cloud(42, 20, 1.0);
     pts[13][1] = f32::NAN;
     assert_eq!(
-        model.register(&pts, &mut s),
+        model.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0),
         Err(Error::NonFiniteCoordinate { index: 13 })
     );
     pts[13][1] = f32::NEG_INFINITY;
     assert_eq!(
-        model.register(&pts, &mut s),
+        model.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0),
         Err(Error::NonFiniteCoordinate { index: 13 })
     );
     pts[13][1] = 4.5; // input range is +-4
     assert_eq!(
-        model.register(&pts, &mut s),
+        model.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0),
         Err(Error::CoordinateOutOfRange { index: 13 })
     );
     // Extreme but valid coordinates work.
     pts[13] = [3.9999, -3.9999, 0.0];
-    assert!(model.register(&pts, &mut s).is_ok());
+    assert!(
+        model
+            .network_pose(&pts, 1, 0.0, &mut s)
+            .map(|r| r.0)
+            .is_ok()
+    );
 }
 
 #[test]
@@ -208,7 +219,9 @@ fn scratch_is_checked_at_load_and_at_run() {
     );
     let mut small = small;
     assert!(matches!(
-        model.register(&cloud(1, 3, 1.0), &mut small),
+        model
+            .network_pose(&cloud(1, 3, 1.0), 1, 0.0, &mut small)
+            .map(|r| r.0),
         Err(Error::ScratchTooSmall { .. })
     ));
     assert!(matches!(
@@ -244,9 +257,12 @@ fn iterative_registration_is_repeated_single_passes() {
     let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
     let pts = cloud(72, 300, 0.8);
     // One pass is `register`, bit for bit.
-    let single = model.register(&pts, &mut s).unwrap();
+    let single = model
+        .network_pose(&pts, 1, 0.0, &mut s)
+        .map(|r| r.0)
+        .unwrap();
     assert_eq!(
-        model.register_iterative(&pts, 1, 0.0, &mut s).unwrap(),
+        model.network_pose(&pts, 1, 0.0, &mut s).unwrap(),
         (single, 1)
     );
     // Three passes equal moving the cloud explicitly and composing by hand.
@@ -254,17 +270,19 @@ fn iterative_registration_is_repeated_single_passes() {
     for _ in 0..3 {
         let rigid = Rigid::from(&current);
         let moved: Vec<[f32; 3]> = pts.iter().map(|&p| rigid.apply(p)).collect();
-        current = current.then(&model.register(&moved, &mut s).unwrap());
+        current = current.then(
+            &model
+                .network_pose(&moved, 1, 0.0, &mut s)
+                .map(|r| r.0)
+                .unwrap(),
+        );
     }
     assert_eq!(
-        model.register_iterative(&pts, 3, 0.0, &mut s).unwrap(),
+        model.network_pose(&pts, 3, 0.0, &mut s).unwrap(),
         (current, 3)
     );
     // A huge tolerance stops after the first pass.
-    assert_eq!(
-        model.register_iterative(&pts, 10, 1e9, &mut s).unwrap().1,
-        1
-    );
+    assert_eq!(model.network_pose(&pts, 10, 1e9, &mut s).unwrap().1, 1);
 }
 
 #[test]
@@ -272,9 +290,17 @@ fn centring_models_see_the_centred_source() {
     use pcrnet_core::pose::{Rigid, centring};
     use pcrnet_core::testing::random_int8_blob_with;
     let (mut arena, mut out) = (vec![0u8; 1 << 20], vec![0u8; 1 << 20]);
-    let centred = random_int8_blob_with(81, SMALL_ENC, SMALL_HEAD, true, &mut arena, &mut out)
-        .unwrap()
-        .to_vec();
+    let centred = random_int8_blob_with(
+        81,
+        SMALL_ENC,
+        SMALL_HEAD,
+        true,
+        pcrnet_core::Frame::IDENTITY,
+        &mut arena,
+        &mut out,
+    )
+    .unwrap()
+    .to_vec();
     let plain = blob(81, SMALL_ENC, SMALL_HEAD);
     let (mc, mp) = (
         Int8Model::from_bytes(&centred).unwrap(),
@@ -285,7 +311,7 @@ fn centring_models_see_the_centred_source() {
         .iter()
         .map(|p| [p[0] + 1.0, p[1] - 0.7, p[2] + 0.3])
         .collect();
-    let start = centring(&pts, true).unwrap();
+    let start = centring(&pts, true, &pcrnet_core::Frame::IDENTITY).unwrap();
     let moved: Vec<[f32; 3]> = pts.iter().map(|&p| Rigid::from(&start).apply(p)).collect();
     let mut s1 = vec![0i8; mc.scratch_len(MAX_TILE)];
     let mut s2 = vec![0i8; mp.scratch_len(MAX_TILE)];
@@ -297,11 +323,14 @@ fn centring_models_see_the_centred_source() {
     assert_eq!(a.feature, b.feature);
     assert_eq!(a.centring, start);
     let head = a.head;
-    let pose = mc.register(&pts, &mut s1).unwrap();
+    let pose = mc.network_pose(&pts, 1, 0.0, &mut s1).map(|r| r.0).unwrap();
     assert_eq!(pose, start.then(&mc.pose(&head).unwrap()));
     // The rotation does not depend on where the cloud is.
     let shifted: Vec<[f32; 3]> = pts.iter().map(|p| [p[0] - 1.5, p[1], p[2] + 2.0]).collect();
-    let other = mc.register(&shifted, &mut s1).unwrap();
+    let other = mc
+        .network_pose(&shifted, 1, 0.0, &mut s1)
+        .map(|r| r.0)
+        .unwrap();
     for (x, y) in pose.rotation.iter().zip(other.rotation) {
         assert!((x - y).abs() < 1e-3, "{pose:?} vs {other:?}");
     }

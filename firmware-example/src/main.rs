@@ -1,7 +1,12 @@
 //! pcrnet firmware example: register a stored point cloud against the
 //! model's template, with the int8 model used in place from flash and all
-//! working memory in statics. Prints the pose and the instruction count
-//! over semihosting.
+//! working memory in statics. Prints the pose, its residual and whether it
+//! is reliable, and the instruction count over semihosting.
+//!
+//! It acts on the confidence: a pose that is not reliable is retried with
+//! every flip hypothesis the blob stores; if that is still not reliable, the
+//! example reports that it has no pose to act on (a real application would
+//! keep its last good pose or ask for another view).
 //!
 //! Memory (embedded default architecture, tile 8): model blob in flash
 //! (~224 KB), scratch 2,304 B and the cloud 12 B/point in RAM; stack and
@@ -14,7 +19,7 @@ use cortex_m_semihosting::debug;
 #[cfg(feature = "defmt")]
 use defmt_semihosting as _;
 use panic_semihosting as _;
-use pcrnet_core::{Int8Model, MAX_TILE, int8_scratch_len};
+use pcrnet_core::{Int8Model, MAX_TILE, Options, Registration, int8_scratch_len};
 use pcrnet_firmware_example::{icount::Counter, stack};
 
 /// Text over semihosting, or defmt frames with the `defmt` feature.
@@ -44,7 +49,13 @@ fn main() -> ! {
     static mut CLOUD: [[f32; 3]; POINTS] = [[0.0; 3]; POINTS];
 
     stack::paint();
-    let core = cortex_m::Peripherals::take().unwrap();
+    let Some(core) = cortex_m::Peripherals::take() else {
+        log!("core peripherals already taken");
+        debug::exit(debug::EXIT_FAILURE);
+        loop {
+            cortex_m::asm::wfi();
+        }
+    };
     let counter = Counter::start(core.SYST);
 
     for (p, bytes) in CLOUD.iter_mut().zip(SOURCE.chunks_exact(12)) {
@@ -55,16 +66,38 @@ fn main() -> ! {
 
     let code = match Int8Model::load(MODEL, SCRATCH_BUF) {
         Ok(model) => {
+            log!("points: {}", POINTS);
+            // The recommended pipeline: one network pass, 4 starting poses,
+            // ICP against the template's points, residual.
+            let options = Options::default();
             let start = counter.instructions();
-            let result = model.register(CLOUD, SCRATCH_BUF);
-            let used = counter.instructions() - start;
+            let mut result = model.register(CLOUD, &options, SCRATCH_BUF);
+            log!("instructions: {}", counter.instructions() - start);
+            if let Ok(r) = &result {
+                report(r);
+                if !r.reliable {
+                    // Act on the confidence: try every stored turn before giving up.
+                    let all = Options {
+                        hypotheses: usize::MAX,
+                        ..options
+                    };
+                    log!("not reliable: retrying with every flip hypothesis");
+                    let start = counter.instructions();
+                    result = model.register(CLOUD, &all, SCRATCH_BUF);
+                    log!("instructions: {}", counter.instructions() - start);
+                    if let Ok(r) = &result {
+                        report(r);
+                    }
+                }
+            }
+            log!("peak stack: {} bytes", stack::peak());
             match result {
-                Ok(pose) => {
-                    log!("points: {}", POINTS);
-                    log!("rotation (w, x, y, z): {:?}", pose.rotation);
-                    log!("translation: {:?}", pose.translation);
-                    log!("instructions: {}", used);
-                    log!("peak stack: {} bytes", stack::peak());
+                Ok(r) if r.reliable => {
+                    log!("pose reliable: acting on it");
+                    debug::EXIT_SUCCESS
+                }
+                Ok(_) => {
+                    log!("no reliable pose: keeping the last good one");
                     debug::EXIT_SUCCESS
                 }
                 Err(e) => {
@@ -83,4 +116,20 @@ fn main() -> ! {
     loop {
         cortex_m::asm::wfi();
     }
+}
+
+/// Prints a registration's pose and confidence.
+fn report(r: &Registration) {
+    log!("rotation (w, x, y, z): {:?}", r.pose.rotation);
+    log!("translation: {:?}", r.pose.translation);
+    log!(
+        "residual: {:?} ({:?} of the template's size), fitness {:?}, hypothesis {}, ICP iterations {}, saturated {}",
+        r.residual,
+        r.relative_residual,
+        r.fitness,
+        r.hypothesis,
+        r.icp_iterations,
+        r.saturated
+    );
+    log!("reliable: {}", r.reliable);
 }

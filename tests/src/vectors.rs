@@ -49,7 +49,7 @@ pub fn expected_iterative(model: &[u8], case: &Case) -> Option<Iterative> {
     let m = Int8Model::from_bytes(model).expect("test models are valid");
     let mut scratch = vec![0i8; m.scratch_len(MAX_TILE)];
     Some(
-        m.register_iterative(&case.cloud, case.iterations, 0.0, &mut scratch)
+        m.network_pose(&case.cloud, case.iterations, 0.0, &mut scratch)
             .map(|(p, n)| (n, pose_bits(&p)))
             .map_err(|e| format!("{e:?}")),
     )

@@ -111,8 +111,8 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
 
 fn describe_f32(m: &F32Model<'_>, size: usize) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "f32 model: {}", widths(m.arch()));
-    shape_table(m.arch(), &mut s);
+    let _ = writeln!(s, "f32 model: {}", widths(m.network().arch()));
+    shape_table(m.network().arch(), &mut s);
     let _ = writeln!(s, "size: {size} bytes");
     let _ = writeln!(
         s,

@@ -15,7 +15,9 @@ pub mod net;
 pub mod quantize;
 pub mod register;
 pub mod shapes;
+pub mod template;
 pub mod train;
+pub mod upgrade;
 
 pub use net::F32Params;
 pub use quantize::{CalibrationRule, QuantizeError, quantize};

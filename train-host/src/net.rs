@@ -2,9 +2,11 @@
 
 use pcrnet_core::Arch;
 use pcrnet_core::float::{F32Network, Layer, Params};
-use pcrnet_core::format::{F32Layer, F32Payload, ModelKind, write_blob};
+use pcrnet_core::format::{F32Layer, F32Payload};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+
+use crate::template::{Reference, TemplateError, f32_blob};
 
 /// Weights (`outputs x inputs`, row-major) and biases of every layer:
 /// encoder layers, hidden head layers, then the output layer.
@@ -82,16 +84,14 @@ impl F32Params {
     /// sources centred on their centroid (see `pcrnet_core::pose::centring`).
     pub fn to_f32_blob(
         &self,
-        template: &[[f32; 3]],
+        reference: &Reference,
         centre_source: bool,
-    ) -> pcrnet_core::Result<Vec<u8>> {
-        let feature = self.encode(template)?;
+    ) -> Result<Vec<u8>, TemplateError> {
         let bytes: Vec<(Vec<u8>, Vec<u8>)> = self
             .layers
             .iter()
             .map(|(w, b)| (le_bytes(w), le_bytes(b)))
             .collect();
-        let template_bytes = le_bytes(&feature);
         let mut layers = heapless::Vec::new();
         for (w, b) in &bytes {
             layers
@@ -106,12 +106,12 @@ impl F32Params {
         let payload = F32Payload {
             arch: self.arch.clone(),
             centre_source,
+            frame: reference.frame,
+            template: reference.cloud(),
             layers,
-            template_feature: &template_bytes,
+            template_feature: &[],
         };
-        let mut out = vec![0u8; pcrnet_core::format::blob_len(&payload)?];
-        write_blob(ModelKind::F32, &payload, &mut out)?;
-        Ok(out)
+        f32_blob(&payload, reference)
     }
 }
 

@@ -29,11 +29,12 @@
 
 use pcrnet_core::fixed::quantize_multiplier;
 use pcrnet_core::float::{Layer, dense};
-use pcrnet_core::format::{Int8Layer, Int8Output, Int8Payload, ModelKind, blob_len, write_blob};
+use pcrnet_core::format::{Int8Layer, Int8Output, Int8Payload};
 use pcrnet_core::pose::Rigid;
-use pcrnet_core::{Int8Model, POSE_DIM};
+use pcrnet_core::{Frame, POSE_DIM};
 
 use crate::net::{F32Params, le_bytes};
+use crate::template::{Reference, TemplateError, int8_blob};
 
 /// Why quantization failed.
 #[derive(Debug, thiserror::Error)]
@@ -58,6 +59,9 @@ pub enum QuantizeError {
     /// `pcrnet-core` rejected the result.
     #[error("pcrnet-core: {0}")]
     Core(#[from] pcrnet_core::Error),
+    /// The template could not be recorded.
+    #[error(transparent)]
+    Template(#[from] TemplateError),
 }
 
 /// How the activation and input ranges are chosen (see the module docs).
@@ -229,14 +233,15 @@ fn quantize_layer(
     Ok(q)
 }
 
-/// Quantizes `params` with calibration clouds and returns the int8 blob,
-/// its template feature computed from `template` by the int8 encoder.
+/// Quantizes `params` with calibration clouds (model frame) and returns the
+/// int8 blob recording `reference` (frame, template points, and the
+/// template feature computed by the int8 encoder).
 /// With `centre_source` (a network trained on centred sources) the blob
 /// says so, and the calibration clouds are centred as the device will
 /// centre its sources (`pcrnet_core::pose::centring`).
 pub fn quantize(
     params: &F32Params,
-    template: &[[f32; 3]],
+    reference: &Reference,
     calibration: &[Vec<[f32; 3]>],
     rule: CalibrationRule,
     centre_source: bool,
@@ -246,7 +251,7 @@ pub fn quantize(
         centred = calibration
             .iter()
             .map(|c| {
-                let moved = Rigid::from(&pcrnet_core::pose::centring(c, true)?);
+                let moved = Rigid::from(&pcrnet_core::pose::centring(c, true, &Frame::IDENTITY)?);
                 Ok(c.iter().map(|&p| moved.apply(p)).collect())
             })
             .collect::<Result<_, pcrnet_core::Error>>()?;
@@ -254,7 +259,7 @@ pub fn quantize(
     } else {
         calibration
     };
-    let ranges = calibrate(params, template, calibration)?;
+    let ranges = calibrate(params, &reference.normalised(), calibration)?;
     let arch = &params.arch;
     let n_enc = arch.encoder.len();
     let act_scale = |m: f32| (m.max(1e-6) * rule.activation_headroom) as f64 / 255.0;
@@ -284,10 +289,11 @@ pub fn quantize(
     let out_scale = le_bytes(&output.acc_scale);
     debug_assert_eq!(output.acc_scale.len(), POSE_DIM);
 
-    let zeros = vec![0u8; arch.feature_dim()];
-    let draft = Int8Payload {
+    let payload = Int8Payload {
         arch: arch.clone(),
         centre_source,
+        frame: reference.frame,
+        template: reference.cloud(),
         input_scale,
         encoder: layers[..n_enc].iter().map(QLayer::view).collect(),
         head: layers[n_enc..].iter().map(QLayer::view).collect(),
@@ -296,21 +302,7 @@ pub fn quantize(
             bias: &output.bias,
             scale: &out_scale,
         },
-        template_feature: &zeros,
+        template_feature: &[],
     };
-    let model = Int8Model::from_payload(draft.clone())?;
-    let mut scratch = vec![0i8; model.scratch_len(pcrnet_core::MAX_TILE)];
-    let template_feature: Vec<u8> = model
-        .encode(template, &mut scratch)?
-        .iter()
-        .map(|&v| v as u8)
-        .collect();
-    let payload = Int8Payload {
-        template_feature: &template_feature,
-        ..draft
-    };
-    let mut out = vec![0u8; blob_len(&payload)?];
-    write_blob(ModelKind::Int8, &payload, &mut out)?;
-    Int8Model::from_bytes(&out)?;
-    Ok(out)
+    Ok(int8_blob(&payload, reference)?)
 }

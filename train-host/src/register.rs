@@ -1,12 +1,22 @@
-//! Registering two clouds from files with a model blob (the `register`
-//! command): points -> normalise -> the network (int8 or f32) -> pose in
-//! the user's coordinates.
+//! Registering clouds with a model blob on the host.
+//!
+//! - [`pipeline`]: the device pipeline, `pcrnet-core`'s
+//!   [`register`](pcrnet_core::Int8Model::register) (network, flip
+//!   hypotheses, ICP against the template's points, residual), with the
+//!   blob's own template or another one bound in its place ([`bind`]).
+//!   With an int8 blob and no other template, every value is bit-identical
+//!   to what a device computes.
+//! - [`network`]: the network alone (PCRNet / i-PCRNet), as in the paper.
+//! - [`register_pointnetlk`]: PointNetLK on an f32 blob's encoder.
+//!
+//! All take and return user units: the frame is the blob's (or the bound
+//! template's), `p_template = R p_source + t`.
 
-use pcrnet_core::{F32Model, Int8Model, MAX_TILE, Pose};
+use pcrnet_core::{F32Model, Int8Model, MAX_TILE, Options, Pose, Registration};
 
 use crate::eval::pointnetlk::{LkResult, PointNetLk};
 use crate::net::F32Params;
-use crate::shapes::Normalisation;
+use crate::template::{DEFAULT_TEMPLATE_POINTS, TemplateError, bind};
 
 /// Which network ran.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -22,10 +32,47 @@ pub enum Precision {
 /// a device may prefer a looser tolerance (see the README).
 pub const ITERATIVE_TOLERANCE: f32 = 1e-7;
 
-/// What a registration produced.
+/// The blob to run: `blob` itself, or with `template` (user units) bound in
+/// place of its own (see [`bind`]).
+fn model_for(blob: &[u8], template: Option<&[[f32; 3]]>) -> Result<Vec<u8>, TemplateError> {
+    match template {
+        Some(t) => bind(blob, t, DEFAULT_TEMPLATE_POINTS),
+        None => Ok(blob.to_vec()),
+    }
+}
+
+/// The device pipeline on the host: see the module docs.
+pub fn pipeline(
+    blob: &[u8],
+    template: Option<&[[f32; 3]]>,
+    source: &[[f32; 3]],
+    options: &Options,
+) -> Result<(Registration, Precision), TemplateError> {
+    let blob = model_for(blob, template)?;
+    match Int8Model::from_bytes(&blob) {
+        Ok(model) => {
+            let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+            Ok((
+                model.register(source, options, &mut scratch)?,
+                Precision::Int8,
+            ))
+        }
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            let model = F32Model::from_bytes(&blob)?;
+            let mut scratch = vec![0f32; model.scratch_len()];
+            Ok((
+                model.register(source, options, &mut scratch)?,
+                Precision::F32,
+            ))
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The network's pose alone.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Registration {
-    /// Pose mapping the source onto the template, in the input coordinates.
+pub struct NetworkPose {
+    /// Pose mapping the source onto the template, user units.
     pub pose: Pose,
     /// Which network ran.
     pub precision: Precision,
@@ -33,40 +80,37 @@ pub struct Registration {
     pub passes: usize,
 }
 
-/// Registers `source` onto `template` with a model blob of either kind, in
-/// up to `passes` passes (1: PCRNet; more: i-PCRNet, stopping early once a
-/// pass's `||dT - I||_F` is below `tolerance`, the paper's being
-/// [`ITERATIVE_TOLERANCE`]).
-///
-/// Both clouds are normalised with the template's normalisation (centroid,
-/// scale into the unit box), as in training, so their relative pose is
-/// kept; the template's feature is computed by the model's own encoder
-/// (replacing the one stored in the blob). The returned pose is in the
-/// input coordinates: `p_template = R p_source + t`.
-pub fn register(
+/// The network alone, in up to `passes` passes (1: PCRNet; more: i-PCRNet,
+/// stopping early once a pass's `||dT - I||_F` is below `tolerance`, the
+/// paper's being [`ITERATIVE_TOLERANCE`]).
+pub fn network(
     blob: &[u8],
-    template: &[[f32; 3]],
+    template: Option<&[[f32; 3]]>,
     source: &[[f32; 3]],
     passes: usize,
     tolerance: f32,
-) -> Result<Registration, pcrnet_core::Error> {
-    let norm = Normalisation::of(template);
-    let (mut t, mut s) = (template.to_vec(), source.to_vec());
-    norm.apply(&mut t);
-    norm.apply(&mut s);
-    let ((pose, passes), precision) = match Int8Model::from_bytes(blob) {
-        Ok(model) => (
-            register_int8(&model, &t, &s, passes, tolerance)?,
-            Precision::Int8,
-        ),
-        Err(pcrnet_core::Error::WrongKind { .. }) => (
-            register_f32(&F32Model::from_bytes(blob)?, &t, &s, passes, tolerance)?,
-            Precision::F32,
-        ),
-        Err(e) => return Err(e),
+) -> Result<NetworkPose, TemplateError> {
+    let blob = model_for(blob, template)?;
+    let ((pose, passes), precision) = match Int8Model::from_bytes(&blob) {
+        Ok(model) => {
+            let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+            (
+                model.network_pose(source, passes, tolerance, &mut scratch)?,
+                Precision::Int8,
+            )
+        }
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            let model = F32Model::from_bytes(&blob)?;
+            let mut scratch = vec![0f32; model.scratch_len()];
+            (
+                model.network_pose(source, passes, tolerance, &mut scratch)?,
+                Precision::F32,
+            )
+        }
+        Err(e) => return Err(e.into()),
     };
-    Ok(Registration {
-        pose: denormalise(&pose, &norm),
+    Ok(NetworkPose {
+        pose,
         precision,
         passes,
     })
@@ -74,108 +118,44 @@ pub fn register(
 
 /// Registers `source` onto `template` with PointNetLK on the encoder of an
 /// **f32** blob (Jacobian by finite differences on the template, up to
-/// `iterations` Lucas-Kanade steps), with the same normalisation as
-/// [`register`]. The pose and its trajectory are in the input coordinates.
+/// `iterations` Lucas-Kanade steps), in the template's frame. The pose and
+/// its trajectory are in user units.
 pub fn register_pointnetlk(
     blob: &[u8],
-    template: &[[f32; 3]],
+    template: Option<&[[f32; 3]]>,
     source: &[[f32; 3]],
     iterations: usize,
-) -> Result<LkResult, pcrnet_core::Error> {
-    let params = F32Params::from_network(&F32Model::from_bytes(blob)?);
-    let norm = Normalisation::of(template);
-    let (mut t, mut s) = (template.to_vec(), source.to_vec());
-    norm.apply(&mut t);
-    norm.apply(&mut s);
+) -> Result<LkResult, TemplateError> {
+    let blob = model_for(blob, template)?;
+    let model = F32Model::from_bytes(&blob)?;
+    let params = F32Params::from_network(model.network());
+    let frame = *model.frame();
+    let stored = model.template();
+    // The template in the model frame: the blob's stored points.
+    let t: Vec<[f32; 3]> = (0..stored.len())
+        .map(|i| stored.point(i).map(|v| v as f32 * stored.step()))
+        .collect();
+    let s: Vec<[f32; 3]> = source.iter().map(|&p| frame.to_model(p)).collect();
     let lk = PointNetLk::new(&params, &t, 1e-2)?;
     let result = lk.register(&s, iterations, 1e-7)?;
     Ok(LkResult {
-        pose: denormalise(&result.pose, &norm),
+        pose: frame.pose_to_user(&result.pose),
         iterations: result.iterations,
         trajectory: result
             .trajectory
             .iter()
-            .map(|p| denormalise(p, &norm))
+            .map(|p| frame.pose_to_user(p))
             .collect(),
     })
-}
-
-fn register_int8(
-    model: &Int8Model<'_>,
-    template: &[[f32; 3]],
-    source: &[[f32; 3]],
-    passes: usize,
-    tolerance: f32,
-) -> Result<(Pose, usize), pcrnet_core::Error> {
-    let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
-    let feature: Vec<u8> = model
-        .encode(template, &mut scratch)?
-        .iter()
-        .map(|&v| v as u8)
-        .collect();
-    let payload = pcrnet_core::format::Int8Payload {
-        template_feature: &feature,
-        ..model.payload().clone()
-    };
-    Int8Model::from_payload(payload)?.register_iterative(source, passes, tolerance, &mut scratch)
-}
-
-fn register_f32(
-    model: &F32Model<'_>,
-    template: &[[f32; 3]],
-    source: &[[f32; 3]],
-    passes: usize,
-    tolerance: f32,
-) -> Result<(Pose, usize), pcrnet_core::Error> {
-    let params = F32Params::from_network(model);
-    let feature = params.encode(template)?;
-    let net = params
-        .network(&feature)?
-        .with_centring(model.centres_source());
-    let mut scratch = vec![0f32; net.scratch_len()];
-    net.register_iterative(source, passes, tolerance, &mut scratch)
-}
-
-/// Turns a pose between normalised clouds (`q = s (p - c)`) into one
-/// between the original clouds: `R` is kept, `t = c + t'/s - R c`.
-fn denormalise(pose: &Pose, norm: &Normalisation) -> Pose {
-    // transform_point(c) = R c + t', so R c = rc - t'.
-    let rc = pose.transform_point(norm.centre);
-    let t = pose.translation;
-    let translation = std::array::from_fn(|k| norm.centre[k] + t[k] / norm.scale - (rc[k] - t[k]));
-    Pose {
-        translation,
-        ..*pose
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::shapes::{Shape, random_transform, sample};
+    use crate::template::Reference;
     use crate::{CalibrationRule, F32Params, quantize};
     use pcrnet_core::Arch;
-
-    #[test]
-    fn denormalised_pose_commutes_with_the_normalisation() {
-        let norm = Normalisation {
-            centre: [3.0, -2.0, 10.0],
-            scale: 0.05,
-        };
-        let h = std::f32::consts::FRAC_1_SQRT_2;
-        let pose = Pose::from_head_output(&[h, 0.0, h, 0.0, 0.3, -0.2, 0.1]).unwrap();
-        let original = denormalise(&pose, &norm);
-        for p in [[1.0f32, 2.0, 3.0], [-4.0, 0.5, 12.0]] {
-            let mut lhs = [original.transform_point(p)];
-            norm.apply(&mut lhs);
-            let mut q = [p];
-            norm.apply(&mut q);
-            let rhs = pose.transform_point(q[0]);
-            for k in 0..3 {
-                assert!((lhs[0][k] - rhs[k]).abs() < 1e-5, "{lhs:?} vs {rhs:?}");
-            }
-        }
-    }
 
     #[test]
     fn int8_and_f32_blobs_register_files_consistently() {
@@ -184,16 +164,24 @@ mod tests {
         let calib: Vec<_> = (0..8)
             .map(|i| random_transform(&template, 45.0, 1.0, i))
             .collect();
-        let int8 = quantize(&params, &template, &calib, CalibrationRule::default(), true).unwrap();
-        let f32_blob = params.to_f32_blob(&template, true).unwrap();
+        let reference = Reference::new(&template, 128).unwrap();
+        let int8 = quantize(
+            &params,
+            &reference,
+            &calib,
+            CalibrationRule::default(),
+            true,
+        )
+        .unwrap();
+        let f32_blob = params.to_f32_blob(&reference, true).unwrap();
         // The template in its own (scaled, shifted) coordinates.
         let world: Vec<[f32; 3]> = template
             .iter()
             .map(|p| [p[0] * 20.0 + 5.0, p[1] * 20.0, p[2] * 20.0 - 3.0])
             .collect();
         let source = random_transform(&world, 30.0, 0.0, 9);
-        let r8 = register(&int8, &world, &source, 1, ITERATIVE_TOLERANCE).unwrap();
-        let rf = register(&f32_blob, &world, &source, 1, ITERATIVE_TOLERANCE).unwrap();
+        let r8 = network(&int8, Some(&world), &source, 1, ITERATIVE_TOLERANCE).unwrap();
+        let rf = network(&f32_blob, Some(&world), &source, 1, ITERATIVE_TOLERANCE).unwrap();
         assert_eq!(
             (r8.precision, rf.precision),
             (Precision::Int8, Precision::F32)
@@ -209,8 +197,72 @@ mod tests {
             .sum();
         assert!(2.0 * dot.abs().min(1.0).acos().to_degrees() < 10.0);
         assert!(matches!(
-            register(&int8, &world, &[], 1, ITERATIVE_TOLERANCE),
-            Err(pcrnet_core::Error::EmptyCloud)
+            network(&int8, Some(&world), &[], 1, ITERATIVE_TOLERANCE),
+            Err(TemplateError::Core(pcrnet_core::Error::EmptyCloud))
         ));
+        // The pipeline without refinement is the network's pose, scored.
+        let (bare, _) = pipeline(&int8, Some(&world), &source, &Options::network_only()).unwrap();
+        assert_eq!(bare.pose, r8.pose);
+        assert_eq!((bare.hypothesis, bare.icp_iterations), (0, 0));
+    }
+
+    #[test]
+    fn the_refined_pipeline_recovers_a_known_transform_in_user_units() {
+        // An untrained network whose head is biased to the identity (as a
+        // trained head is, near it): the pose then comes from the device ICP.
+        let mut params = F32Params::init(Arch::new(&[16, 32], &[32]).unwrap(), 7);
+        let (w, b) = params.layers.last_mut().unwrap();
+        w.iter_mut().for_each(|v| *v *= 1e-3);
+        b[0] = 2.0;
+        let unit = sample(Shape::Ell, 400, 3);
+        // The template in millimetres, far from the origin.
+        let world: Vec<[f32; 3]> = unit
+            .iter()
+            .map(|p| {
+                [
+                    p[0] * 120.0 + 2500.0,
+                    p[1] * 120.0 - 800.0,
+                    p[2] * 120.0 + 40.0,
+                ]
+            })
+            .collect();
+        let calib: Vec<_> = (0..8)
+            .map(|i| random_transform(&unit, 20.0, 0.1, i))
+            .collect();
+        let reference = Reference::new(&world, 400).unwrap();
+        let int8 = quantize(
+            &params,
+            &reference,
+            &calib,
+            CalibrationRule::default(),
+            true,
+        )
+        .unwrap();
+        // The source: the template turned 15 degrees about a tilted axis
+        // through its centre and moved 9 mm.
+        let source: Vec<[f32; 3]> = {
+            let (s, c) = 15f32.to_radians().sin_cos();
+            world
+                .iter()
+                .map(|p| {
+                    let (x, y, z) = (p[0] - 2500.0, p[1] + 800.0, p[2] - 40.0);
+                    [c * x - s * y + 2506.0, s * x + c * y - 797.0, z + 47.0]
+                })
+                .collect()
+        };
+        let (r, _) = pipeline(&int8, None, &source, &Options::default()).unwrap();
+        let worst = source
+            .iter()
+            .zip(&world)
+            .map(|(s, t)| {
+                let p = r.pose.transform_point(*s);
+                ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2) + (p[2] - t[2]).powi(2)).sqrt()
+            })
+            .fold(0f32, f32::max);
+        // 0.1 degree at 120 mm is 0.2 mm.
+        assert!(worst < 0.2, "worst {worst} mm, {r:?}");
+        assert!(r.reliable && r.fitness == 1.0 && r.residual < 0.05, "{r:?}");
+        let (z, _) = (r.pose.rotation[3], r.pose.rotation[0]);
+        assert!((2.0 * z.asin().to_degrees() + 15.0).abs() < 0.1, "{r:?}");
     }
 }

@@ -1,6 +1,7 @@
 //! Seeded synthetic shapes and rigid transforms, for tests and demos that
 //! must run without the ModelNet data.
 
+use pcrnet_core::Frame;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -68,55 +69,31 @@ fn box_surface(rng: &mut ChaCha8Rng, size: [f32; 3], centre: [f32; 3]) -> [f32; 
     p
 }
 
-/// The similarity that centres a cloud on its centroid and scales it into
-/// `[-0.5, 0.5]^3`: `p' = scale * (p - centre)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Normalisation {
-    /// Centroid of the cloud it was computed on.
-    pub centre: [f32; 3],
-    /// Scale factor (1 for an empty or single-point cloud).
-    pub scale: f32,
+/// The frame that centres a cloud on its centroid and scales it into
+/// `[-0.5, 0.5]^3`: `p_model = scale (p - centre)` ([`Frame::to_model`]).
+/// The centroid is summed in f64 (as `pcrnet-core` does), so large or
+/// repeated coordinates do not leave a residue. `None` for an empty cloud,
+/// a non-finite coordinate or a cloud with no extent (all points equal).
+pub fn frame_of(pts: &[[f32; 3]]) -> Option<Frame> {
+    let centre = pcrnet_core::pose::centroid(pts).ok()?;
+    let extent = pts
+        .iter()
+        .flat_map(|p| (0..3).map(move |k| (p[k] - centre[k]).abs()))
+        .fold(0f32, f32::max);
+    let scale = 0.5 / extent;
+    (extent > 0.0 && scale.is_finite()).then_some(Frame { centre, scale })
 }
 
-impl Normalisation {
-    /// The normalisation of `pts` (identity for an empty cloud).
-    pub fn of(pts: &[[f32; 3]]) -> Self {
-        if pts.is_empty() {
-            return Normalisation {
-                centre: [0.0; 3],
-                scale: 1.0,
-            };
-        }
-        let n = pts.len() as f32;
-        let mut c = [0f32; 3];
-        for p in pts {
-            for k in 0..3 {
-                c[k] += p[k] / n;
-            }
-        }
-        let extent = pts
-            .iter()
-            .flat_map(|p| (0..3).map(move |k| (p[k] - c[k]).abs()))
-            .fold(0f32, f32::max);
-        Normalisation {
-            centre: c,
-            scale: if extent > 0.0 { 0.5 / extent } else { 1.0 },
-        }
-    }
-
-    /// Applies it in place.
-    pub fn apply(&self, pts: &mut [[f32; 3]]) {
-        for p in pts.iter_mut() {
-            for (v, c) in p.iter_mut().zip(self.centre) {
-                *v = (*v - c) * self.scale;
-            }
-        }
-    }
-}
-
-/// Centres a cloud on its centroid and scales it so it fits in `[-0.5, 0.5]^3`.
+/// Centres a cloud on its centroid and scales it so it fits in
+/// `[-0.5, 0.5]^3` (see [`frame_of`]); a cloud with no extent is only centred.
 pub fn normalise(pts: &mut [[f32; 3]]) {
-    Normalisation::of(pts).apply(pts);
+    let frame = frame_of(pts).unwrap_or_else(|| Frame {
+        centre: pcrnet_core::pose::centroid(pts).unwrap_or([0.0; 3]),
+        scale: 1.0,
+    });
+    for p in pts.iter_mut() {
+        *p = frame.to_model(*p);
+    }
 }
 
 /// A random rigid transform with Euler angles in `+-max_deg` per axis and

@@ -7,6 +7,7 @@ use pcrnet_train::eval::methods::{Method, MethodKind, run};
 use pcrnet_train::eval::pairs::{Pair, PairSet, PairSetSpec, Shapes};
 use pcrnet_train::eval::score;
 use pcrnet_train::shapes::random_transform;
+use pcrnet_train::template::Reference;
 use pcrnet_train::train::data::{PairConfig, Sampling};
 use pcrnet_train::{CalibrationRule, F32Params, quantize};
 
@@ -42,8 +43,9 @@ fn blobs() -> (Vec<u8>, Vec<u8>) {
     let cal: Vec<_> = (0..16)
         .map(|i| random_transform(&template, 45.0, 1.0, 100 + i))
         .collect();
-    let int8 = quantize(&params, &template, &cal, CalibrationRule::default(), true).unwrap();
-    let f32 = params.to_f32_blob(&template, true).unwrap();
+    let reference = Reference::new(&template, 256).unwrap();
+    let int8 = quantize(&params, &reference, &cal, CalibrationRule::default(), true).unwrap();
+    let f32 = params.to_f32_blob(&reference, true).unwrap();
     (int8, f32)
 }
 
@@ -113,20 +115,20 @@ fn one_pass_ipcrnet_is_pcrnet() {
         let a = run(
             &Method::new(MethodKind::Pcrnet),
             Some(&int8),
-            &p.template,
+            Some(&p.template),
             &p.source,
         )
         .unwrap();
-        let b = run(&one, Some(&int8), &p.template, &p.source).unwrap();
+        let b = run(&one, Some(&int8), Some(&p.template), &p.source).unwrap();
         assert_eq!(a.pose, b.pose);
         let c = run(
             &Method::new(MethodKind::Pcrnet),
             Some(&f32),
-            &p.template,
+            Some(&p.template),
             &p.source,
         )
         .unwrap();
-        let d = run(&one, Some(&f32), &p.template, &p.source).unwrap();
+        let d = run(&one, Some(&f32), Some(&p.template), &p.source).unwrap();
         assert_eq!(c.pose, d.pose);
     }
 }

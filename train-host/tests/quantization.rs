@@ -2,6 +2,7 @@
 
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
+use pcrnet_train::template::Reference;
 use pcrnet_train::{CalibrationRule, F32Params, quantize};
 
 /// Worst and mean errors.
@@ -42,16 +43,17 @@ fn measure(enc: &[u16], head: &[u16], seed: u64, coarsen: Option<f32>) -> Errors
     let calib: Vec<Vec<[f32; 3]>> = (0..16)
         .map(|i| random_transform(&template, 45.0, 1.0, 1000 + i))
         .collect();
+    let reference = Reference::new(&template, 256).unwrap();
     let blob = quantize(
         &params,
-        &template,
+        &reference,
         &calib,
         CalibrationRule::default(),
         false,
     )
     .unwrap();
     let q = Int8Model::from_bytes(&blob).unwrap();
-    let fblob = params.to_f32_blob(&template, false).unwrap();
+    let fblob = params.to_f32_blob(&reference, false).unwrap();
     let f = F32Model::from_bytes(&fblob).unwrap();
     let mut qs = vec![0i8; q.scratch_len(MAX_TILE)];
     let mut fs = vec![0f32; f.scratch_len()];
@@ -72,9 +74,10 @@ fn measure(enc: &[u16], head: &[u16], seed: u64, coarsen: Option<f32>) -> Errors
         q.dequantize_feature(qi.feature, &mut deq);
         let qhead = q.head_to_real(&qi.head);
         let qpose = q.pose(&qi.head).unwrap();
-        let ff = f.encode(&src, &mut fs).unwrap().to_vec();
-        let fhead = f.infer(&src, &mut fs).unwrap();
-        let fpose = f.register(&src, &mut fs).unwrap();
+        // The template's frame is (nearly) the identity: compare in it.
+        let ff = f.network().encode(&src, &mut fs).unwrap().to_vec();
+        let fhead = f.network().infer(&src, &mut fs).unwrap();
+        let (fpose, _) = f.network_pose(&src, 1, 0.0, &mut fs).unwrap();
         let (fe, he, re) = (
             rel(&deq, &ff),
             rel(&qhead, &fhead),

@@ -4,7 +4,8 @@
 
 use std::path::PathBuf;
 
-use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE, Pose};
+use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE, Options, Pose};
+use pcrnet_train::template::Reference;
 use pcrnet_train::train::geometry::{apply, quat_to_mat};
 use pcrnet_train::train::model::{self, ModelKind};
 use pcrnet_train::train::{
@@ -95,10 +96,12 @@ fn batched_forward_matches_core() {
             );
         }
         // Through the blob: same pose as the trainer's.
-        let blob = params.to_f32_blob(tpl, false).unwrap();
+        let blob = params
+            .to_f32_blob(&Reference::new(tpl, 256).unwrap(), false)
+            .unwrap();
         let m = F32Model::from_bytes(&blob).unwrap();
         let mut s = vec![0.0; m.scratch_len()];
-        let pose: Pose = m.register(src, &mut s).unwrap();
+        let (pose, _): (Pose, usize) = m.network().network_pose(src, 1, 0.0, &mut s).unwrap();
         let ours = model::predict(&params, ModelKind::Pcrnet, tpl, src, 1, n)[0];
         assert!(rotation_error_deg(&ours.0, &quat_to_mat(pose.rotation)) < 1e-2);
         for k in 0..3 {
@@ -459,16 +462,17 @@ fn checkpoint_and_export() {
 
     let tpl = &train.clouds[0];
     let cal = export::calibration_clouds(tpl, &t.config.pairs, 8, 1);
-    let written = export::export(&t.params, tpl, Some(&cal), true, &dir).unwrap();
+    let reference = Reference::new(tpl, 256).unwrap();
+    let written = export::export(&t.params, &reference, Some(&cal), true, &dir).unwrap();
     assert_eq!(written.len(), 2);
     let f = std::fs::read(dir.join(export::F32_BLOB)).unwrap();
     let m = F32Model::from_bytes(&f).unwrap();
     let mut s = vec![0.0; m.scratch_len()];
     let (src, _, _) = data::make_pair(tpl, &t.config.pairs, 9);
-    m.register(&src, &mut s).unwrap();
+    m.register(&src, &Options::default(), &mut s).unwrap();
     let q = std::fs::read(dir.join(export::INT8_BLOB)).unwrap();
     let m = Int8Model::from_bytes(&q).unwrap();
     let mut s = vec![0i8; m.scratch_len(MAX_TILE)];
-    m.register(&src, &mut s).unwrap();
+    m.register(&src, &Options::default(), &mut s).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }

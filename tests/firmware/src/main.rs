@@ -129,7 +129,7 @@ fn main() -> ! {
             let iterations = word(cases + 5 * c + 4) as usize;
             if iterations > 0 {
                 line.clear();
-                match model.register_iterative(cloud, iterations, 0.0, SCRATCH_BUF) {
+                match model.network_pose(cloud, iterations, 0.0, SCRATCH_BUF) {
                     Ok((p, n)) => {
                         let _ = write!(line, "case {c} iter ok {n}");
                         for v in p.rotation.iter().chain(&p.translation) {

@@ -9,6 +9,7 @@ use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
 use pcrnet_train::eval::cli::MethodOptions;
 use pcrnet_train::eval::methods::{self, MethodKind};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
+use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use pcrnet_train::{
     CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, inspect, quantize,
 };
@@ -54,6 +55,9 @@ enum Command {
     /// Export a training checkpoint to the f32 and int8 blobs, with the
     /// template's feature embedded.
     Export(pcrnet_train::train::cli::ExportArgs),
+    /// Upgrade a format-2 f32 blob to the current format (frame, template
+    /// points, turns), writing f32 and re-quantized int8 blobs.
+    Upgrade(pcrnet_train::train::cli::UpgradeArgs),
     /// Make a saved, seeded test set of pairs (from ModelNet-style folders,
     /// your own clouds, or generated shapes).
     Pairs(pcrnet_train::eval::cli::PairsArgs),
@@ -88,14 +92,18 @@ enum Command {
         source_seed: Option<u64>,
     },
     /// Register SOURCE onto TEMPLATE (files: .pcd .ply .off .xyz .txt) and
-    /// print the pose as quaternion + translation and as a 4x4 matrix.
+    /// print the pose as quaternion + translation and as a 4x4 matrix, with
+    /// the residual and whether to trust it. Without TEMPLATE, the model's
+    /// own template (stored in the blob) is used, exactly as on a device.
     Register {
-        /// The template cloud (the known model).
-        template: PathBuf,
-        /// The source cloud (what the sensor sees).
-        source: PathBuf,
-        /// Method: pcrnet (one pass), ipcrnet (iterative), pointnetlk (f32 blob) or icp.
-        #[arg(long, value_enum, default_value_t = MethodKind::Pcrnet)]
+        /// `[TEMPLATE] SOURCE`: the template cloud (the known object;
+        /// optional with a model) and the source cloud (what the sensor sees).
+        #[arg(num_args = 1..=2, required = true, value_name = "[TEMPLATE] SOURCE")]
+        clouds: Vec<PathBuf>,
+        /// Method: device (the firmware's pipeline: network, flip
+        /// hypotheses, ICP against the template's points, residual), pcrnet
+        /// (one pass), ipcrnet (iterative), pointnetlk (f32 blob) or icp.
+        #[arg(long, value_enum, default_value_t = MethodKind::Device)]
         method: MethodKind,
         /// Model and settings of the method.
         #[command(flatten)]
@@ -103,6 +111,9 @@ enum Command {
         /// Write the source moved onto the template here (XYZ text).
         #[arg(long)]
         aligned: Option<PathBuf>,
+        /// Write the whole result as JSON to this file (`-`: standard output).
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
 }
 
@@ -128,6 +139,7 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Train(args) => pcrnet_train::train::cli::train(*args)?,
         Command::Export(args) => pcrnet_train::train::cli::export(args)?,
+        Command::Upgrade(args) => pcrnet_train::train::cli::upgrade(args)?,
         Command::Pairs(args) => pcrnet_train::eval::cli::pairs(args)?,
         Command::Eval(args) => pcrnet_train::eval::cli::eval(args)?,
         Command::Experiment(args) => pcrnet_train::eval::cli::experiment(args)?,
@@ -159,56 +171,140 @@ fn main() -> anyhow::Result<()> {
             }
         }
         Command::Register {
-            template,
-            source,
+            clouds,
             method,
             options,
             aligned,
-        } => register(&template, &source, method, &options, aligned)?,
+            json,
+        } => {
+            let (template, source) = match clouds.as_slice() {
+                [t, s] => (Some(t.as_path()), s.as_path()),
+                [s] => (None, s.as_path()),
+                _ => anyhow::bail!("register takes [TEMPLATE] SOURCE"),
+            };
+            register(template, source, method, &options, aligned, json)?
+        }
     }
     Ok(())
 }
 
 fn register(
-    template_path: &Path,
+    template_path: Option<&Path>,
     source_path: &Path,
     kind: MethodKind,
     options: &MethodOptions,
     aligned: Option<PathBuf>,
+    json: Option<PathBuf>,
 ) -> anyhow::Result<()> {
-    let template = read_cloud(template_path)?;
+    let template = template_path.map(read_cloud).transpose()?;
     let source = read_cloud(source_path)?;
     let method = options.method(kind);
     let blob = options.read_model()?;
-    let out =
-        methods::run(&method, blob.as_deref(), &template, &source).with_context(
-            || match &options.model {
-                Some(path) => format!("registering with {}", path.display()),
-                None => "registering".into(),
-            },
-        )?;
+    let out = methods::run(&method, blob.as_deref(), template.as_deref(), &source).with_context(
+        || match &options.model {
+            Some(path) => format!("registering with {}", path.display()),
+            None => "registering".into(),
+        },
+    )?;
     let pose = out.pose;
-    println!(
-        "method: {}, {} step(s)",
+    // With --json -, standard output carries the JSON alone.
+    let to_stdout = json.as_deref() == Some(Path::new("-"));
+    let say = |line: String| {
+        if to_stdout {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    };
+    say(format!(
+        "method: {}, {} pass(es)/step(s){}",
         method.name(out.precision),
-        out.iterations
-    );
-    println!("time: {:.3} ms", out.seconds * 1e3);
-    println!("quaternion (w, x, y, z): {:?}", pose.rotation);
-    println!("translation: {:?}", pose.translation);
-    println!("matrix (maps source onto template):");
+        out.iterations,
+        match (kind, template_path) {
+            (MethodKind::Device, None) => " - the firmware's pipeline, the blob's own template",
+            (MethodKind::Device, Some(_)) =>
+                " - the firmware's pipeline, with the given template bound into the model",
+            _ => "",
+        }
+    ));
+    say(format!("time: {:.3} ms", out.seconds * 1e3));
+    say(format!("quaternion (w, x, y, z): {:?}", pose.rotation));
+    say(format!("translation: {:?}", pose.translation));
+    say("matrix (maps source onto template):".into());
     for row in pose.matrix() {
-        println!(
+        say(format!(
             "  [{:>10.6} {:>10.6} {:>10.6} {:>10.6}]",
             row[0], row[1], row[2], row[3]
-        );
+        ));
     }
-    if let Some(out) = aligned {
+    if let Some(c) = &out.check {
+        say(format!(
+            "residual: {:.6} (source units), {:.4} of the template's size; fitness {:.3}; inlier RMSE {:.6}",
+            c.residual, c.relative_residual, c.fitness, c.inlier_rmse
+        ));
+        say(format!(
+            "hypothesis {} won; {} ICP iteration(s); {} saturated int8 value(s){}",
+            c.hypothesis,
+            c.icp_iterations,
+            c.saturated,
+            match c.degenerate {
+                Some(d) => format!("; degenerate source: {d:?}"),
+                None => String::new(),
+            }
+        ));
+        say(if c.reliable {
+            "trust: RELIABLE (relative residual within the threshold)".into()
+        } else {
+            "trust: NOT RELIABLE - do not act on this pose (residual above the threshold, or a degenerate source)".into()
+        });
+    }
+    if let Some(out_path) = aligned {
         let moved: Vec<[f32; 3]> = source.iter().map(|&p| pose.transform_point(p)).collect();
-        write_xyz(&out, &moved)?;
-        println!("aligned source written to {}", out.display());
+        write_xyz(&out_path, &moved)?;
+        say(format!("aligned source written to {}", out_path.display()));
+    }
+    if let Some(path) = json {
+        let value = report_json(&method.name(out.precision), &out);
+        let text = serde_json::to_string_pretty(&value)? + "\n";
+        if to_stdout {
+            use std::io::Write;
+            let mut stdout = std::io::stdout().lock();
+            match stdout.write_all(text.as_bytes()) {
+                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+                r => r?,
+            }
+        } else {
+            std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+        }
     }
     Ok(())
+}
+
+/// The whole result of `register` as JSON: pose (quaternion w, x, y, z,
+/// translation, 4x4 row-major) and, for the device pipeline, the check.
+fn report_json(method: &str, out: &methods::Outcome) -> serde_json::Value {
+    let p = &out.pose;
+    let mut v = serde_json::json!({
+        "method": method,
+        "iterations": out.iterations,
+        "seconds": out.seconds,
+        "quaternion_wxyz": p.rotation,
+        "translation": p.translation,
+        "matrix": p.matrix(),
+    });
+    if let Some(c) = &out.check {
+        v["residual"] = c.residual.into();
+        v["relative_residual"] = c.relative_residual.into();
+        v["fitness"] = c.fitness.into();
+        v["inlier_rmse"] = c.inlier_rmse.into();
+        v["hypothesis"] = c.hypothesis.into();
+        v["passes"] = c.passes.into();
+        v["icp_iterations"] = c.icp_iterations.into();
+        v["saturated"] = c.saturated.into();
+        v["degenerate"] = c.degenerate.map(|d| format!("{d:?}")).into();
+        v["reliable"] = c.reliable.into();
+    }
+    v
 }
 
 /// Writes a cloud as XYZ text (one `x y z` line per point, exact f32 values).
@@ -233,15 +329,16 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
     let calibration: Vec<_> = (0..32)
         .map(|i| random_transform(&template, 45.0, 1.0, seed * 1000 + i))
         .collect();
+    let reference = Reference::new(&template, DEFAULT_TEMPLATE_POINTS)?;
     // Like a trained default, the demo model centres its sources.
     let int8_blob = quantize(
         &params,
-        &template,
+        &reference,
         &calibration,
         CalibrationRule::default(),
         true,
     )?;
-    let f32_blob = params.to_f32_blob(&template, true)?;
+    let f32_blob = params.to_f32_blob(&reference, true)?;
     let source = random_transform(&template, 45.0, 1.0, seed.wrapping_add(77));
     if let Some(dir) = out {
         std::fs::create_dir_all(&dir)?;
@@ -262,10 +359,10 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
 
     let model = Int8Model::from_bytes(&int8_blob)?;
     let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
-    let pose = model.register(&source, &mut scratch)?;
+    let (pose, _) = model.network_pose(&source, 1, 0.0, &mut scratch)?;
     let fmodel = F32Model::from_bytes(&f32_blob)?;
     let mut fscratch = vec![0f32; fmodel.scratch_len()];
-    let fpose = fmodel.register(&source, &mut fscratch)?;
+    let (fpose, _) = fmodel.network_pose(&source, 1, 0.0, &mut fscratch)?;
     println!("source: {} points", source.len());
     println!(
         "int8 pose: q = {:?}, t = {:?}",

@@ -80,13 +80,26 @@ pub struct EvalArgs {
 /// and `pcrnet eval`).
 #[derive(Debug, Clone, Args)]
 pub struct MethodOptions {
-    /// Model blob: int8 or f32 for pcrnet / ipcrnet, f32 for pointnetlk.
+    /// Model blob: int8 or f32 for device / pcrnet / ipcrnet, f32 for pointnetlk.
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Most passes of ipcrnet / steps of pointnetlk (the paper: 20) or
-    /// iterations of icp (100).
+    /// Network passes of device / ipcrnet (ipcrnet: 20; device: 1, give
+    /// more for an i-PCRNet model), steps of pointnetlk (20) or iterations
+    /// of icp (100).
     #[arg(long)]
     pub iterations: Option<usize>,
+    /// Starting poses the device pipeline tries: 1 (the network's pose)
+    /// up to 1 + the turns stored in the blob (default 4: the network's pose
+    /// and the half turns about the template's principal axes).
+    #[arg(long)]
+    pub hypotheses: Option<usize>,
+    /// Most ICP iterations per hypothesis of the device pipeline (0: none).
+    #[arg(long)]
+    pub icp_iterations: Option<usize>,
+    /// Device ICP leaves out pairs farther apart than this, as a share of
+    /// the template's size.
+    #[arg(long)]
+    pub icp_distance: Option<f32>,
     /// Refine the network's pose with ICP.
     #[arg(long)]
     pub refine_icp: bool,
@@ -103,6 +116,9 @@ impl MethodOptions {
         m.iterations = self.iterations.unwrap_or(m.iterations);
         m.refine_icp = self.refine_icp;
         m.tolerance = self.tolerance.unwrap_or(m.tolerance);
+        m.hypotheses = self.hypotheses.unwrap_or(m.hypotheses);
+        m.icp_iterations = self.icp_iterations.unwrap_or(m.icp_iterations);
+        m.icp_distance = self.icp_distance.unwrap_or(m.icp_distance);
         m
     }
 

@@ -7,9 +7,11 @@
 //! | `ipcrnet` | up to [`Method::iterations`] passes (the paper: 20), stopping when `\|\|dT - I\|\|_F <` [`Method::tolerance`] (the paper: 1e-7) | int8 or f32 blob |
 //! | `pointnetlk` | inverse-compositional Lucas-Kanade on the encoder's features, up to 20 steps | f32 blob |
 //! | `icp` | point-to-point ICP from the identity, up to 100 iterations | none |
+//! | `device` | the device pipeline: network passes ([`Method::iterations`]), [`Method::hypotheses`] starting poses, ICP against the blob's template points, residual (`pcrnet-core`'s `register`) | int8 or f32 blob |
 //!
-//! Any network method can be followed by ICP refinement
-//! ([`Method::refine_icp`]): ICP starts from the network's pose.
+//! Any network method can be followed by host ICP refinement
+//! ([`Method::refine_icp`]): ICP (f64, k-d tree, all template points)
+//! starts from the network's pose.
 //!
 //! Time per registration ([`Outcome::seconds`]) is everything from the two
 //! clouds to the pose on one thread: normalisation, the template's feature
@@ -22,7 +24,8 @@ use pcrnet_core::Pose;
 use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
-use crate::register::{ITERATIVE_TOLERANCE, Precision, register, register_pointnetlk};
+use crate::register::{ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk};
+use crate::template::TemplateError;
 
 /// A method family.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -35,6 +38,8 @@ pub enum MethodKind {
     Pointnetlk,
     /// Point-to-point ICP.
     Icp,
+    /// The device pipeline: network, flip hypotheses, on-device ICP, residual.
+    Device,
 }
 
 /// A method with its settings.
@@ -48,6 +53,27 @@ pub struct Method {
     pub refine_icp: bool,
     /// i-PCRNet stops once a pass's `||dT - I||_F` is below this.
     pub tolerance: f32,
+    /// Starting poses of the device pipeline (1 + template turns tried).
+    #[serde(default = "default_hypotheses")]
+    pub hypotheses: usize,
+    /// Most ICP iterations per hypothesis of the device pipeline.
+    #[serde(default = "default_icp_iterations")]
+    pub icp_iterations: usize,
+    /// Device ICP pair distance (model units: share of the template's size).
+    #[serde(default = "default_icp_distance")]
+    pub icp_distance: f32,
+}
+
+fn default_hypotheses() -> usize {
+    pcrnet_core::Options::default().hypotheses
+}
+
+fn default_icp_iterations() -> usize {
+    pcrnet_core::Options::default().icp_iterations
+}
+
+fn default_icp_distance() -> f32 {
+    pcrnet_core::Options::default().icp_distance
 }
 
 impl Method {
@@ -56,7 +82,7 @@ impl Method {
     /// ([`ITERATIVE_TOLERANCE`]); no refinement.
     pub fn new(kind: MethodKind) -> Self {
         let iterations = match kind {
-            MethodKind::Pcrnet => 1,
+            MethodKind::Pcrnet | MethodKind::Device => 1,
             MethodKind::Ipcrnet | MethodKind::Pointnetlk => 20,
             MethodKind::Icp => IcpConfig::default().max_iterations,
         };
@@ -65,6 +91,25 @@ impl Method {
             iterations,
             refine_icp: false,
             tolerance: ITERATIVE_TOLERANCE,
+            hypotheses: default_hypotheses(),
+            icp_iterations: default_icp_iterations(),
+            icp_distance: default_icp_distance(),
+        }
+    }
+
+    /// The device pipeline's options for this method.
+    pub fn device_options(&self) -> pcrnet_core::Options {
+        pcrnet_core::Options {
+            passes: self.iterations,
+            tolerance: if self.iterations > 1 {
+                self.tolerance
+            } else {
+                0.0
+            },
+            hypotheses: self.hypotheses,
+            icp_iterations: self.icp_iterations,
+            icp_distance: self.icp_distance,
+            ..pcrnet_core::Options::default()
         }
     }
 
@@ -88,11 +133,18 @@ impl Method {
             MethodKind::Ipcrnet => "i-PCRNet",
             MethodKind::Pointnetlk => "PointNetLK",
             MethodKind::Icp => "ICP",
+            MethodKind::Device if self.iterations > 1 => "device i-PCRNet",
+            MethodKind::Device => "device PCRNet",
         };
         let precision = match (self.kind, precision) {
-            (MethodKind::Pcrnet | MethodKind::Ipcrnet, Some(Precision::Int8)) => " int8",
-            (MethodKind::Pcrnet | MethodKind::Ipcrnet, Some(Precision::F32)) => " f32",
-            _ => "",
+            (MethodKind::Icp | MethodKind::Pointnetlk, _) | (_, None) => String::new(),
+            (_, Some(Precision::Int8)) => " int8".into(),
+            (_, Some(Precision::F32)) => " f32".into(),
+        };
+        let precision = if self.kind == MethodKind::Device {
+            format!("{precision} K={} + device ICP", self.hypotheses)
+        } else {
+            precision
         };
         let refine = if self.refine_icp && self.kind != MethodKind::Icp {
             " + ICP"
@@ -117,28 +169,37 @@ pub struct Outcome {
     /// The pose after each step, when the method records it (PointNetLK,
     /// ICP without a network stage).
     pub trajectory: Option<Vec<Pose>>,
+    /// The device pipeline's residual and flags.
+    pub check: Option<pcrnet_core::Registration>,
 }
 
 /// Why a registration failed.
 #[derive(Debug, thiserror::Error)]
 pub enum MethodError {
     /// A network method was run without a model blob.
-    #[error("{0:?} needs a model blob")]
+    #[error(
+        "{0:?} needs a model: pass --model FILE (the shipped one is models/embedded-default-int8.pcrn; PointNetLK needs an f32 blob such as models/embedded-default-f32.pcrn)"
+    )]
     NoModel(MethodKind),
-    /// The network (or the blob) failed.
+    /// The network, the blob or the template failed.
     #[error(transparent)]
-    Core(#[from] pcrnet_core::Error),
+    Model(#[from] TemplateError),
     /// ICP failed.
     #[error(transparent)]
     Icp(#[from] IcpError),
+    /// Host ICP refinement needs the template as a cloud.
+    #[error("ICP (and --refine-icp) needs the template as a cloud: give TEMPLATE SOURCE")]
+    NoTemplate,
 }
 
 /// Registers `source` onto `template` with `method` (and the model `blob`
-/// for network methods; its kind picks the int8 or f32 path).
+/// for network methods; its kind picks the int8 or f32 path). Without a
+/// template, network methods use the blob's own (as a device does); ICP
+/// needs one.
 pub fn run(
     method: &Method,
     blob: Option<&[u8]>,
-    template: &[[f32; 3]],
+    template: Option<&[[f32; 3]]>,
     source: &[[f32; 3]],
 ) -> Result<Outcome, MethodError> {
     let start = Instant::now();
@@ -149,13 +210,25 @@ pub fn run(
                 max_iterations: method.iterations,
                 ..IcpConfig::default()
             };
-            let r = icp(template, source, config)?;
+            let r = icp(template.ok_or(MethodError::NoTemplate)?, source, config)?;
             Outcome {
                 pose: r.pose,
                 iterations: r.iterations,
                 precision: None,
                 seconds: 0.0,
                 trajectory: Some(r.trajectory),
+                check: None,
+            }
+        }
+        MethodKind::Device => {
+            let (r, precision) = pipeline(model()?, template, source, &method.device_options())?;
+            Outcome {
+                pose: r.pose,
+                iterations: r.passes,
+                precision: Some(precision),
+                seconds: 0.0,
+                trajectory: None,
+                check: Some(r),
             }
         }
         MethodKind::Pointnetlk => {
@@ -166,6 +239,7 @@ pub fn run(
                 precision: Some(Precision::F32),
                 seconds: 0.0,
                 trajectory: Some(r.trajectory),
+                check: None,
             }
         }
         MethodKind::Pcrnet | MethodKind::Ipcrnet => {
@@ -173,13 +247,14 @@ pub fn run(
                 MethodKind::Pcrnet => 1,
                 _ => method.iterations,
             };
-            let r = register(model()?, template, source, passes, method.tolerance)?;
+            let r = network(model()?, template, source, passes, method.tolerance)?;
             Outcome {
                 pose: r.pose,
                 iterations: r.passes,
                 precision: Some(r.precision),
                 seconds: 0.0,
                 trajectory: None,
+                check: None,
             }
         }
     };
@@ -188,6 +263,7 @@ pub fn run(
             .iter()
             .map(|&p| out.pose.transform_point(p))
             .collect();
+        let template = template.ok_or(MethodError::NoTemplate)?;
         let r = icp(template, &moved, IcpConfig::default())?;
         out.pose = out.pose.then(&r.pose);
         out.trajectory = None;
@@ -218,12 +294,12 @@ mod tests {
     fn networks_need_a_model_and_icp_refines() {
         let t = sample(Shape::Ell, 200, 1);
         assert!(matches!(
-            run(&Method::new(MethodKind::Pcrnet), None, &t, &t),
+            run(&Method::new(MethodKind::Pcrnet), None, Some(&t), &t),
             Err(MethodError::NoModel(MethodKind::Pcrnet))
         ));
         // ICP on a small known offset: exact, with a trajectory.
         let shifted: Vec<[f32; 3]> = t.iter().map(|p| [p[0] + 0.02, p[1], p[2]]).collect();
-        let r = run(&Method::new(MethodKind::Icp), None, &t, &shifted).unwrap();
+        let r = run(&Method::new(MethodKind::Icp), None, Some(&t), &shifted).unwrap();
         assert!((r.pose.translation[0] + 0.02).abs() < 1e-4, "{:?}", r.pose);
         assert_eq!(r.trajectory.map(|v| v.len()), Some(r.iterations));
         assert!(r.seconds > 0.0);

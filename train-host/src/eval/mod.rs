@@ -96,7 +96,7 @@ pub fn score(
     let one = |(index, p): (usize, &Pair)| -> Result<Scored, ScoreError> {
         let started = std::time::Instant::now();
         let (pose, iterations, seconds, precision, failure) =
-            match methods::run(method, blob, &p.template, &p.source) {
+            match methods::run(method, blob, Some(&p.template), &p.source) {
                 Ok(o) => (o.pose, o.iterations, o.seconds, o.precision, None),
                 Err(error @ methods::MethodError::NoModel(_)) => {
                     return Err(ScoreError {

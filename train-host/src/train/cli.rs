@@ -9,6 +9,7 @@ use super::{
     CHECKPOINT_FILE, Checkpoint, Dataset, LossKind, ModelKind, PairConfig, RunOptions, Sampling,
     Schedule, Split, TrainConfig, Trainer, data, export as exp,
 };
+use crate::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use crate::{EMBEDDED_ENCODER, EMBEDDED_HEAD};
 
 /// Network kind on the command line.
@@ -148,6 +149,10 @@ pub struct TrainArgs {
     /// Template embedded in the blobs (default: the first training shape).
     #[arg(long)]
     pub template: Option<PathBuf>,
+    /// Template points stored in the blob for checking and refining poses
+    /// on the device (6 bytes of flash each).
+    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
+    pub template_points: usize,
     /// No progress bars.
     #[arg(long)]
     pub no_progress: bool,
@@ -166,6 +171,10 @@ pub struct ExportArgs {
     /// recorded in the checkpoint).
     #[arg(long)]
     pub points: Option<usize>,
+    /// Template points stored in the blob for checking and refining poses
+    /// on the device (6 bytes of flash each).
+    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
+    pub template_points: usize,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -281,11 +290,19 @@ fn load_data(args: &TrainArgs, seed: u64) -> anyhow::Result<(Dataset, Dataset)> 
     Ok((train, val))
 }
 
-/// Reads a template file and preprocesses it as the training shapes.
-fn load_template(path: &Path, points: usize, seed: u64) -> anyhow::Result<Vec<[f32; 3]>> {
+/// Reads a template file, reduces it as the training shapes were (farthest
+/// points), and records it for a blob: frame, stored points, turns. The
+/// template keeps its own units and axes.
+fn load_template(
+    path: &Path,
+    points: usize,
+    stored: usize,
+    seed: u64,
+) -> anyhow::Result<Reference> {
     let raw = crate::io::read_cloud(path)?;
-    data::preprocess(&raw, points, Sampling::Fps, seed)
-        .with_context(|| format!("{}: no finite point", path.display()))
+    let reduced = data::reduce(&raw, points, Sampling::Fps, seed)
+        .with_context(|| format!("{}: no finite point", path.display()))?;
+    Reference::new(&reduced, stored).with_context(|| format!("{}", path.display()))
 }
 
 /// Runs `pcrnet train`.
@@ -381,17 +398,22 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         eprintln!("stopped before the end (--max-steps): no export");
         return Ok(());
     }
-    let template = match &args.template {
-        Some(p) => load_template(p, trainer.train_data().points, seed)?,
-        None => trainer.train_data().clouds[0].clone(),
+    let reference = match &args.template {
+        Some(p) => load_template(p, trainer.train_data().points, args.template_points, seed)?,
+        None => Reference::new(&trainer.train_data().clouds[0], args.template_points)?,
     };
     let cal = args.export.then(|| {
-        exp::calibration_clouds(&template, &trainer.config.pairs, 64, trainer.config.seed)
+        exp::calibration_clouds(
+            &reference.normalised(),
+            &trainer.config.pairs,
+            64,
+            trainer.config.seed,
+        )
     });
     let centre = trainer.config.pairs.centre;
     for p in exp::export(
         &trainer.params,
-        &template,
+        &reference,
         cal.as_deref(),
         centre,
         &args.out,
@@ -401,14 +423,68 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Arguments of `pcrnet upgrade`.
+#[derive(Debug, Clone, Args)]
+pub struct UpgradeArgs {
+    /// A format-2 f32 blob (it holds all the weights).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// The template cloud to record (any format `pcrnet` reads, any units).
+    #[arg(long)]
+    pub template: PathBuf,
+    /// Points the template is reduced to, as in training.
+    #[arg(long, default_value_t = 512)]
+    pub points: usize,
+    /// Template points stored in the blob (6 bytes of flash each).
+    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
+    pub template_points: usize,
+    /// Calibration sources get Gaussian noise with sigma drawn from
+    /// U[0, NOISE] (as `train --noise`); 0 for clean sources.
+    #[arg(long, default_value_t = 0.04)]
+    pub noise: f32,
+    /// Seed of the template reduction and the calibration clouds.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output folder (model-f32.pcrn, model-int8.pcrn).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Runs `pcrnet upgrade`: a format-2 f32 blob to current f32 and int8 blobs.
+pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
+    if !(args.noise.is_finite() && args.noise >= 0.0) {
+        bail!("--noise must be a finite number >= 0 (got {})", args.noise);
+    }
+    let blob =
+        std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
+    let (params, centre) =
+        crate::upgrade::read_v2_f32(&blob).with_context(|| format!("{}", args.model.display()))?;
+    let reference = load_template(&args.template, args.points, args.template_points, args.seed)?;
+    let pairs = data::PairConfig {
+        noise: (args.noise > 0.0).then_some([0.0, args.noise]),
+        centre,
+        ..data::PairConfig::default()
+    };
+    let cal = exp::calibration_clouds(&reference.normalised(), &pairs, 64, args.seed);
+    for p in exp::export(&params, &reference, Some(&cal), centre, &args.out)? {
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
 /// Runs `pcrnet export`.
 pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ck = Checkpoint::load(&args.checkpoint)?;
     let points = args.points.unwrap_or(ck.config.points);
-    let template = load_template(&args.template, points, ck.config.seed)?;
-    let cal = exp::calibration_clouds(&template, &ck.config.pairs, 64, ck.config.seed);
+    let reference = load_template(&args.template, points, args.template_points, ck.config.seed)?;
+    let cal = exp::calibration_clouds(
+        &reference.normalised(),
+        &ck.config.pairs,
+        64,
+        ck.config.seed,
+    );
     let centre = ck.config.pairs.centre;
-    for p in exp::export(&ck.params(), &template, Some(&cal), centre, &args.out)? {
+    for p in exp::export(&ck.params(), &reference, Some(&cal), centre, &args.out)? {
         eprintln!("wrote {}", p.display());
     }
     Ok(())

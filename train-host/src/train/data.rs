@@ -193,6 +193,19 @@ pub fn preprocess(
     sampling: Sampling,
     seed: u64,
 ) -> Option<Vec<[f32; 3]>> {
+    let mut out = reduce(cloud, points, sampling, seed)?;
+    shapes::normalise(&mut out);
+    Some(out)
+}
+
+/// Reduces (or pads) a cloud's finite points to `points` points, keeping
+/// its units. Returns `None` for a cloud without finite points.
+pub fn reduce(
+    cloud: &[[f32; 3]],
+    points: usize,
+    sampling: Sampling,
+    seed: u64,
+) -> Option<Vec<[f32; 3]>> {
     let finite: Vec<[f32; 3]> = cloud
         .iter()
         .copied()
@@ -214,7 +227,6 @@ pub fn preprocess(
         finite
     };
     pad(&mut out, points, &mut rng);
-    shapes::normalise(&mut out);
     Some(out)
 }
 

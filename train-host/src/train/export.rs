@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use super::checkpoint::write_atomic;
 use super::data::{PairConfig, make_pair, mix_seed};
+use crate::template::Reference;
 use crate::{CalibrationRule, F32Params, quantize};
 
 /// File name of the exported f32 blob.
@@ -24,26 +25,27 @@ pub fn calibration_clouds(
         .collect()
 }
 
-/// Writes the f32 blob (template feature embedded) into `dir`, and the
-/// int8 blob too when `calibration` is given. Files are written atomically.
+/// Writes the f32 blob (recording `reference`: frame, template points,
+/// feature) into `dir`, and the int8 blob too when `calibration` (model
+/// frame) is given. Files are written atomically.
 /// `centre_source` must be the training pairs' `centre`. Returns the paths written.
 pub fn export(
     params: &F32Params,
-    template: &[[f32; 3]],
+    reference: &Reference,
     calibration: Option<&[Vec<[f32; 3]>]>,
     centre_source: bool,
     dir: &Path,
 ) -> anyhow::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)?;
     let mut written = Vec::new();
-    let f32_blob = params.to_f32_blob(template, centre_source)?;
+    let f32_blob = params.to_f32_blob(reference, centre_source)?;
     let p = dir.join(F32_BLOB);
     write_atomic(&p, &f32_blob)?;
     written.push(p);
     if let Some(cal) = calibration {
         let int8 = quantize(
             params,
-            template,
+            reference,
             cal,
             CalibrationRule::default(),
             centre_source,

@@ -1,0 +1,159 @@
+//! Eigen-decomposition of small symmetric matrices (3x3, 4x4) by cyclic
+//! Jacobi rotations, in f32 with `libm::sqrtf` and single IEEE-754
+//! operations in a fixed order, so the result is bit-identical on every
+//! target. Used by ICP (Horn's quaternion, 4x4) and by the degeneracy check
+//! of a source (its covariance, 3x3).
+//!
+//! Each rotation zeroes one off-diagonal entry (Golub & Van Loan,
+//! *Matrix Computations*, 8.5: the stable choice of `t = tan(theta)` with
+//! `|theta| <= pi/4`); sweeps stop when every off-diagonal entry is zero
+//! or after [`MAX_SWEEPS`]. Jacobi converges quadratically: 4x4 matrices
+//! reach f32 precision in 4-6 sweeps.
+
+// Matrix code indexes rows and columns by name (p, q, k), as the textbook
+// algorithm does; iterator forms would hide which entry is which.
+#![allow(clippy::needless_range_loop)]
+
+/// Most sweeps over all off-diagonal entries.
+pub const MAX_SWEEPS: usize = 12;
+
+/// Eigenvalues and eigenvectors of the symmetric matrix `a` (only its upper
+/// triangle is read): returns `(values, vectors)` with `vectors[k]` the unit
+/// eigenvector of `values[k]`, sorted by descending value.
+pub fn symmetric<const N: usize>(mut a: [[f32; N]; N]) -> ([f32; N], [[f32; N]; N]) {
+    for i in 0..N {
+        for j in 0..i {
+            a[i][j] = a[j][i];
+        }
+    }
+    // v's columns are the eigenvectors.
+    let mut v = [[0f32; N]; N];
+    for (i, row) in v.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for _ in 0..MAX_SWEEPS {
+        let mut off = 0f32;
+        for i in 0..N {
+            for j in i + 1..N {
+                off += libm::fabsf(a[i][j]);
+            }
+        }
+        if off == 0.0 || !off.is_finite() {
+            break;
+        }
+        for p in 0..N {
+            for q in p + 1..N {
+                rotate(&mut a, &mut v, p, q);
+            }
+        }
+    }
+    let mut values = [0f32; N];
+    for (k, value) in values.iter_mut().enumerate() {
+        *value = a[k][k];
+    }
+    // Selection sort by descending value (stable: first index wins ties).
+    let mut order = [0usize; N];
+    for (k, o) in order.iter_mut().enumerate() {
+        *o = k;
+    }
+    for i in 0..N {
+        let mut best = i;
+        for j in i + 1..N {
+            if values[order[j]] > values[order[best]] {
+                best = j;
+            }
+        }
+        order.swap(i, best);
+    }
+    let mut sorted = [0f32; N];
+    let mut vectors = [[0f32; N]; N];
+    for (k, &o) in order.iter().enumerate() {
+        sorted[k] = values[o];
+        for i in 0..N {
+            vectors[k][i] = v[i][o];
+        }
+    }
+    (sorted, vectors)
+}
+
+/// One Jacobi rotation in the (p, q) plane zeroing `a[p][q]`.
+fn rotate<const N: usize>(a: &mut [[f32; N]; N], v: &mut [[f32; N]; N], p: usize, q: usize) {
+    let apq = a[p][q];
+    if apq == 0.0 {
+        return;
+    }
+    let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
+    // t = sign(theta) / (|theta| + sqrt(theta^2 + 1)); for huge theta,
+    // theta^2 overflows and t ~ 1 / (2 theta).
+    let t = if libm::fabsf(theta) > 1e18 {
+        0.5 / theta
+    } else {
+        let t = 1.0 / (libm::fabsf(theta) + libm::sqrtf(theta * theta + 1.0));
+        if theta < 0.0 { -t } else { t }
+    };
+    let c = 1.0 / libm::sqrtf(t * t + 1.0);
+    let s = t * c;
+    for k in 0..N {
+        let (akp, akq) = (a[k][p], a[k][q]);
+        a[k][p] = c * akp - s * akq;
+        a[k][q] = s * akp + c * akq;
+    }
+    for k in 0..N {
+        let (apk, aqk) = (a[p][k], a[q][k]);
+        a[p][k] = c * apk - s * aqk;
+        a[q][k] = s * apk + c * aqk;
+    }
+    a[p][q] = 0.0;
+    a[q][p] = 0.0;
+    for row in v.iter_mut() {
+        let (vp, vq) = (row[p], row[q]);
+        row[p] = c * vp - s * vq;
+        row[q] = s * vp + c * vq;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn diagonalises_a_symmetric_matrix() {
+        let a = [
+            [4.0f32, 1.0, -2.0, 0.5],
+            [0.0, 3.0, 0.25, 1.0],
+            [0.0, 0.0, -1.0, 2.0],
+            [0.0, 0.0, 0.0, 0.5],
+        ];
+        let full = {
+            let mut f = a;
+            for i in 0..4 {
+                for j in 0..i {
+                    f[i][j] = f[j][i];
+                }
+            }
+            f
+        };
+        let (values, vectors) = symmetric(a);
+        assert!(values.windows(2).all(|w| w[0] >= w[1]));
+        for k in 0..4 {
+            let v = vectors[k];
+            let n: f32 = v.iter().map(|x| x * x).sum();
+            assert!((n - 1.0).abs() < 1e-5);
+            for i in 0..4 {
+                let av: f32 = (0..4).map(|j| full[i][j] * v[j]).sum();
+                assert!((av - values[k] * v[i]).abs() < 1e-4, "{k} {i}");
+            }
+        }
+        let trace: f32 = values.iter().sum();
+        assert!((trace - 6.5).abs() < 1e-4);
+    }
+
+    #[test]
+    fn diagonal_and_zero_matrices() {
+        let (values, vectors) = symmetric([[1.0f32, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 2.0]]);
+        assert_eq!(values, [3.0, 2.0, 1.0]);
+        assert_eq!(vectors[0], [0.0, 1.0, 0.0]);
+        let (values, _) = symmetric([[0f32; 3]; 3]);
+        assert_eq!(values, [0.0; 3]);
+    }
+}

@@ -1,0 +1,322 @@
+//! Checking and refining a pose against the template's points: the
+//! residual (how well the moved source lies on the template), point-to-point
+//! ICP, and flip resolution over several starting poses.
+//!
+//! Everything runs in the model frame ([`crate::format::Frame`]) on the
+//! template's int16 grid ([`Template`]): a source point is moved into the
+//! model frame and by the pose in f32 ([`PointMap`]), rounded onto the grid,
+//! and matched to its nearest template point by an exact integer search.
+//! The sums ICP needs are integers too (exact, order-free); only the 4x4
+//! eigenproblem of Horn's method and the final scores are f32, through
+//! `libm`. Memory is O(1): nothing depends on the number of points.
+
+use crate::eigen;
+use crate::error::{Error, Result};
+use crate::format::Frame;
+use crate::pose::{PointMap, Pose};
+use crate::template::Template;
+
+/// The source points refinement and scoring use: every `stride`-th point
+/// of the cloud (from index 0), moved into the model frame.
+#[derive(Debug, Clone, Copy)]
+pub struct Subset<'s> {
+    /// The cloud, user units.
+    pub source: &'s [[f32; 3]],
+    /// User units -> model frame.
+    pub frame: Frame,
+    /// Step between used points (>= 1).
+    pub stride: usize,
+}
+
+impl<'s> Subset<'s> {
+    /// Every point if the cloud has at most `max_points`, else a stride
+    /// that keeps at most `max_points` (>= 1) of them.
+    pub fn new(source: &'s [[f32; 3]], frame: Frame, max_points: usize) -> Self {
+        let max = max_points.max(1);
+        Subset {
+            source,
+            frame,
+            stride: source.len().div_ceil(max).max(1),
+        }
+    }
+
+    fn points(&self) -> impl Iterator<Item = &'s [f32; 3]> + 's {
+        self.source.iter().step_by(self.stride)
+    }
+}
+
+/// How well a posed source fits the template (model units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fit {
+    /// Mean over the used points of `min(d, max_distance)`, `d` the
+    /// distance to the nearest template point.
+    pub residual: f32,
+    /// Share of used points with `d <= max_distance`.
+    pub fitness: f32,
+    /// Root mean square of `d` over those inliers (0 without inliers).
+    pub inlier_rmse: f32,
+}
+
+/// `max_distance` (model units) as a squared int16-step limit for the search.
+fn limit(template: &Template<'_>, max_distance: f32) -> u64 {
+    let steps = max_distance / template.step();
+    let sq = steps * steps;
+    // Non-finite or huge limits search everything.
+    if sq.is_finite() && sq < 1.8e19 {
+        sq as u64
+    } else {
+        u64::MAX - 1
+    }
+}
+
+/// Scores `pose` (model frame) on the subset: see [`Fit`].
+pub fn score(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, max_distance: f32) -> Fit {
+    let map = PointMap::new(subset.frame, pose);
+    let lim = limit(template, max_distance);
+    let cap = libm::sqrtf(lim as f32);
+    let (mut sum, mut sum_sq, mut inliers, mut used) = (0f32, 0f32, 0u32, 0u32);
+    for p in subset.points() {
+        let q = template.quantize(map.apply(*p));
+        used += 1;
+        match template.nearest(q, lim + 1) {
+            Some(n) => {
+                let d2 = n.distance_squared as f32;
+                sum += libm::sqrtf(d2);
+                sum_sq += d2;
+                inliers += 1;
+            }
+            None => sum += cap,
+        }
+    }
+    let step = template.step();
+    let n = used.max(1) as f32;
+    Fit {
+        residual: sum / n * step,
+        fitness: inliers as f32 / n,
+        inlier_rmse: if inliers > 0 {
+            libm::sqrtf(sum_sq / inliers as f32) * step
+        } else {
+            0.0
+        },
+    }
+}
+
+/// ICP settings (model units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IcpSettings {
+    /// Most iterations.
+    pub iterations: usize,
+    /// Stop once an update's `||dT - I||_F` is below this.
+    pub tolerance: f32,
+    /// Pairs farther apart than this are left out of the fit.
+    pub max_distance: f32,
+}
+
+/// Point-to-point ICP from `start` (model frame): each iteration pairs
+/// every used source point with its nearest template point within
+/// `max_distance` and applies the rigid motion that best aligns the pairs
+/// (Horn, *Closed-form solution of absolute orientation using unit
+/// quaternions*, JOSA A 1987). Returns the pose and the iterations run;
+/// stops early on the tolerance or when fewer than 3 pairs remain.
+pub fn icp(
+    template: &Template<'_>,
+    subset: &Subset<'_>,
+    start: Pose,
+    settings: &IcpSettings,
+) -> (Pose, usize) {
+    let lim = limit(template, settings.max_distance);
+    let mut pose = start;
+    for done in 1..=settings.iterations {
+        let Some(delta) = icp_step(template, subset, &pose, lim) else {
+            return (pose, done - 1);
+        };
+        pose = pose.then(&delta);
+        if delta.distance_to_identity_squared() < settings.tolerance * settings.tolerance {
+            return (pose, done);
+        }
+    }
+    (pose, settings.iterations)
+}
+
+/// One ICP update (model frame), or `None` with fewer than 3 pairs.
+fn icp_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64) -> Option<Pose> {
+    let map = PointMap::new(subset.frame, pose);
+    let (mut n, mut sp, mut sq) = (0i64, [0i64; 3], [0i64; 3]);
+    let mut spq = [[0i64; 3]; 3];
+    for p in subset.points() {
+        let p = template.quantize(map.apply(*p));
+        let Some(nb) = template.nearest(p, lim + 1) else {
+            continue;
+        };
+        let q = template.point(nb.index);
+        n += 1;
+        for i in 0..3 {
+            sp[i] += p[i] as i64;
+            sq[i] += q[i] as i64;
+            for j in 0..3 {
+                spq[i][j] += p[i] as i64 * q[j] as i64;
+            }
+        }
+    }
+    if n < 3 {
+        return None;
+    }
+    // n^2 x the centred cross-covariance, exact: |n spq| and |sp sq| stay
+    // below 2^62 for n <= 65535 points of at most 2^15 steps.
+    let mut h = [[0f32; 3]; 3];
+    let mut scale = 0f32;
+    for i in 0..3 {
+        for j in 0..3 {
+            h[i][j] = (n * spq[i][j] - sp[i] * sq[j]) as f32;
+            scale = scale.max(libm::fabsf(h[i][j]));
+        }
+    }
+    let rotation = if scale > 0.0 {
+        for row in h.iter_mut() {
+            for v in row.iter_mut() {
+                *v /= scale;
+            }
+        }
+        horn_rotation(&h)
+    } else {
+        Pose::IDENTITY.rotation
+    };
+    let r = Pose {
+        rotation,
+        translation: [0.0; 3],
+    };
+    let nf = n as f32;
+    let mean_p = sp.map(|v| v as f32 / nf);
+    let mean_q = sq.map(|v| v as f32 / nf);
+    let rp = r.transform_point(mean_p);
+    let step = template.step();
+    Some(Pose {
+        rotation,
+        translation: [0, 1, 2].map(|k| (mean_q[k] - rp[k]) * step),
+    })
+}
+
+/// The unit quaternion (`w >= 0`) of the rotation taking the source onto the
+/// template for the cross-covariance `s[i][j] = sum p_i q_j`: the eigenvector
+/// of Horn's symmetric 4x4 matrix with the largest eigenvalue.
+fn horn_rotation(s: &[[f32; 3]; 3]) -> [f32; 4] {
+    let [[xx, xy, xz], [yx, yy, yz], [zx, zy, zz]] = *s;
+    let n = [
+        [xx + yy + zz, yz - zy, zx - xz, xy - yx],
+        [0.0, xx - yy - zz, xy + yx, zx + xz],
+        [0.0, 0.0, -xx + yy - zz, yz + zy],
+        [0.0, 0.0, 0.0, -xx - yy + zz],
+    ];
+    let (_, vectors) = eigen::symmetric(n);
+    let q = vectors[0];
+    let norm = libm::sqrtf(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if !(norm.is_finite() && norm > 0.0) {
+        return Pose::IDENTITY.rotation;
+    }
+    let s = if q[0] < 0.0 { -1.0 / norm } else { 1.0 / norm };
+    q.map(|v| v * s)
+}
+
+/// What the shape of a source says about how well a pose can be determined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Degeneracy {
+    /// All used points (nearly) coincide: no rotation can be recovered.
+    Point,
+    /// The points (nearly) lie on a line: the rotation about it is free.
+    Line,
+}
+
+/// Classifies the spread of the used points (model frame): `Point` when
+/// the largest standard deviation along a principal axis is below
+/// `min_extent`, `Line` when the second is below 1% of the largest.
+pub fn degeneracy(
+    template: &Template<'_>,
+    subset: &Subset<'_>,
+    min_extent: f32,
+) -> Option<Degeneracy> {
+    let map = PointMap::new(subset.frame, &Pose::IDENTITY);
+    let (mut n, mut s, mut ss) = (0i64, [0i64; 3], [[0i64; 3]; 3]);
+    for p in subset.points() {
+        let p = template.quantize(map.apply(*p));
+        n += 1;
+        for i in 0..3 {
+            s[i] += p[i] as i64;
+            for j in 0..3 {
+                ss[i][j] += p[i] as i64 * p[j] as i64;
+            }
+        }
+    }
+    if n == 0 {
+        return Some(Degeneracy::Point);
+    }
+    // n^2 x the covariance, in squared steps.
+    let mut c = [[0f32; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            c[i][j] = (n * ss[i][j] - s[i] * s[j]) as f32;
+        }
+    }
+    let (values, _) = eigen::symmetric(c);
+    let nf = n as f32;
+    let sd = values.map(|v| libm::sqrtf(v.max(0.0)) / nf * template.step());
+    if sd[0] < min_extent {
+        Some(Degeneracy::Point)
+    } else if sd[1] < 0.01 * sd[0] {
+        Some(Degeneracy::Line)
+    } else {
+        None
+    }
+}
+
+/// The result of [`resolve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resolved {
+    /// The chosen pose (model frame).
+    pub pose: Pose,
+    /// Its fit.
+    pub fit: Fit,
+    /// Which start it came from: 0 the given pose, `k` the pose followed by turn `k - 1`.
+    pub hypothesis: usize,
+    /// ICP iterations run from that start.
+    pub icp_iterations: usize,
+}
+
+/// Flip resolution: from `start` and from `start` followed by each of the
+/// first `hypotheses - 1` template turns, refines (when `icp.iterations >
+/// 0`) and scores; keeps the lowest residual (the first on ties).
+pub fn resolve(
+    template: &Template<'_>,
+    subset: &Subset<'_>,
+    start: Pose,
+    hypotheses: usize,
+    icp_settings: &IcpSettings,
+    max_distance: f32,
+) -> Result<Resolved> {
+    let turns = template.turns();
+    let count = hypotheses.clamp(1, 1 + turns.len());
+    let mut best: Option<Resolved> = None;
+    for k in 0..count {
+        let from = match k.checked_sub(1).and_then(|t| turns.get(t)) {
+            Some(&rotation) => start.then(&Pose {
+                rotation,
+                translation: [0.0; 3],
+            }),
+            None => start,
+        };
+        let (pose, icp_iterations) = icp(template, subset, from, icp_settings);
+        let fit = score(template, subset, &pose, max_distance);
+        if !fit.residual.is_finite() {
+            return Err(Error::NonFiniteResult);
+        }
+        if best.is_none_or(|b| fit.residual < b.fit.residual) {
+            best = Some(Resolved {
+                pose,
+                fit,
+                hypothesis: k,
+                icp_iterations,
+            });
+        }
+    }
+    best.ok_or(Error::NonFiniteResult)
+}

@@ -1,0 +1,207 @@
+//! The main job as one call: points -> network -> pose -> check and refine,
+//! returning a [`Registration`] that says how far to trust the pose.
+//!
+//! ```text
+//! source (user units)
+//!   -> frame (blob)         p_model = scale (p - centre)
+//!   -> network passes       PCRNet: 1; i-PCRNet: up to `passes`, composed
+//!   -> hypotheses           the network's pose, then it followed by each template turn
+//!   -> ICP                  point-to-point against the template's points, each hypothesis
+//!   -> residual             lowest wins; fitness, RMSE, degeneracy, saturation
+//!   -> pose (user units)    p_template = R p_source + t
+//! ```
+//!
+//! The same code runs on the device and on the host ([`crate::Int8Model::register`],
+//! [`crate::F32Model::register`]); with the int8 network, every value is
+//! bit-identical between them.
+
+use crate::error::{Error, Result};
+use crate::format::Frame;
+use crate::pose::{self, PointMap, Pose};
+use crate::refine::{self, Degeneracy, IcpSettings, Subset};
+use crate::template::Template;
+
+/// How to register. Distances are in **model units**: the template spans
+/// `[-0.5, 0.5]` along its longest axis, so 0.05 is 5% of its size, and
+/// the settings carry over between objects of any size or unit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Options {
+    /// Network passes (1: PCRNet; more: i-PCRNet, composing the estimates).
+    pub passes: usize,
+    /// i-PCRNet stops once a pass's `||dT - I||_F` is below this (0: never).
+    pub tolerance: f32,
+    /// Starting poses tried by flip resolution: 1 (the network's pose only)
+    /// up to 1 + the turns stored in the blob (clamped).
+    pub hypotheses: usize,
+    /// Most ICP iterations per hypothesis (0: no refinement).
+    pub icp_iterations: usize,
+    /// ICP stops once an update's `||dT - I||_F` is below this.
+    pub icp_tolerance: f32,
+    /// ICP leaves out pairs farther apart than this (model units).
+    pub icp_distance: f32,
+    /// The residual counts a point at most this far from the template
+    /// (model units), and the fitness counts points within it.
+    pub inlier_distance: f32,
+    /// Most source points scored and refined (every k-th point is used).
+    pub max_points: usize,
+    /// A pose is [`Registration::reliable`] when its relative residual is at most this.
+    pub max_residual: f32,
+}
+
+impl Default for Options {
+    /// The recommended device pipeline (see the README for the measurements
+    /// behind each number).
+    fn default() -> Self {
+        Options {
+            passes: 1,
+            tolerance: 0.0,
+            hypotheses: 4,
+            icp_iterations: 30,
+            icp_tolerance: 1e-4,
+            icp_distance: 0.3,
+            inlier_distance: 0.05,
+            max_points: 256,
+            max_residual: 0.02,
+        }
+    }
+}
+
+impl Options {
+    /// The network alone (no turns, no ICP), still scored.
+    pub fn network_only() -> Self {
+        Options {
+            hypotheses: 1,
+            icp_iterations: 0,
+            ..Options::default()
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        let bad = |what| Err(Error::InvalidOption { what });
+        if self.passes == 0 {
+            return bad("passes must be at least 1");
+        }
+        if self.hypotheses == 0 {
+            return bad("hypotheses must be at least 1");
+        }
+        if self.max_points == 0 {
+            return bad("max_points must be at least 1");
+        }
+        let non_negative = |v: f32| v.is_finite() && v >= 0.0;
+        if !non_negative(self.tolerance) || !non_negative(self.icp_tolerance) {
+            return bad("tolerances must be finite and >= 0");
+        }
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        if !positive(self.icp_distance) || !positive(self.inlier_distance) {
+            return bad("distances must be finite and > 0");
+        }
+        if !self.max_residual.is_finite() {
+            return bad("max_residual must be finite");
+        }
+        Ok(())
+    }
+}
+
+/// What a registration found, and how far to trust it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Registration {
+    /// Pose mapping the source onto the template, user units:
+    /// `p_template = R p_source + t`.
+    pub pose: Pose,
+    /// Mean distance from the moved source's points to the template's
+    /// nearest point, each capped at the inlier distance: user units.
+    pub residual: f32,
+    /// The same as a share of the template's size (model units): compare
+    /// it across objects. 0 is a perfect fit; the inlier distance is the worst.
+    pub relative_residual: f32,
+    /// Share of the used source points within the inlier distance (0..=1).
+    pub fitness: f32,
+    /// RMS distance of those inliers, user units.
+    pub inlier_rmse: f32,
+    /// The starting pose that won: 0 the network's, `k` the network's followed by turn `k - 1`.
+    pub hypothesis: usize,
+    /// Network passes run.
+    pub passes: usize,
+    /// ICP iterations run from the winning start.
+    pub icp_iterations: usize,
+    /// int8 values that reached the top of their range (feature entries and
+    /// head activations, summed over passes): clipping that costs accuracy.
+    /// Always 0 on the f32 path.
+    pub saturated: u32,
+    /// The source's shape does not determine a pose.
+    pub degenerate: Option<Degeneracy>,
+    /// Not degenerate, and the relative residual is at most the option's `max_residual`.
+    pub reliable: bool,
+}
+
+/// Standard deviation (model units) below which a source counts as one point.
+const MIN_EXTENT: f32 = 1e-3;
+
+/// Runs the pipeline with `pass`, one network pass on the source moved by a
+/// [`PointMap`], returning the pass's pose (model frame) and its saturation count.
+pub(crate) fn run(
+    frame: &Frame,
+    centre_source: bool,
+    template: &Template<'_>,
+    source: &[[f32; 3]],
+    options: &Options,
+    mut pass: impl FnMut(&PointMap) -> Result<(Pose, u32)>,
+) -> Result<Registration> {
+    options.validate()?;
+    if source.is_empty() {
+        return Err(Error::EmptyCloud);
+    }
+    let start = pose::centring(source, centre_source, frame)?;
+    let mut saturated = 0u32;
+    let (network, passes) = pose::iterate(start, options.passes, options.tolerance, |current| {
+        let (delta, s) = pass(&PointMap::new(*frame, current))?;
+        saturated = saturated.saturating_add(s);
+        Ok(delta)
+    })?;
+    if !finite(&network) {
+        return Err(Error::NonFiniteResult);
+    }
+    let subset = Subset::new(source, *frame, options.max_points);
+    let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
+    let icp = IcpSettings {
+        iterations: options.icp_iterations,
+        tolerance: options.icp_tolerance,
+        max_distance: options.icp_distance,
+    };
+    let r = refine::resolve(
+        template,
+        &subset,
+        network,
+        options.hypotheses,
+        &icp,
+        options.inlier_distance,
+    )?;
+    let pose = frame.pose_to_user(&r.pose);
+    let residual = r.fit.residual / frame.scale;
+    let inlier_rmse = r.fit.inlier_rmse / frame.scale;
+    if !(finite(&pose) && residual.is_finite() && inlier_rmse.is_finite()) {
+        return Err(Error::NonFiniteResult);
+    }
+    Ok(Registration {
+        pose,
+        residual,
+        relative_residual: r.fit.residual,
+        fitness: r.fit.fitness,
+        inlier_rmse,
+        hypothesis: r.hypothesis,
+        passes,
+        icp_iterations: r.icp_iterations,
+        saturated,
+        degenerate,
+        reliable: degenerate.is_none() && r.fit.residual <= options.max_residual,
+    })
+}
+
+fn finite(p: &Pose) -> bool {
+    p.rotation
+        .iter()
+        .chain(&p.translation)
+        .all(|v| v.is_finite())
+}

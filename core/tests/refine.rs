@@ -1,0 +1,180 @@
+//! Checking and refining poses against a template's points: ICP recovers
+//! known transforms, flip resolution picks the right turn, the residual
+//! tells good poses from bad ones, and the frame round-trips user units.
+
+use pcrnet_core::format::Frame;
+use pcrnet_core::pose::Pose;
+use pcrnet_core::refine::{self, Degeneracy, IcpSettings, Subset};
+use pcrnet_core::template::{self, Template};
+use pcrnet_core::testing::SplitMix64;
+
+const STEP: f32 = 1.0 / 16384.0;
+
+/// An asymmetric "L" of 600 points in the model frame (about [-0.5, 0.5]).
+fn ell(seed: u64) -> Vec<[f32; 3]> {
+    let mut rng = SplitMix64(seed);
+    (0..600)
+        .map(|i| {
+            if i % 3 == 0 {
+                [
+                    rng.uniform(-0.5, -0.3),
+                    rng.uniform(-0.5, 0.5),
+                    rng.uniform(-0.1, 0.1),
+                ]
+            } else {
+                [
+                    rng.uniform(-0.5, 0.5),
+                    rng.uniform(-0.5, -0.35),
+                    rng.uniform(-0.1, 0.1),
+                ]
+            }
+        })
+        .collect()
+}
+
+struct Owned {
+    points: Vec<u8>,
+    cells: Vec<u8>,
+}
+
+fn template_of(cloud: &[[f32; 3]], turns: &[[f32; 4]], owned: &mut Owned) -> Template<'static> {
+    let q: Vec<[i16; 3]> = cloud
+        .iter()
+        .map(|p| p.map(|x| (x / STEP).round() as i16))
+        .collect();
+    let (np, nc) = template::build_len(q.len(), 6);
+    owned.points = vec![0; np];
+    owned.cells = vec![0; nc];
+    let cloud = template::build(&q, STEP, 6, turns, &mut owned.points, &mut owned.cells).unwrap();
+    // Leak for a 'static view in tests only.
+    let cloud = pcrnet_core::format::TemplateCloud {
+        points: Box::leak(cloud.points.to_vec().into_boxed_slice()),
+        cells: Box::leak(cloud.cells.to_vec().into_boxed_slice()),
+        ..cloud
+    };
+    Template::new(cloud).unwrap()
+}
+
+fn rotation(axis: [f32; 3], deg: f32) -> Pose {
+    let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+    let h = deg.to_radians() / 2.0;
+    Pose {
+        rotation: [
+            h.cos(),
+            h.sin() * axis[0] / n,
+            h.sin() * axis[1] / n,
+            h.sin() * axis[2] / n,
+        ],
+        translation: [0.0; 3],
+    }
+}
+
+fn angle_deg(a: &Pose, b: &Pose) -> f32 {
+    let d: f32 = a.rotation.iter().zip(b.rotation).map(|(x, y)| x * y).sum();
+    2.0 * d.abs().min(1.0).acos().to_degrees()
+}
+
+#[test]
+fn icp_recovers_a_known_transform() {
+    let cloud = ell(1);
+    let mut owned = Owned {
+        points: vec![],
+        cells: vec![],
+    };
+    let t = template_of(&cloud, &[], &mut owned);
+    // Source: the template moved by the inverse of `truth`, so `truth` maps it back.
+    let mut truth = rotation([0.3, -1.0, 0.5], 12.0);
+    truth.translation = [0.03, -0.02, 0.05];
+    let inv = {
+        let r = Pose {
+            translation: [0.0; 3],
+            ..truth
+        };
+        let conj = Pose {
+            rotation: [
+                r.rotation[0],
+                -r.rotation[1],
+                -r.rotation[2],
+                -r.rotation[3],
+            ],
+            translation: [0.0; 3],
+        };
+        let t = conj.transform_point(truth.translation);
+        Pose {
+            translation: [-t[0], -t[1], -t[2]],
+            ..conj
+        }
+    };
+    let source: Vec<[f32; 3]> = cloud.iter().map(|&p| inv.transform_point(p)).collect();
+    let subset = Subset::new(&source, Frame::IDENTITY, 256);
+    let settings = IcpSettings {
+        iterations: 50,
+        tolerance: 1e-6,
+        max_distance: 0.2,
+    };
+    let (pose, iterations) = refine::icp(&t, &subset, Pose::IDENTITY, &settings);
+    assert!(iterations > 1 && iterations <= 50);
+    assert!(angle_deg(&pose, &truth) < 0.1, "{pose:?} vs {truth:?}");
+    for k in 0..3 {
+        assert!(
+            (pose.translation[k] - truth.translation[k]).abs() < 1e-3,
+            "{pose:?}"
+        );
+    }
+    let fit = refine::score(&t, &subset, &pose, 0.05);
+    assert!(fit.residual < 1e-3 && fit.fitness == 1.0, "{fit:?}");
+    // The identity is a worse fit.
+    let off = refine::score(&t, &subset, &Pose::IDENTITY, 0.05);
+    assert!(off.residual > 10.0 * fit.residual, "{off:?}");
+}
+
+#[test]
+fn flip_resolution_picks_the_turn_that_fits() {
+    let cloud = ell(2);
+    let mut owned = Owned {
+        points: vec![],
+        cells: vec![],
+    };
+    let half_z = [0.0, 0.0, 0.0, 1.0];
+    let half_x = [0.0, 1.0, 0.0, 0.0];
+    let t = template_of(&cloud, &[half_x, half_z], &mut owned);
+    // The source is the template turned half about z: the network's
+    // "identity" is a flip; turn 2 (half about z) undoes it.
+    let flip = Pose {
+        rotation: half_z,
+        translation: [0.0; 3],
+    };
+    let source: Vec<[f32; 3]> = cloud.iter().map(|&p| flip.transform_point(p)).collect();
+    let subset = Subset::new(&source, Frame::IDENTITY, 300);
+    let settings = IcpSettings {
+        iterations: 10,
+        tolerance: 1e-5,
+        max_distance: 0.1,
+    };
+    let one = refine::resolve(&t, &subset, Pose::IDENTITY, 1, &settings, 0.05).unwrap();
+    let three = refine::resolve(&t, &subset, Pose::IDENTITY, 3, &settings, 0.05).unwrap();
+    assert_eq!(three.hypothesis, 2);
+    assert!(three.fit.residual < 1e-3, "{three:?}");
+    assert!(one.fit.residual > 10.0 * three.fit.residual, "{one:?}");
+    assert!(angle_deg(&three.pose, &flip) < 0.1);
+}
+
+#[test]
+fn degenerate_sources_are_flagged() {
+    let cloud = ell(3);
+    let mut owned = Owned {
+        points: vec![],
+        cells: vec![],
+    };
+    let t = template_of(&cloud, &[], &mut owned);
+    let point = vec![[0.1f32, 0.2, 0.3]; 40];
+    let line: Vec<[f32; 3]> = (0..40).map(|i| [i as f32 * 0.01, 0.2, 0.3]).collect();
+    for (cloud, expected) in [
+        (&point, Some(Degeneracy::Point)),
+        (&line, Some(Degeneracy::Line)),
+        (&cloud, None),
+    ] {
+        let subset = Subset::new(cloud, Frame::IDENTITY, 256);
+        assert_eq!(refine::degeneracy(&t, &subset, 1e-3), expected);
+    }
+}

@@ -1,0 +1,266 @@
+//! What a blob records about its template (format v3), built on the host:
+//! the frame (how the template's units and axes map to the model frame),
+//! the subsampled template points with their search grid, the symmetry turns
+//! for flip resolution, and the template's feature. One place for all of it:
+//! `export`, `quantize` and `register` with a template file go through
+//! [`Reference`] and [`bind`].
+
+use nalgebra::{Matrix3, SymmetricEigen};
+use pcrnet_core::format::{
+    self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, TemplateCloud, write_blob,
+};
+use pcrnet_core::template::{self, MAX_GRID};
+use pcrnet_core::{F32Model, Frame, Int8Model, MAX_TILE};
+
+use crate::shapes::frame_of;
+use crate::train::data::farthest_point_sampling;
+
+/// Model units per int16 step of stored template points: the template fills
+/// `[-0.5, 0.5]^3`, and a moved source point stays representable up to
+/// `+-2` (beyond that it is clamped, far outside any inlier distance).
+pub const TEMPLATE_STEP: f32 = 1.0 / 16384.0;
+/// Template points stored by default: 6 bytes each (3 KB of flash).
+pub const DEFAULT_TEMPLATE_POINTS: usize = 512;
+
+/// Why a template cannot be recorded.
+#[derive(Debug, thiserror::Error)]
+pub enum TemplateError {
+    /// Empty, non-finite, or all points equal.
+    #[error(
+        "the template has no extent (empty, non-finite, or every point equal): it cannot define a frame; give a cloud of the object's surface"
+    )]
+    NoExtent,
+    /// The point count asked for is outside what a blob holds.
+    #[error("--template-points must be between 1 and 65535 (got {0})")]
+    PointCount(usize),
+    /// `pcrnet-core` refused the result.
+    #[error("pcrnet-core: {0}")]
+    Core(#[from] pcrnet_core::Error),
+}
+
+/// A template as a blob records it (owned bytes of a [`TemplateCloud`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reference {
+    /// User units -> model frame.
+    pub frame: Frame,
+    /// The template as given (user units): its feature is computed from these.
+    pub points: Vec<[f32; 3]>,
+    point_bytes: Vec<u8>,
+    cell_bytes: Vec<u8>,
+    grid: u8,
+    origin: [i16; 3],
+    cell: u16,
+    turns: Vec<[f32; 4]>,
+}
+
+impl Reference {
+    /// Records `template` (user units): its frame, `stored` of its points
+    /// (farthest-point subsampled in the model frame, from point 0) on the
+    /// int16 grid with a search grid of about 2 points per cell, and the
+    /// half and quarter turns about its principal axes.
+    pub fn new(template: &[[f32; 3]], stored: usize) -> Result<Self, TemplateError> {
+        if !(1..=template::MAX_POINTS).contains(&stored) {
+            return Err(TemplateError::PointCount(stored));
+        }
+        let frame = frame_of(template).ok_or(TemplateError::NoExtent)?;
+        let model: Vec<[f32; 3]> = template.iter().map(|&p| frame.to_model(p)).collect();
+        let kept = farthest_point_sampling(&model, stored, 0);
+        let quantized: Vec<[i16; 3]> = kept
+            .iter()
+            .map(|p| p.map(|x| (x / TEMPLATE_STEP).round().clamp(-32767.0, 32767.0) as i16))
+            .collect();
+        let grid = ((kept.len() as f64 / 2.0).cbrt().round() as u8).clamp(1, MAX_GRID);
+        let turns = principal_turns(&model);
+        let (np, nc) = template::build_len(quantized.len(), grid);
+        let (mut point_bytes, mut cell_bytes) = (vec![0u8; np], vec![0u8; nc]);
+        let (origin, cell) = {
+            let c = template::build(
+                &quantized,
+                TEMPLATE_STEP,
+                grid,
+                &turns,
+                &mut point_bytes,
+                &mut cell_bytes,
+            )?;
+            (c.origin, c.cell)
+        };
+        Ok(Reference {
+            frame,
+            points: template.to_vec(),
+            point_bytes,
+            cell_bytes,
+            grid,
+            origin,
+            cell,
+            turns,
+        })
+    }
+
+    /// The view a payload stores.
+    pub fn cloud(&self) -> TemplateCloud<'_> {
+        TemplateCloud {
+            step: TEMPLATE_STEP,
+            points: &self.point_bytes,
+            grid: self.grid,
+            origin: self.origin,
+            cell: self.cell,
+            cells: &self.cell_bytes,
+            turns: heapless::Vec::from_slice(&self.turns).unwrap_or_default(),
+        }
+    }
+
+    /// The template in the model frame (`frame.to_model` of every point,
+    /// exactly as `pcrnet-core` moves a source).
+    pub fn normalised(&self) -> Vec<[f32; 3]> {
+        self.points
+            .iter()
+            .map(|&p| self.frame.to_model(p))
+            .collect()
+    }
+
+    /// Flash the template block takes in a blob (points, cells, turns, frame).
+    pub fn flash_bytes(&self) -> usize {
+        self.point_bytes.len() + self.cell_bytes.len() + 16 * self.turns.len() + 16
+    }
+}
+
+/// Half turns then quarter turns (+-90 degrees) about the principal axes
+/// of `model` (the template in the model frame, centroid at the origin),
+/// largest variance first: unit quaternions `[w, x, y, z]`.
+fn principal_turns(model: &[[f32; 3]]) -> Vec<[f32; 4]> {
+    let n = model.len().max(1) as f64;
+    let mut c = Matrix3::<f64>::zeros();
+    for p in model {
+        for i in 0..3 {
+            for j in 0..3 {
+                c[(i, j)] += p[i] as f64 * p[j] as f64 / n;
+            }
+        }
+    }
+    let eig = SymmetricEigen::new(c);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let axes: Vec<[f32; 3]> = order
+        .iter()
+        .map(|&k| {
+            let v = eig.eigenvectors.column(k);
+            [v[0] as f32, v[1] as f32, v[2] as f32]
+        })
+        .collect();
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    let mut turns: Vec<[f32; 4]> = axes.iter().map(|a| [0.0, a[0], a[1], a[2]]).collect();
+    for a in &axes {
+        turns.push([h, h * a[0], h * a[1], h * a[2]]);
+        turns.push([h, -h * a[0], -h * a[1], -h * a[2]]);
+    }
+    turns.truncate(MAX_TURNS);
+    turns
+}
+
+/// Writes an int8 blob from `payload` with `reference` as its template:
+/// frame, template points and the template feature (computed by the int8
+/// encoder itself, as the device would).
+pub fn int8_blob(
+    payload: &Int8Payload<'_>,
+    reference: &Reference,
+) -> Result<Vec<u8>, TemplateError> {
+    let zeros = vec![0u8; payload.arch.feature_dim()];
+    let draft = Int8Payload {
+        frame: reference.frame,
+        template: reference.cloud(),
+        template_feature: &zeros,
+        ..payload.clone()
+    };
+    let model = Int8Model::from_payload(draft.clone())?;
+    let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+    let feature: Vec<u8> = model
+        .encode(&reference.points, &mut scratch)?
+        .iter()
+        .map(|&v| v as u8)
+        .collect();
+    let done = Int8Payload {
+        template_feature: &feature,
+        ..draft
+    };
+    let mut out = vec![0u8; format::blob_len(&done)?];
+    write_blob(ModelKind::Int8, &done, &mut out)?;
+    Int8Model::from_bytes(&out)?;
+    Ok(out)
+}
+
+/// Writes an f32 blob from `payload` with `reference` as its template (as [`int8_blob`]).
+pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u8>, TemplateError> {
+    let zeros = vec![0u8; 4 * payload.arch.feature_dim()];
+    let draft = F32Payload {
+        frame: reference.frame,
+        template: reference.cloud(),
+        template_feature: &zeros,
+        ..payload.clone()
+    };
+    let model = F32Model::from_payload(draft.clone())?;
+    let mut scratch = vec![0f32; model.scratch_len()];
+    let feature: Vec<u8> = model
+        .network()
+        .encode(&reference.normalised(), &mut scratch)?
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let done = F32Payload {
+        template_feature: &feature,
+        ..draft
+    };
+    let mut out = vec![0u8; format::blob_len(&done)?];
+    write_blob(ModelKind::F32, &done, &mut out)?;
+    F32Model::from_bytes(&out)?;
+    Ok(out)
+}
+
+/// The same model with another template (user units): for registering
+/// against any cloud with a trained blob of either kind.
+pub fn bind(blob: &[u8], template: &[[f32; 3]], stored: usize) -> Result<Vec<u8>, TemplateError> {
+    let reference = Reference::new(template, stored)?;
+    match Int8Model::from_bytes(blob) {
+        Ok(m) => int8_blob(m.payload(), &reference),
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            let payload: F32Payload<'_> = format::decode(format::open(blob, ModelKind::F32)?)?;
+            f32_blob(&payload, &reference)
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shapes::{Shape, sample};
+
+    #[test]
+    fn records_frame_points_and_turns() {
+        let unit = sample(Shape::Ell, 600, 2);
+        let metres: Vec<[f32; 3]> = unit
+            .iter()
+            .map(|p| [p[0] * 3.0 + 100.0, p[1] * 3.0 - 50.0, p[2] * 3.0 + 7.0])
+            .collect();
+        let r = Reference::new(&metres, 256).unwrap();
+        assert!((r.frame.scale - 1.0 / 3.0).abs() < 1e-3, "{:?}", r.frame);
+        let t = template::Template::new(r.cloud()).unwrap();
+        assert_eq!(t.len(), 256);
+        assert_eq!(t.turns().len(), 9);
+        // Stored points lie in the unit box of the model frame.
+        for i in 0..t.len() {
+            assert!(
+                t.point(i)
+                    .iter()
+                    .all(|&v| (v as f32 * TEMPLATE_STEP).abs() <= 0.5001)
+            );
+        }
+        assert!(matches!(
+            Reference::new(&[[0.1, 0.1, 0.1]; 3], 16),
+            Err(TemplateError::NoExtent)
+        ));
+        assert!(matches!(
+            Reference::new(&metres, 0),
+            Err(TemplateError::PointCount(0))
+        ));
+    }
+}
