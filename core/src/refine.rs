@@ -282,20 +282,32 @@ pub struct Resolved {
     pub icp_iterations: usize,
 }
 
+/// Hypotheses that go on to full ICP after screening (see [`resolve`]).
+pub const FINALISTS: usize = 2;
+
 /// Flip resolution: from `start` and from `start` followed by each of the
-/// first `hypotheses - 1` template turns, refines (when `icp.iterations >
-/// 0`) and scores; keeps the lowest residual (the first on ties).
+/// first `hypotheses - 1` template turns, runs ICP for `screen` iterations
+/// and scores each; the [`FINALISTS`] lowest residuals then continue ICP up
+/// to `icp.iterations` in all, and the lowest final residual wins (the
+/// first on ties). With `screen >= icp.iterations` every hypothesis gets the
+/// full ICP.
 pub fn resolve(
     template: &Template<'_>,
     subset: &Subset<'_>,
     start: Pose,
     hypotheses: usize,
+    screen: usize,
     icp_settings: &IcpSettings,
     max_distance: f32,
 ) -> Result<Resolved> {
     let turns = template.turns();
     let count = hypotheses.clamp(1, 1 + turns.len());
-    let mut best: Option<Resolved> = None;
+    let first = IcpSettings {
+        iterations: screen.min(icp_settings.iterations),
+        ..*icp_settings
+    };
+    // The finalists so far, best first.
+    let mut finalists: [Option<Resolved>; FINALISTS] = [None; FINALISTS];
     for k in 0..count {
         let from = match k.checked_sub(1).and_then(|t| turns.get(t)) {
             Some(&rotation) => start.then(&Pose {
@@ -304,18 +316,50 @@ pub fn resolve(
             }),
             None => start,
         };
-        let (pose, icp_iterations) = icp(template, subset, from, icp_settings);
+        let (pose, icp_iterations) = icp(template, subset, from, &first);
         let fit = score(template, subset, &pose, max_distance);
         if !fit.residual.is_finite() {
             return Err(Error::NonFiniteResult);
         }
-        if best.is_none_or(|b| fit.residual < b.fit.residual) {
-            best = Some(Resolved {
-                pose,
-                fit,
-                hypothesis: k,
-                icp_iterations,
-            });
+        let mut candidate = Some(Resolved {
+            pose,
+            fit,
+            hypothesis: k,
+            icp_iterations,
+        });
+        // Insert, keeping the order (a later equal residual goes after).
+        for slot in finalists.iter_mut() {
+            match (*slot, candidate) {
+                (None, _) => {
+                    *slot = candidate.take();
+                }
+                (Some(held), Some(c)) if c.fit.residual < held.fit.residual => {
+                    *slot = Some(c);
+                    candidate = Some(held);
+                }
+                _ => {}
+            }
+        }
+    }
+    let rest = IcpSettings {
+        iterations: icp_settings.iterations.saturating_sub(first.iterations),
+        ..*icp_settings
+    };
+    let mut best: Option<Resolved> = None;
+    for f in finalists.iter().flatten() {
+        let mut r = *f;
+        // Screening stopped on its own (converged, or too few pairs): done.
+        if rest.iterations > 0 && r.icp_iterations == first.iterations {
+            let (pose, more) = icp(template, subset, r.pose, &rest);
+            r.fit = score(template, subset, &pose, max_distance);
+            r.pose = pose;
+            r.icp_iterations += more;
+            if !r.fit.residual.is_finite() {
+                return Err(Error::NonFiniteResult);
+            }
+        }
+        if best.is_none_or(|b| r.fit.residual < b.fit.residual) {
+            best = Some(r);
         }
     }
     best.ok_or(Error::NonFiniteResult)

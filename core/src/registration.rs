@@ -34,7 +34,10 @@ pub struct Options {
     /// Starting poses tried by flip resolution: 1 (the network's pose only)
     /// up to 1 + the turns stored in the blob (clamped).
     pub hypotheses: usize,
-    /// Most ICP iterations per hypothesis (0: no refinement).
+    /// ICP iterations every hypothesis gets before the two best (lowest
+    /// residual) go on to `icp_iterations` (see [`crate::refine::resolve`]).
+    pub screen_iterations: usize,
+    /// Most ICP iterations in all for a finalist (0: no refinement).
     pub icp_iterations: usize,
     /// ICP stops once an update's `||dT - I||_F` is below this.
     pub icp_tolerance: f32,
@@ -56,9 +59,10 @@ impl Default for Options {
         Options {
             passes: 1,
             tolerance: 0.0,
-            hypotheses: 4,
-            icp_iterations: 30,
-            icp_tolerance: 1e-4,
+            hypotheses: 10,
+            screen_iterations: 50,
+            icp_iterations: 50,
+            icp_tolerance: 1e-3,
             icp_distance: 0.3,
             inlier_distance: 0.05,
             max_points: 256,
@@ -175,6 +179,7 @@ pub(crate) fn run(
         &subset,
         network,
         options.hypotheses,
+        options.screen_iterations,
         &icp,
         options.inlier_distance,
     )?;

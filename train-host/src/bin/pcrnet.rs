@@ -117,8 +117,20 @@ enum Command {
     },
 }
 
-fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+/// Errors print as one chain of messages (no backtrace, whatever
+/// `RUST_BACKTRACE` says) and exit with status 1.
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse().command) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(command: Command) -> anyhow::Result<()> {
+    match command {
         Command::Inspect { model } => {
             let blob =
                 std::fs::read(&model).with_context(|| format!("reading {}", model.display()))?;

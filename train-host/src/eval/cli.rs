@@ -93,9 +93,17 @@ pub struct MethodOptions {
     /// and the half turns about the template's principal axes).
     #[arg(long)]
     pub hypotheses: Option<usize>,
-    /// Most ICP iterations per hypothesis of the device pipeline (0: none).
+    /// ICP iterations every hypothesis of the device pipeline gets before
+    /// the two best go on.
+    #[arg(long)]
+    pub screen_iterations: Option<usize>,
+    /// Most ICP iterations of the device pipeline in all (0: no refinement).
     #[arg(long)]
     pub icp_iterations: Option<usize>,
+    /// Most source points the device pipeline scores and refines (every
+    /// k-th point is used).
+    #[arg(long)]
+    pub max_points: Option<usize>,
     /// Device ICP leaves out pairs farther apart than this, as a share of
     /// the template's size.
     #[arg(long)]
@@ -118,6 +126,8 @@ impl MethodOptions {
         m.tolerance = self.tolerance.unwrap_or(m.tolerance);
         m.hypotheses = self.hypotheses.unwrap_or(m.hypotheses);
         m.icp_iterations = self.icp_iterations.unwrap_or(m.icp_iterations);
+        m.screen_iterations = self.screen_iterations.unwrap_or(m.screen_iterations);
+        m.max_points = self.max_points.unwrap_or(m.max_points);
         m.icp_distance = self.icp_distance.unwrap_or(m.icp_distance);
         m
     }
@@ -278,6 +288,23 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
         println!(
             "success (rot <= {}°, trans <= {}): {:.3}",
             x.rot_deg, x.trans, x.ratio
+        );
+    }
+    let over_30 = s.pairs.iter().filter(|p| p.rot_deg > 30.0).count();
+    println!(
+        "rotation errors above 30°: {over_30} ({:.1}%)",
+        100.0 * over_30 as f64 / m.count.max(1) as f64
+    );
+    if let Some(c) = &s.confidence {
+        println!(
+            "confidence ({} good below {}°, {} bad): residual AUROC {}; flagged unreliable: {:.1}% of bad, {:.1}% of good; {:.1}% of reliable ones are bad",
+            c.good,
+            c.good_below_deg,
+            c.bad,
+            c.auroc.map_or("n/a".into(), |a| format!("{a:.3}")),
+            100.0 * c.bad_flagged,
+            100.0 * c.good_flagged,
+            100.0 * c.reliable_but_bad
         );
     }
     if let Some(t) = m.time_ms {

@@ -56,9 +56,15 @@ pub struct Method {
     /// Starting poses of the device pipeline (1 + template turns tried).
     #[serde(default = "default_hypotheses")]
     pub hypotheses: usize,
-    /// Most ICP iterations per hypothesis of the device pipeline.
+    /// Most ICP iterations of the device pipeline.
     #[serde(default = "default_icp_iterations")]
     pub icp_iterations: usize,
+    /// ICP iterations of every hypothesis before the two best go on.
+    #[serde(default = "default_screen_iterations")]
+    pub screen_iterations: usize,
+    /// Most source points the device pipeline scores and refines.
+    #[serde(default = "default_max_points")]
+    pub max_points: usize,
     /// Device ICP pair distance (model units: share of the template's size).
     #[serde(default = "default_icp_distance")]
     pub icp_distance: f32,
@@ -70,6 +76,14 @@ fn default_hypotheses() -> usize {
 
 fn default_icp_iterations() -> usize {
     pcrnet_core::Options::default().icp_iterations
+}
+
+fn default_screen_iterations() -> usize {
+    pcrnet_core::Options::default().screen_iterations
+}
+
+fn default_max_points() -> usize {
+    pcrnet_core::Options::default().max_points
 }
 
 fn default_icp_distance() -> f32 {
@@ -93,6 +107,8 @@ impl Method {
             tolerance: ITERATIVE_TOLERANCE,
             hypotheses: default_hypotheses(),
             icp_iterations: default_icp_iterations(),
+            screen_iterations: default_screen_iterations(),
+            max_points: default_max_points(),
             icp_distance: default_icp_distance(),
         }
     }
@@ -108,6 +124,8 @@ impl Method {
             },
             hypotheses: self.hypotheses,
             icp_iterations: self.icp_iterations,
+            screen_iterations: self.screen_iterations,
+            max_points: self.max_points,
             icp_distance: self.icp_distance,
             ..pcrnet_core::Options::default()
         }

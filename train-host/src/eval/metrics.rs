@@ -247,3 +247,110 @@ mod tests {
         assert_eq!(s.count, 4);
     }
 }
+
+/// How well a confidence score separates good registrations from bad ones.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Confidence {
+    /// Registrations counted good (rotation error below [`Confidence::good_below_deg`]).
+    pub good: usize,
+    /// The others.
+    pub bad: usize,
+    /// The rotation error (degrees) below which a registration is good.
+    pub good_below_deg: f64,
+    /// Area under the ROC curve of "residual ranks good below bad": the
+    /// probability that a random good registration has a lower residual
+    /// than a random bad one (ties count half). `None` without both kinds.
+    pub auroc: Option<f64>,
+    /// Share of bad registrations flagged unreliable.
+    pub bad_flagged: f64,
+    /// Share of good registrations flagged unreliable (false alarms).
+    pub good_flagged: f64,
+    /// Share of registrations flagged reliable that are bad.
+    pub reliable_but_bad: f64,
+}
+
+impl Confidence {
+    /// From per-registration rotation errors, residuals and reliability flags.
+    pub fn of(rot_deg: &[f64], residual: &[f64], reliable: &[bool], good_below_deg: f64) -> Self {
+        let good: Vec<f64> = rot_deg
+            .iter()
+            .zip(residual)
+            .filter(|(e, _)| **e < good_below_deg)
+            .map(|(_, r)| *r)
+            .collect();
+        let bad: Vec<f64> = rot_deg
+            .iter()
+            .zip(residual)
+            .filter(|(e, _)| **e >= good_below_deg)
+            .map(|(_, r)| *r)
+            .collect();
+        let auroc = (!good.is_empty() && !bad.is_empty()).then(|| {
+            let mut wins = 0.0;
+            for g in &good {
+                for b in &bad {
+                    wins += if g < b {
+                        1.0
+                    } else if g == b {
+                        0.5
+                    } else {
+                        0.0
+                    };
+                }
+            }
+            wins / (good.len() * bad.len()) as f64
+        });
+        let share = |num: usize, den: usize| {
+            if den == 0 {
+                0.0
+            } else {
+                num as f64 / den as f64
+            }
+        };
+        let flagged = |want_good: bool| {
+            rot_deg
+                .iter()
+                .zip(reliable)
+                .filter(|(e, r)| (**e < good_below_deg) == want_good && !**r)
+                .count()
+        };
+        let reliable_count = reliable.iter().filter(|r| **r).count();
+        let reliable_bad = rot_deg
+            .iter()
+            .zip(reliable)
+            .filter(|(e, r)| **e >= good_below_deg && **r)
+            .count();
+        Confidence {
+            good: good.len(),
+            bad: bad.len(),
+            good_below_deg,
+            auroc,
+            bad_flagged: share(flagged(false), bad.len()),
+            good_flagged: share(flagged(true), good.len()),
+            reliable_but_bad: share(reliable_bad, reliable_count),
+        }
+    }
+}
+
+#[cfg(test)]
+mod confidence_tests {
+    use super::*;
+
+    #[test]
+    fn auroc_and_flag_rates() {
+        // Good: errors 1, 2 with residuals 0.1, 0.3; bad: 40, 90 with 0.2, 0.5.
+        let c = Confidence::of(
+            &[1.0, 40.0, 2.0, 90.0],
+            &[0.1, 0.2, 0.3, 0.5],
+            &[true, true, false, false],
+            5.0,
+        );
+        assert_eq!((c.good, c.bad), (2, 2));
+        // Pairs (g, b): (0.1,0.2) (0.1,0.5) (0.3,0.5) won, (0.3,0.2) lost.
+        assert_eq!(c.auroc, Some(0.75));
+        assert_eq!(
+            (c.bad_flagged, c.good_flagged, c.reliable_but_bad),
+            (0.5, 0.5, 0.5)
+        );
+        assert_eq!(Confidence::of(&[1.0], &[0.1], &[true], 5.0).auroc, None);
+    }
+}

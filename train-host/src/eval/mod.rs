@@ -48,6 +48,15 @@ pub struct PairScore {
     pub ms: f64,
     /// Passes, steps or iterations run.
     pub iterations: usize,
+    /// The device pipeline's relative residual (share of the template's size).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual: Option<f64>,
+    /// The device pipeline's verdict.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reliable: Option<bool>,
+    /// The device pipeline's winning hypothesis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hypothesis: Option<usize>,
 }
 
 /// A method's scores on a set of pairs.
@@ -63,7 +72,15 @@ pub struct MethodScore {
     pub pairs: Vec<PairScore>,
     /// Registrations that failed (scored as the identity pose), with why.
     pub failures: Vec<String>,
+    /// How well the device pipeline's residual separates good registrations
+    /// (rotation error below 5 degrees) from bad ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<metrics::Confidence>,
 }
+
+/// Rotation error (degrees) below which a registration counts as good when
+/// judging the confidence (the and the success criterion's 5 degrees).
+pub const GOOD_BELOW_DEG: f64 = 5.0;
 
 /// Why a pair could not be registered.
 #[derive(Debug, thiserror::Error)]
@@ -95,9 +112,9 @@ pub fn score(
     type Scored = (PairScore, Option<Precision>, Option<String>);
     let one = |(index, p): (usize, &Pair)| -> Result<Scored, ScoreError> {
         let started = std::time::Instant::now();
-        let (pose, iterations, seconds, precision, failure) =
+        let (pose, iterations, seconds, precision, check, failure) =
             match methods::run(method, blob, Some(&p.template), &p.source) {
-                Ok(o) => (o.pose, o.iterations, o.seconds, o.precision, None),
+                Ok(o) => (o.pose, o.iterations, o.seconds, o.precision, o.check, None),
                 Err(error @ methods::MethodError::NoModel(_)) => {
                     return Err(ScoreError {
                         index,
@@ -110,6 +127,7 @@ pub fn score(
                     0,
                     started.elapsed().as_secs_f64(),
                     None,
+                    None,
                     Some(format!("pair {index}: {e}")),
                 ),
             };
@@ -119,6 +137,9 @@ pub fn score(
                 trans: metrics::translation_error(&pose.translation, &p.t_gt),
                 ms: seconds * 1e3,
                 iterations,
+                residual: check.map(|c| c.relative_residual as f64),
+                reliable: check.map(|c| c.reliable),
+                hypothesis: check.map(|c| c.hypothesis),
             },
             precision,
             failure,
@@ -143,11 +164,22 @@ pub fn score(
     let rot: Vec<f64> = scores.iter().map(|s| s.rot_deg).collect();
     let trans: Vec<f64> = scores.iter().map(|s| s.trans).collect();
     let secs: Vec<f64> = scores.iter().map(|s| s.ms / 1e3).collect();
+    // A failed registration has no residual: it counts as unreliable with
+    // the worst residual.
+    let confidence = scores.iter().any(|s| s.residual.is_some()).then(|| {
+        let residual: Vec<f64> = scores
+            .iter()
+            .map(|s| s.residual.unwrap_or(f64::INFINITY))
+            .collect();
+        let reliable: Vec<bool> = scores.iter().map(|s| s.reliable.unwrap_or(false)).collect();
+        metrics::Confidence::of(&rot, &residual, &reliable, GOOD_BELOW_DEG)
+    });
     Ok(MethodScore {
         method: method.name(precision),
         model: model.map(|(n, _)| n.to_string()),
         summary: metrics::Summary::of(&rot, &trans, Some(&secs)),
         pairs: scores,
         failures,
+        confidence,
     })
 }
