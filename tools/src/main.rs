@@ -16,14 +16,16 @@ cargo xtask <command>
                 firmware crates), docs, core for thumbv7em-none-eabihf,
                 the QEMU harness, then the host tests
   demo          the main job: register the shipped source with the trained
-                embedded default (int8), extra arguments go to `pcrnet register`
+                embedded default (int8) through the device pipeline, and say
+                whether the pose is reliable; extra arguments go to
+                `pcrnet register`
   qemu-test     run core on an emulated Cortex-M4F and compare every output
                 with the host bit for bit; then prove a changed rounding on
                 the device is caught
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
   bench         host benchmarks (criterion): encoder throughput, training step
-  results [DATA] run the paper's six experiments on DATA (default
+  results [DATA] run the paper's six experiments and `trust` on DATA (default
                 ../shared/data; trains the models they need into
                 target/experiments) and regenerate RESULTS.md
   help          this text
@@ -234,11 +236,12 @@ fn results(data: &str) -> Result<(), String> {
 }
 
 /// The main job on the embedded default: register the shipped source onto
-/// the shipped template with the trained int8 model (the device's path).
+/// the template stored in the trained int8 model, with the device pipeline
+/// (network, flip hypotheses, ICP, residual: what the firmware runs, bit
+/// for bit), and say whether the pose can be trusted.
 fn demo(extra: &[String]) -> Result<(), String> {
     let mut args = vec![
         "register",
-        "models/embedded-default-template.xyz",
         "models/embedded-default-source.xyz",
         "--model",
         "models/embedded-default-int8.pcrn",

@@ -39,13 +39,14 @@ use crate::train::export::{F32_BLOB, INT8_BLOB};
 pub const POINTS: usize = 512;
 
 /// The experiment names, in order.
-pub const EXPERIMENTS: [&str; 6] = [
+pub const EXPERIMENTS: [&str; 7] = [
     "generalisation",
     "noise",
     "partial",
     "sparse",
     "speed",
     "iterations",
+    "trust",
 ];
 
 /// How a model used by the experiments is trained: `pcrnet train --data
@@ -249,7 +250,7 @@ fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
 }
 
 /// Makes (or reloads and checks) pair set `name`.
-fn pair_set(ctx: &Context, name: &str, spec: PairSetSpec) -> anyhow::Result<Vec<Pair>> {
+pub(super) fn pair_set(ctx: &Context, name: &str, spec: PairSetSpec) -> anyhow::Result<Vec<Pair>> {
     let path = ctx.work.join("pairs").join(format!("{name}.json"));
     let shapes = spec.load_shapes()?;
     let set = if path.is_file() {
@@ -278,11 +279,20 @@ fn pair_set(ctx: &Context, name: &str, spec: PairSetSpec) -> anyhow::Result<Vec<
     Ok(set.materialise(&shapes)?)
 }
 
-fn modelnet10(ctx: &Context, classes: Option<&[&str]>, pairs: PairConfig) -> PairSetSpec {
+pub(super) fn modelnet10(
+    ctx: &Context,
+    classes: Option<&[&str]>,
+    pairs: PairConfig,
+) -> PairSetSpec {
     folder(ctx, "ModelNet10", classes, pairs)
 }
 
-fn folder(ctx: &Context, dir: &str, classes: Option<&[&str]>, pairs: PairConfig) -> PairSetSpec {
+pub(super) fn folder(
+    ctx: &Context,
+    dir: &str,
+    classes: Option<&[&str]>,
+    pairs: PairConfig,
+) -> PairSetSpec {
     PairSetSpec {
         shapes: Shapes::Folder {
             root: ctx.data.join(dir),
@@ -365,17 +375,17 @@ pub struct Report {
 }
 
 /// Collects an experiment's results as it runs.
-struct Recorder<'a> {
-    ctx: &'a Context,
+pub(super) struct Recorder<'a> {
+    pub(super) ctx: &'a Context,
     name: &'static str,
     runs: Vec<Run>,
-    raw: Vec<(String, MethodScore)>,
+    pub(super) raw: Vec<(String, MethodScore)>,
     plots: Vec<String>,
     models: Vec<(String, String)>,
 }
 
 impl<'a> Recorder<'a> {
-    fn new(ctx: &'a Context, name: &'static str) -> Self {
+    pub(super) fn new(ctx: &'a Context, name: &'static str) -> Self {
         Recorder {
             ctx,
             name,
@@ -397,7 +407,7 @@ impl<'a> Recorder<'a> {
     }
 
     /// Scores `method` on `pairs`, records it and returns its summary.
-    fn score(
+    pub(super) fn score(
         &mut self,
         set: &str,
         method: Method,
@@ -429,7 +439,7 @@ impl<'a> Recorder<'a> {
         Ok(summary)
     }
 
-    fn plot(&mut self, stem: &str, chart: &Chart) -> anyhow::Result<()> {
+    pub(super) fn plot(&mut self, stem: &str, chart: &Chart) -> anyhow::Result<()> {
         std::fs::create_dir_all(&self.ctx.results)?;
         let name = format!("{}-{stem}", self.name);
         draw(chart, &self.ctx.results.join(&name))?;
@@ -437,7 +447,7 @@ impl<'a> Recorder<'a> {
         Ok(())
     }
 
-    fn finish(
+    pub(super) fn finish(
         self,
         title: &str,
         setup: Vec<String>,
@@ -482,7 +492,7 @@ impl<'a> Recorder<'a> {
     }
 }
 
-fn label(method: &str, model: Option<&str>) -> String {
+pub(super) fn label(method: &str, model: Option<&str>) -> String {
     match model {
         Some(m) => format!("{method} ({m})"),
         None => method.to_string(),
@@ -574,7 +584,7 @@ fn machine() -> String {
 }
 
 /// A success-ratio chart (rotation threshold 0 to `max_deg`).
-fn success_chart(title: &str, runs: &[&MethodScore], max_deg: f64) -> Chart {
+pub(super) fn success_chart(title: &str, runs: &[&MethodScore], max_deg: f64) -> Chart {
     Chart {
         title: title.to_string(),
         x_label: "rotation error threshold (degrees)".into(),
@@ -652,6 +662,7 @@ pub fn run_experiment(ctx: &Context, name: &str) -> anyhow::Result<Report> {
         "sparse" => sparse(ctx),
         "speed" => speed(ctx),
         "iterations" => iterations(ctx),
+        "trust" => super::trust::trust(ctx),
         other => anyhow::bail!(
             "unknown experiment {other} (one of {})",
             EXPERIMENTS.join(", ")

@@ -11,6 +11,7 @@ pub mod metrics;
 pub mod pairs;
 pub mod plot;
 pub mod pointnetlk;
+pub mod trust;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use pcrnet_core::Pose;

@@ -1,0 +1,129 @@
+//! The `trust` experiment: the device pipeline of the shipped model
+//! (network, flip hypotheses, on-device ICP, residual) beside the network
+//! alone and host ICP, with how well the residual separates good poses
+//! from bad ones, on ModelNet10 and on a category the model never saw.
+
+use anyhow::Context as _;
+
+use super::experiments::{
+    Context, Recorder, Report, Table, folder, label, pair_set, success_chart,
+};
+use super::methods::{Method, MethodKind};
+use super::{GOOD_BELOW_DEG, MethodScore};
+use crate::train::data::PairConfig;
+
+/// The shipped embedded default, relative to the repository root.
+pub const SHIPPED_INT8: &str = "models/embedded-default-int8.pcrn";
+
+/// Noise sigma of both sets (the target protocol).
+const SIGMA: f32 = 0.01;
+
+fn device(hypotheses: usize) -> Method {
+    Method {
+        hypotheses,
+        ..Method::new(MethodKind::Device)
+    }
+}
+
+/// Runs the experiment (see the module docs).
+pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
+    let started = std::time::Instant::now();
+    let blob = std::fs::read(SHIPPED_INT8).with_context(|| {
+        format!("reading {SHIPPED_INT8} (run the experiment from the repository root)")
+    })?;
+    let model = Some(("embedded-default-int8", blob.as_slice()));
+    let mut rec = Recorder::new(ctx, "trust");
+    let noisy = PairConfig {
+        noise: Some([SIGMA, SIGMA]),
+        ..PairConfig::default()
+    };
+    let sets = [
+        ("ModelNet10", "trust-mn10", "ModelNet10"),
+        (
+            "airplanes (unseen)",
+            "trust-airplane",
+            "ModelNet40-airplane",
+        ),
+    ];
+    let recommended = pcrnet_core::Options::default().hypotheses;
+    for (set, file, dir) in sets {
+        let pairs = pair_set(ctx, file, folder(ctx, dir, None, noisy))?;
+        let first = rec.raw.len();
+        rec.score(set, Method::new(MethodKind::Pcrnet), model, &pairs, true)?;
+        rec.score(
+            set,
+            Method::new(MethodKind::Pcrnet).then_icp(),
+            model,
+            &pairs,
+            true,
+        )?;
+        rec.score(set, device(1), model, &pairs, true)?;
+        rec.score(set, device(4), model, &pairs, true)?;
+        if recommended != 4 {
+            rec.score(set, device(recommended), model, &pairs, true)?;
+        }
+        let runs: Vec<&MethodScore> = rec.raw[first..].iter().map(|r| &r.1).collect();
+        let chart = success_chart(&format!("Device pipeline: {set}"), &runs, 90.0);
+        rec.plot(set.split(' ').next().unwrap_or(set), &chart)?;
+    }
+    let table = Table {
+        caption: format!(
+            "Errors, success and confidence per method; a pose is good below {GOOD_BELOW_DEG}° rotation error; the device pipeline's verdict is `reliable` (relative residual <= {})",
+            pcrnet_core::Options::default().max_residual
+        ),
+        header: [
+            "test set",
+            "method",
+            "rot mean",
+            "rot median",
+            "AUC",
+            "ok (5°, 0.05)",
+            "errors > 30°",
+            "residual AUROC",
+            "bad flagged",
+            "good flagged",
+            "ms mean",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect(),
+        rows: rec.raw.iter().map(|(set, s)| row(set, s)).collect(),
+    };
+    rec.finish(
+        "A pose the device can trust",
+        vec![
+            format!(
+                "The shipped model (`{SHIPPED_INT8}`, trained on all ten ModelNet10 classes), 200 test pairs per set, Gaussian noise sigma {SIGMA}, Euler angles U[-45°, 45°], translation U[-1, 1]; airplanes (ModelNet40) are a category the model never saw."
+            ),
+            "PCRNet: the network alone; + ICP: host point-to-point ICP (f64, k-d tree, all template points, 100 iterations); device K=k: `pcrnet-core`'s register (what the firmware runs, bit for bit), k starting poses (the network's, then half and quarter turns about the template's principal axes), ICP against the 512 stored template points, up to 50 iterations each, lowest residual wins.".into(),
+            "Residual AUROC: the probability that a good pose has a lower residual than a bad one; bad / good flagged: shares marked not reliable.".into(),
+        ],
+        vec![table],
+        started,
+    )
+}
+
+fn row(set: &str, s: &MethodScore) -> Vec<String> {
+    let m = &s.summary;
+    let over_30 = s.pairs.iter().filter(|p| p.rot_deg > 30.0).count();
+    let c = s.confidence;
+    vec![
+        set.to_string(),
+        label(&s.method, s.model.as_deref()),
+        format!("{:.2}°", m.rotation_deg.mean),
+        format!("{:.2}°", m.rotation_deg.median),
+        format!("{:.3}", m.auc),
+        m.success
+            .first()
+            .map_or("-".into(), |x| format!("{:.3}", x.ratio)),
+        format!(
+            "{over_30} ({:.1}%)",
+            100.0 * over_30 as f64 / m.count.max(1) as f64
+        ),
+        c.and_then(|c| c.auroc)
+            .map_or("-".into(), |a| format!("{a:.3}")),
+        c.map_or("-".into(), |c| format!("{:.1}%", 100.0 * c.bad_flagged)),
+        c.map_or("-".into(), |c| format!("{:.1}%", 100.0 * c.good_flagged)),
+        m.time_ms.map_or("-".into(), |t| format!("{:.1}", t.mean)),
+    ]
+}
