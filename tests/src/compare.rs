@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 use pcrnet_core::POSE_DIM;
 
-use crate::vectors::{Expected, Iterative};
+use crate::vectors::{Expected, Iterative, RegistrationBits, RegistrationOutcome};
 
 /// What the device printed for one case.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,6 +19,17 @@ pub struct DeviceResult {
     pub stack: usize,
 }
 
+/// What the device printed for one `register` call.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceRegistration {
+    /// The outputs, in the same form as the host's.
+    pub outcome: RegistrationOutcome,
+    /// Instructions spent by the call.
+    pub instructions: u64,
+    /// Peak stack bytes during the call.
+    pub stack: usize,
+}
+
 /// Everything the device printed.
 #[derive(Debug, Default)]
 pub struct DeviceRun {
@@ -30,6 +41,8 @@ pub struct DeviceRun {
     pub cases: BTreeMap<usize, DeviceResult>,
     /// Iterative registrations, per case index.
     pub iterative: BTreeMap<usize, Iterative>,
+    /// `register` calls, per (case index, option set index).
+    pub registrations: BTreeMap<(usize, usize), DeviceRegistration>,
     /// Lines that were not understood (reported, and they fail the run).
     pub unparsed: Vec<String>,
     /// Whether the runner printed its closing `done`.
@@ -77,6 +90,60 @@ fn parse_ok(rest: &[&str]) -> Option<DeviceResult> {
     })
 }
 
+fn hex_bits(s: &str) -> Option<u32> {
+    u32::from_str_radix(s, 16).ok()
+}
+
+/// `instructions stack qw qx qy qz tx ty tz residual relative fitness rmse
+/// hypothesis passes icp_iterations saturated degenerate reliable`.
+fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
+    let [
+        instructions,
+        stack,
+        qw,
+        qx,
+        qy,
+        qz,
+        tx,
+        ty,
+        tz,
+        residual,
+        relative,
+        fitness,
+        rmse,
+        hypothesis,
+        passes,
+        icp,
+        saturated,
+        degenerate,
+        reliable,
+    ] = rest
+    else {
+        return None;
+    };
+    let mut pose = [0u32; POSE_DIM];
+    for (o, s) in pose.iter_mut().zip([qw, qx, qy, qz, tx, ty, tz]) {
+        *o = hex_bits(s)?;
+    }
+    Some(DeviceRegistration {
+        outcome: Ok(RegistrationBits {
+            pose,
+            residual: hex_bits(residual)?,
+            relative_residual: hex_bits(relative)?,
+            fitness: hex_bits(fitness)?,
+            inlier_rmse: hex_bits(rmse)?,
+            hypothesis: hypothesis.parse().ok()?,
+            passes: passes.parse().ok()?,
+            icp_iterations: icp.parse().ok()?,
+            saturated: saturated.parse().ok()?,
+            degenerate: degenerate.to_string(),
+            reliable: reliable.parse().ok()?,
+        }),
+        instructions: instructions.parse().ok()?,
+        stack: stack.parse().ok()?,
+    })
+}
+
 /// Parses the runner's output.
 pub fn parse(stdout: &str) -> DeviceRun {
     let mut run = DeviceRun::default();
@@ -113,6 +180,38 @@ pub fn parse(stdout: &str) -> DeviceRun {
             ["case", c, "iter", "error", error @ ..] => c.parse().ok().map(|c| {
                 run.iterative.insert(c, Err(error.join(" ")));
             }),
+            ["case", c, "reg", k, "ok", rest @ ..] => c
+                .parse()
+                .ok()
+                .zip(k.parse().ok())
+                .zip(parse_registration(rest))
+                .map(|(key, r)| {
+                    run.registrations.insert(key, r);
+                }),
+            [
+                "case",
+                c,
+                "reg",
+                k,
+                "error",
+                instructions,
+                stack,
+                error @ ..,
+            ] if !error.is_empty() => c
+                .parse()
+                .ok()
+                .zip(k.parse().ok())
+                .zip(instructions.parse().ok().zip(stack.parse().ok()))
+                .map(|(key, (instructions, stack))| {
+                    run.registrations.insert(
+                        key,
+                        DeviceRegistration {
+                            outcome: Err(error.join(" ")),
+                            instructions,
+                            stack,
+                        },
+                    );
+                }),
             ["case", c, "error", encoded, error @ ..] => c
                 .parse()
                 .ok()
@@ -157,6 +256,51 @@ pub fn iterative_difference(host: &Iterative, device: Option<&Iterative>) -> Opt
         }
         (h, Some(d)) if h == d => None,
         (h, Some(d)) => Some(format!("iterative: host {h:?} device {d:?}")),
+    }
+}
+
+fn f32_difference(name: &str, h: u32, d: u32) -> Option<String> {
+    (h != d).then(|| {
+        format!(
+            "{name}: host {h:08x} ({}) device {d:08x} ({})",
+            f32::from_bits(h),
+            f32::from_bits(d)
+        )
+    })
+}
+
+fn int_difference<T: PartialEq + std::fmt::Display>(name: &str, h: T, d: T) -> Option<String> {
+    (h != d).then(|| format!("{name}: host {h} device {d}"))
+}
+
+/// How a `register` call differs between host and device (the first field
+/// that does, in declaration order), if it does.
+pub fn registration_difference(
+    host: &RegistrationOutcome,
+    device: Option<&RegistrationOutcome>,
+) -> Option<String> {
+    match (host, device) {
+        (_, None) => Some("no output from the device".into()),
+        (Ok(h), Some(Ok(d))) => (0..POSE_DIM)
+            .find_map(|i| f32_difference(&format!("pose {}", POSE_NAMES[i]), h.pose[i], d.pose[i]))
+            .or_else(|| f32_difference("residual", h.residual, d.residual))
+            .or_else(|| {
+                f32_difference(
+                    "relative_residual",
+                    h.relative_residual,
+                    d.relative_residual,
+                )
+            })
+            .or_else(|| f32_difference("fitness", h.fitness, d.fitness))
+            .or_else(|| f32_difference("inlier_rmse", h.inlier_rmse, d.inlier_rmse))
+            .or_else(|| int_difference("hypothesis", h.hypothesis, d.hypothesis))
+            .or_else(|| int_difference("passes", h.passes, d.passes))
+            .or_else(|| int_difference("icp_iterations", h.icp_iterations, d.icp_iterations))
+            .or_else(|| int_difference("saturated", h.saturated, d.saturated))
+            .or_else(|| int_difference("degenerate", &h.degenerate, &d.degenerate))
+            .or_else(|| int_difference("reliable", h.reliable, d.reliable)),
+        (h, Some(d)) if h == d => None,
+        (h, Some(d)) => Some(format!("host {h:?} device {d:?}")),
     }
 }
 
@@ -217,7 +361,10 @@ mod tests {
         let out = "calibration 2000000 2000000\nstatic_ram 65600\n\
                    case 0 ok 100 250 512 feature 7f80ff00 head 1 -2 3 4 5 6 7 pose 3f800000 0 0 0 0 0 0\n\
                    case 0 iter ok 3 3f800000 0 0 0 0 0 1\n\
-                   case 1 error false EmptyCloud\ncase 1 iter error EmptyCloud\ndone\n";
+                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 1 1 7 12 none true\n\
+                   case 1 error false EmptyCloud\ncase 1 iter error EmptyCloud\n\
+                   case 1 reg 0 error 20 100 InvalidOption { what: \"hypotheses must be at least 1\" }\n\
+                   case 1 reg 1 error 20 100 EmptyCloud\ndone\n";
         let run = parse(out);
         assert!(run.done && run.unparsed.is_empty());
         assert_eq!(run.calibration, Some((2_000_000, 2_000_000)));
@@ -251,5 +398,47 @@ mod tests {
         );
         let err: Iterative = Err("EmptyCloud".into());
         assert_eq!(iterative_difference(&err, run.iterative.get(&1)), None);
+
+        let reg = &run.registrations[&(0, 0)];
+        assert_eq!((reg.instructions, reg.stack), (1000, 600));
+        let host = RegistrationBits {
+            pose: [0x3f80_0000, 0, 0, 0, 0, 0, 0],
+            residual: 0x3c23_d70a,
+            relative_residual: 0x3c23_d70a,
+            fitness: 0x3f80_0000,
+            inlier_rmse: 0,
+            hypothesis: 1,
+            passes: 1,
+            icp_iterations: 7,
+            saturated: 12,
+            degenerate: "none".into(),
+            reliable: true,
+        };
+        assert_eq!(
+            registration_difference(&Ok(host.clone()), Some(&reg.outcome)),
+            None
+        );
+        let mut other = host.clone();
+        other.icp_iterations = 8;
+        assert_eq!(
+            registration_difference(&Ok(other), Some(&reg.outcome)).as_deref(),
+            Some("icp_iterations: host 8 device 7")
+        );
+        let mut other = host;
+        other.degenerate = "Line".into();
+        assert_eq!(
+            registration_difference(&Ok(other), Some(&reg.outcome)).as_deref(),
+            Some("degenerate: host Line device none")
+        );
+        let invalid: RegistrationOutcome =
+            Err("InvalidOption { what: \"hypotheses must be at least 1\" }".into());
+        assert_eq!(
+            registration_difference(&invalid, Some(&run.registrations[&(1, 0)].outcome)),
+            None
+        );
+        assert!(
+            registration_difference(&invalid, Some(&run.registrations[&(1, 1)].outcome)).is_some()
+        );
+        assert!(registration_difference(&invalid, None).is_some());
     }
 }

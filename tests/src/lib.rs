@@ -2,8 +2,9 @@
 //! run by the same code cross-compiled for a Cortex-M4F under QEMU, and
 //! compared bit for bit.
 //!
-//! 1. [`vectors`] builds models and clouds (seeded) and the container QEMU
-//!    loads into PSRAM, with the host's expected outputs;
+//! 1. [`vectors`] builds models and clouds (seeded), the `register` option
+//!    sets of each case and the container QEMU loads into PSRAM, with the
+//!    host's expected outputs;
 //! 2. [`qemu`] cross-compiles the device runner (`tests/firmware`) and runs it
 //!    with a timeout;
 //! 3. [`compare`] parses the device's lines and compares every value with

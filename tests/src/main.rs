@@ -5,42 +5,140 @@
 //! qemu-harness run [--mutate-device-rounding] [--timeout SECS]
 //! qemu-harness size
 //! ```
-//! `run` ends with `N passed, N failed`. With `--mutate-device-rounding`
-//! the device is built with ties rounded the other way, and the command
-//! succeeds only if the comparison catches it.
+//! Every case compares the inference (int8 feature, head, pose), and as
+//! the case asks, the iterative network pass and `Int8Model::register`
+//! with its option sets (every `Registration` field bit for bit, or the
+//! same error). `run` ends with `N passed, N failed`. With
+//! `--mutate-device-rounding` the device is built with ties rounded the
+//! other way, and the command succeeds only if the comparison catches it,
+//! in the inference and in the registrations.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
-use pcrnet_core::{Int8Model, MAX_TILE};
-use pcrnet_qemu_tests::compare::{first_difference, iterative_difference, parse};
+use pcrnet_core::{Frame, Int8Model, MAX_TILE, Options};
+use pcrnet_qemu_tests::compare::{
+    DeviceRun, first_difference, iterative_difference, parse, registration_difference,
+};
 use pcrnet_qemu_tests::vectors::{
-    Case, TestModel, clouds_for, container, expected, expected_iterative, random_model,
+    Case, TestModel, clouds_for, container, describe, doubled, expected, expected_iterative,
+    expected_registrations, random_model, random_model_with, read_cloud,
 };
 use pcrnet_qemu_tests::{elf, qemu};
 
-/// Random models covering the shapes' corners, every int8 blob shipped in
-/// `models/`, and the paper-size PCRNet (its 4.2 MB of weights go to PSRAM).
-fn models() -> anyhow::Result<Vec<(TestModel, Vec<usize>)>> {
+/// The shipped model that gets the realistic sources.
+const SHIPPED_DEFAULT: &str = "embedded-default-int8.pcrn";
+
+/// A model, the sizes of its uniform clouds, its realistic sources, and
+/// the option sets `register` runs with on its small (<= 300 points) and
+/// invalid clouds and on its realistic sources.
+struct Plan {
+    model: TestModel,
+    sizes: Vec<usize>,
+    sources: Vec<(String, Vec<[f32; 3]>)>,
+    options: Vec<Options>,
+}
+
+/// Network only, and the recommended pipeline (`Options::default()`).
+fn net_and_default() -> Vec<Options> {
+    vec![Options::network_only(), Options::default()]
+}
+
+/// Network only, K=1 and K=4 with the default ICP, and the default pipeline.
+fn net_k1_k4_default() -> Vec<Options> {
+    let k = |hypotheses| Options {
+        hypotheses,
+        ..Options::default()
+    };
+    vec![Options::network_only(), k(1), k(4), Options::default()]
+}
+
+/// Every field away from its default (i-PCRNet passes stopping early,
+/// three hypotheses screened with 3 ICP iterations before the finalists
+/// get 10, fewer points): the screening path, and a check that the
+/// options reach the device intact.
+fn unusual_options() -> Options {
+    Options {
+        passes: 3,
+        tolerance: 0.01,
+        hypotheses: 3,
+        screen_iterations: 3,
+        icp_iterations: 10,
+        icp_tolerance: 2e-3,
+        icp_distance: 0.2,
+        inlier_distance: 0.1,
+        max_points: 64,
+        max_residual: 0.05,
+    }
+}
+
+/// Invalid options: `register` must fail the same way on both sides.
+fn invalid_options() -> Options {
+    Options {
+        hypotheses: 0,
+        ..Options::default()
+    }
+}
+
+/// Centimetres, 2.5 m / -0.4 m / 10 m from the origin: the random models'
+/// input range (+-4 model units) is +-4 m around that centre.
+const CM_FRAME: Frame = Frame {
+    centre: [250.0, -40.0, 1000.0],
+    scale: 0.01,
+};
+
+/// Random models covering the shapes' corners, two with a frame in
+/// centimetres far from the origin, every int8 blob shipped in `models/`
+/// (the embedded default also with its demo source at 512 and 1024
+/// points), and the paper-size PCRNet (its 4.2 MB of weights go to PSRAM).
+fn models() -> anyhow::Result<Vec<Plan>> {
+    let plan = |model, sizes: &[usize]| Plan {
+        model,
+        sizes: sizes.to_vec(),
+        sources: Vec::new(),
+        options: net_and_default(),
+    };
     let mut out = vec![
-        (
+        plan(
             random_model("random 16-24-64 / 48-32", 1, &[16, 24, 64], &[48, 32]),
-            vec![1, 2, 3, 7, 8, 9, 16, 31, 257, 1024, 3000],
+            &[1, 2, 3, 7, 8, 9, 16, 31, 257, 1024, 3000],
         ),
-        (
+        plan(
             random_model("random 8 / - (one layer each)", 2, &[8], &[]),
-            vec![1, 5, 100],
+            &[1, 5, 100],
         ),
-        (
+        plan(
             random_model(
                 "random 8+8 layers",
                 3,
                 &[24, 24, 24, 24, 24, 24, 24, 96],
                 &[64; 8],
             ),
-            vec![1, 33, 500],
+            &[1, 33, 500],
+        ),
+        plan(
+            random_model_with(
+                "random 16-32-64 / 64-32, frame cm at (250, -40, 1000)",
+                5,
+                &[16, 32, 64],
+                &[64, 32],
+                false,
+                CM_FRAME,
+            ),
+            &[1, 64, 256],
+        ),
+        plan(
+            random_model_with(
+                "random 16-32-64 / 64-32, frame cm, centred sources",
+                6,
+                &[16, 32, 64],
+                &[64, 32],
+                true,
+                CM_FRAME,
+            ),
+            &[1, 64, 256],
         ),
     ];
     let dir = qemu::workspace_root().join("models");
@@ -57,25 +155,46 @@ fn models() -> anyhow::Result<Vec<(TestModel, Vec<usize>)>> {
             .unwrap_or_default()
             .to_string_lossy()
             .into_owned();
-        out.push((TestModel { name, blob }, vec![1, 100, 1024, 4096]));
+        let mut sources = Vec::new();
+        if name == SHIPPED_DEFAULT {
+            let demo = read_cloud(&dir.join("embedded-default-source.f32"))?;
+            let dense = doubled(&demo, 1024, 0.005);
+            sources.push((format!("demo source {}", demo.len()), demo));
+            sources.push((
+                format!("demo source {} (twice, jitter 0.005)", dense.len()),
+                dense,
+            ));
+        }
+        out.push(Plan {
+            model: TestModel { name, blob },
+            sizes: vec![1, 100, 1024, 4096],
+            sources,
+            options: net_k1_k4_default(),
+        });
     }
-    out.push((
+    out.push(plan(
         random_model(
             "paper PCRNet 64-64-64-128-1024 / 1024-1024-512-512-256 (PSRAM)",
             4,
             pcrnet_core::arch::PAPER_ENCODER,
             pcrnet_core::arch::PCRNET_HEAD,
         ),
-        vec![1, 9, 1024],
+        &[1, 9, 1024],
     ));
     Ok(out)
 }
 
-fn build_cases(models: &[(TestModel, Vec<usize>)]) -> (Vec<TestModel>, Vec<Case>) {
+fn build_cases(plans: &[Plan]) -> (Vec<TestModel>, Vec<Case>) {
     let mut cases = Vec::new();
     let mut out = Vec::new();
-    for (mi, (model, sizes)) in models.iter().enumerate() {
-        for (label, cloud) in clouds_for(&model.blob, 100 + mi as u64, sizes) {
+    for (mi, plan) in plans.iter().enumerate() {
+        let model = &plan.model;
+        let clouds = clouds_for(&model.blob, 100 + mi as u64, &plan.sizes);
+        let generated = clouds.len();
+        let sources = plan.sources.iter().cloned();
+        let mut unusual = false;
+        for (ci, (label, cloud)) in clouds.into_iter().chain(sources).enumerate() {
+            let realistic = ci >= generated;
             // Vary the tile; the measured 1024-point cases use the largest.
             let tile = if cloud.len() == 1024 {
                 MAX_TILE
@@ -83,13 +202,30 @@ fn build_cases(models: &[(TestModel, Vec<usize>)]) -> (Vec<TestModel>, Vec<Case>
                 cases.len() % MAX_TILE + 1
             };
             // i-PCRNet passes on the small clouds and every invalid one.
-            let iterations = if cloud.len() <= 300 { 3 } else { 0 };
+            let small = cloud.len() <= 300;
+            let iterations = if small { 3 } else { 0 };
+            // `register` on the small and invalid clouds and the realistic
+            // sources (the large uniform clouds cost network time only).
+            let mut registrations = if small || realistic {
+                plan.options.clone()
+            } else {
+                Vec::new()
+            };
+            // Once per model, on its first uniform cloud of 9 to 300 points.
+            if !unusual && label.starts_with("uniform") && (9..=300).contains(&cloud.len()) {
+                registrations.push(unusual_options());
+                unusual = true;
+            }
+            if label.starts_with("NaN") {
+                registrations.push(invalid_options());
+            }
             cases.push(Case {
                 model: mi,
                 label,
                 cloud,
                 tile,
                 iterations,
+                registrations,
             });
         }
         out.push(TestModel {
@@ -112,7 +248,11 @@ fn run(args: Args) -> anyhow::Result<bool> {
         .iter()
         .map(|c| {
             let blob = &models[c.model].blob;
-            (expected(blob, c), expected_iterative(blob, c))
+            (
+                expected(blob, c),
+                expected_iterative(blob, c),
+                expected_registrations(blob, c),
+            )
         })
         .collect();
     let dir = root.join("target/qemu");
@@ -127,16 +267,34 @@ fn run(args: Args) -> anyhow::Result<bool> {
     };
     let elf = qemu::build_firmware(&root.join("tests/firmware"), "pcrnet-qemu-runner", features)?;
     println!(
-        "running {} cases on {} models under QEMU (mps2-an386)...",
+        "running {} cases ({} registrations) on {} models under QEMU (mps2-an386)...",
         cases.len(),
+        cases.iter().map(|c| c.registrations.len()).sum::<usize>(),
         models.len()
     );
+    let started = std::time::Instant::now();
     let stdout = qemu::run_with_timeout(qemu::qemu_command(&elf, Some(&vectors)), args.timeout)?;
+    println!("QEMU ran for {:.1} s", started.elapsed().as_secs_f64());
     std::fs::write(dir.join("device-output.txt"), &stdout)?;
     let device = parse(&stdout);
 
     let (mut passed, mut failed) = (0usize, 0usize);
-    for (i, (case, (host, host_iterative))) in cases.iter().zip(&expect).enumerate() {
+    let (mut registrations, mut registrations_differ) = (0usize, 0usize);
+    for (i, (case, (host, host_iterative, host_registrations))) in
+        cases.iter().zip(&expect).enumerate()
+    {
+        let register_verdicts: Vec<Option<String>> = host_registrations
+            .iter()
+            .zip(&case.registrations)
+            .enumerate()
+            .map(|(k, (h, options))| {
+                let d = device.registrations.get(&(i, k)).map(|d| &d.outcome);
+                registration_difference(h, d)
+                    .map(|why| format!("register #{k} ({}): {why}", describe(options)))
+            })
+            .collect();
+        registrations += register_verdicts.len();
+        registrations_differ += register_verdicts.iter().flatten().count();
         let verdict = match device.cases.get(&i) {
             None => Some("no output from the device".to_string()),
             Some(d) => first_difference(host, &d.outputs),
@@ -145,7 +303,8 @@ fn run(args: Args) -> anyhow::Result<bool> {
             host_iterative
                 .as_ref()
                 .and_then(|h| iterative_difference(h, device.iterative.get(&i)))
-        });
+        })
+        .or_else(|| register_verdicts.into_iter().flatten().next());
         match verdict {
             None => passed += 1,
             Some(why) => {
@@ -169,16 +328,21 @@ fn run(args: Args) -> anyhow::Result<bool> {
 
     if args.mutate {
         println!(
-            "mutation check: with device rounding changed, {failed} of {} cases differ from the host (they must)",
+            "mutation check: with device rounding changed, {failed} of {} cases differ from the host, \
+             and {registrations_differ} of {registrations} registrations (they must)",
             cases.len()
         );
-        return Ok(failed > 0);
+        return Ok(failed > 0 && registrations_differ > 0);
     }
 
     report(&models, &cases, &device, &elf)?;
     if !complete {
         println!("device run incomplete (no `done`, or unparsed lines)");
     }
+    println!(
+        "{registrations} registrations, {} identical",
+        registrations - registrations_differ
+    );
     println!("{passed} passed, {failed} failed");
     Ok(failed == 0 && complete)
 }
@@ -186,7 +350,7 @@ fn run(args: Args) -> anyhow::Result<bool> {
 fn report(
     models: &[TestModel],
     cases: &[Case],
-    device: &pcrnet_qemu_tests::compare::DeviceRun,
+    device: &DeviceRun,
     elf: &std::path::Path,
 ) -> anyhow::Result<()> {
     if let Some((want, got)) = device.calibration {
@@ -220,6 +384,8 @@ fn report(
             .enumerate()
             .filter(|(i, c)| {
                 c.model == mi
+                    && c.cloud.len() == 1024
+                    && c.label.starts_with("uniform")
                     && c.tile == MAX_TILE
                     && device
                         .cases
@@ -244,7 +410,71 @@ fn report(
         }
     }
     println!();
+    report_registrations(models, cases, device);
     Ok(())
+}
+
+/// Instructions and stack per `register` call: every option set on each
+/// model's largest uniform cloud that registers and on its realistic sources.
+fn report_registrations(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
+    println!(
+        "| model | source | points | options | instructions / registration | ICP iterations | hypothesis | reliable | peak stack B |\n|---|---|---|---|---|---|---|---|---|"
+    );
+    for (mi, model) in models.iter().enumerate() {
+        let ok = |i: usize, c: &Case| {
+            c.model == mi
+                && !c.registrations.is_empty()
+                && device
+                    .registrations
+                    .get(&(i, 0))
+                    .is_some_and(|d| d.outcome.is_ok())
+        };
+        let largest_uniform = cases
+            .iter()
+            .enumerate()
+            .filter(|&(i, c)| ok(i, c) && c.label.starts_with("uniform"))
+            .max_by_key(|(_, c)| c.cloud.len())
+            .map(|(i, _)| i);
+        let shown = cases.iter().enumerate().filter(|&(i, c)| {
+            ok(i, c) && (c.label.starts_with("demo") || Some(i) == largest_uniform)
+        });
+        for (i, c) in shown {
+            for (k, options) in c.registrations.iter().enumerate() {
+                let Some(d) = device.registrations.get(&(i, k)) else {
+                    continue;
+                };
+                let Ok(r) = &d.outcome else {
+                    continue;
+                };
+                println!(
+                    "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                    model.name,
+                    c.label,
+                    c.cloud.len(),
+                    describe(options),
+                    d.instructions,
+                    r.icp_iterations,
+                    r.hypothesis,
+                    r.reliable,
+                    d.stack
+                );
+            }
+        }
+    }
+    let deepest = device.registrations.iter().max_by_key(|(_, d)| d.stack);
+    if let Some((&(i, k), d)) = deepest {
+        let c = &cases[i];
+        println!(
+            "\npeak stack of register over {} calls: {} B ({}, {}, {} points, {})",
+            device.registrations.len(),
+            d.stack,
+            models[c.model].name,
+            c.label,
+            c.cloud.len(),
+            c.registrations.get(k).map(describe).unwrap_or_default()
+        );
+    }
+    println!();
 }
 
 fn size() -> anyhow::Result<()> {

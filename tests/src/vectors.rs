@@ -1,12 +1,21 @@
 //! Test models, clouds and the container the device reads.
 
-use pcrnet_core::testing::{SplitMix64, random_int8_blob_into};
-use pcrnet_core::{Int8Model, MAX_TILE, POSE_DIM};
+use pcrnet_core::testing::{SplitMix64, random_int8_blob_with};
+use pcrnet_core::{Frame, Int8Model, MAX_TILE, Options, POSE_DIM, Registration};
 
 /// Where the container goes in the MPS2 PSRAM.
 pub const PSRAM_BASE: u32 = 0x2100_0000;
 /// PSRAM size.
 pub const PSRAM_LEN: usize = 16 << 20;
+/// Container format version (the device checks it).
+pub const CONTAINER_VERSION: u32 = 3;
+/// Scratch bytes on the device (and lent to the host's `register`, so both
+/// pick the same tile).
+pub const SCRATCH_LEN: usize = 64 * 1024;
+/// u32 words per case in the container's table.
+const CASE_WORDS: usize = 7;
+/// u32 words per [`Options`] in the container.
+pub const OPTIONS_WORDS: usize = 10;
 
 /// A named int8 model blob.
 pub struct TestModel {
@@ -28,6 +37,112 @@ pub struct Case {
     pub tile: usize,
     /// i-PCRNet passes to run as well (0: none), with tolerance 0.
     pub iterations: usize,
+    /// `Int8Model::register` runs, one per option set (none: not registered).
+    pub registrations: Vec<Options>,
+}
+
+/// A registration's outputs in comparable form: every f32 as its bits.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RegistrationBits {
+    /// Pose bits `[qw, qx, qy, qz, tx, ty, tz]`.
+    pub pose: [u32; POSE_DIM],
+    /// `residual` bits.
+    pub residual: u32,
+    /// `relative_residual` bits.
+    pub relative_residual: u32,
+    /// `fitness` bits.
+    pub fitness: u32,
+    /// `inlier_rmse` bits.
+    pub inlier_rmse: u32,
+    /// Winning hypothesis.
+    pub hypothesis: usize,
+    /// Network passes run.
+    pub passes: usize,
+    /// ICP iterations run from the winning start.
+    pub icp_iterations: usize,
+    /// Saturated int8 values.
+    pub saturated: u32,
+    /// `none`, or the `Degeneracy` variant's name (`Point`, `Line`).
+    pub degenerate: String,
+    /// Whether the pose is reliable.
+    pub reliable: bool,
+}
+
+impl From<&Registration> for RegistrationBits {
+    fn from(r: &Registration) -> Self {
+        RegistrationBits {
+            pose: pose_bits(&r.pose),
+            residual: r.residual.to_bits(),
+            relative_residual: r.relative_residual.to_bits(),
+            fitness: r.fitness.to_bits(),
+            inlier_rmse: r.inlier_rmse.to_bits(),
+            hypothesis: r.hypothesis,
+            passes: r.passes,
+            icp_iterations: r.icp_iterations,
+            saturated: r.saturated,
+            degenerate: r
+                .degenerate
+                .map_or_else(|| "none".to_string(), |d| format!("{d:?}")),
+            reliable: r.reliable,
+        }
+    }
+}
+
+/// Result of one `register` call: its outputs, or the error's Debug text.
+pub type RegistrationOutcome = Result<RegistrationBits, String>;
+
+/// An error's Debug text as the device's line carries it (words separated by one space).
+fn error_text(e: &pcrnet_core::Error) -> String {
+    format!("{e:?}")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// What the host computes for each of a case's registrations, in order.
+pub fn expected_registrations(model: &[u8], case: &Case) -> Vec<RegistrationOutcome> {
+    let m = Int8Model::from_bytes(model).expect("test models are valid");
+    let mut scratch = vec![0i8; SCRATCH_LEN];
+    case.registrations
+        .iter()
+        .map(|o| {
+            m.register(&case.cloud, o, &mut scratch)
+                .map(|r| RegistrationBits::from(&r))
+                .map_err(|e| error_text(&e))
+        })
+        .collect()
+}
+
+/// A short name for a set of options (reports).
+pub fn describe(o: &Options) -> String {
+    let d = Options::default();
+    if *o == Options::network_only() {
+        return "network only".into();
+    }
+    if *o == d {
+        return format!("default (K={}, ICP {})", o.hypotheses, o.icp_iterations);
+    }
+    if *o
+        == (Options {
+            hypotheses: o.hypotheses,
+            ..d
+        })
+    {
+        return format!("K={} + ICP {}", o.hypotheses, o.icp_iterations);
+    }
+    format!(
+        "{} passes (tol {}), K={}, ICP {} (screen {}, tol {}, {}), inlier {}, {} points, max residual {}",
+        o.passes,
+        o.tolerance,
+        o.hypotheses,
+        o.icp_iterations,
+        o.screen_iterations,
+        o.icp_tolerance,
+        o.icp_distance,
+        o.inlier_distance,
+        o.max_points,
+        o.max_residual
+    )
 }
 
 /// Result of an iterative registration: passes done and pose bits, or the error's Debug text.
@@ -51,7 +166,7 @@ pub fn expected_iterative(model: &[u8], case: &Case) -> Option<Iterative> {
     Some(
         m.network_pose(&case.cloud, case.iterations, 0.0, &mut scratch)
             .map(|(p, n)| (n, pose_bits(&p)))
-            .map_err(|e| format!("{e:?}")),
+            .map_err(|e| error_text(&e)),
     )
 }
 
@@ -76,12 +191,34 @@ pub enum Expected {
     },
 }
 
-/// Random int8 model through `pcrnet-core`'s seeded generator.
+/// Random int8 model through `pcrnet-core`'s seeded generator (identity
+/// frame, sources not centred).
 pub fn random_model(name: &str, seed: u64, encoder: &[u16], head: &[u16]) -> TestModel {
+    random_model_with(name, seed, encoder, head, false, Frame::IDENTITY)
+}
+
+/// As [`random_model`], choosing whether the model centres sources and its
+/// frame (user units -> model frame).
+pub fn random_model_with(
+    name: &str,
+    seed: u64,
+    encoder: &[u16],
+    head: &[u16],
+    centre_source: bool,
+    frame: Frame,
+) -> TestModel {
     let (mut arena, mut out) = (vec![0u8; 8 << 20], vec![0u8; 8 << 20]);
-    let blob = random_int8_blob_into(seed, encoder, head, &mut arena, &mut out)
-        .expect("random model parameters are valid")
-        .to_vec();
+    let blob = random_int8_blob_with(
+        seed,
+        encoder,
+        head,
+        centre_source,
+        frame,
+        &mut arena,
+        &mut out,
+    )
+    .expect("random model parameters are valid")
+    .to_vec();
     TestModel {
         name: name.into(),
         blob,
@@ -95,9 +232,28 @@ fn uniform(rng: &mut SplitMix64, n: usize, extent: f32) -> Vec<[f32; 3]> {
 }
 
 /// Clouds for one model: sizes from 1 to `max_points`, extreme coordinates
-/// at the edge of the input range, tiny and signed-zero values, and invalid
-/// clouds (empty, NaN, infinity, out of range).
+/// at the edge of the input range, tiny and signed-zero values, a line
+/// (degenerate for registration), and invalid clouds (empty, NaN,
+/// infinity, out of range).
+///
+/// They are made in model units; for a model with a non-identity frame
+/// (the exporter's frames never are exactly the identity) every point is
+/// then moved to user units (`p / scale + centre`), the units the model's
+/// callers use, edge-of-range and out-of-range points included.
 pub fn clouds_for(model: &[u8], seed: u64, sizes: &[usize]) -> Vec<(String, Vec<[f32; 3]>)> {
+    let frame = *Int8Model::from_bytes(model)
+        .expect("test models are valid")
+        .frame();
+    let mut clouds = clouds_in_model_units(model, seed, sizes);
+    if frame != Frame::IDENTITY {
+        for p in clouds.iter_mut().flat_map(|(_, c)| c.iter_mut()) {
+            *p = [0, 1, 2].map(|k| p[k] / frame.scale + frame.centre[k]);
+        }
+    }
+    clouds
+}
+
+fn clouds_in_model_units(model: &[u8], seed: u64, sizes: &[usize]) -> Vec<(String, Vec<[f32; 3]>)> {
     let m = Int8Model::from_bytes(model).expect("test models are valid");
     let edge = 32767.0 * m.payload().input_scale;
     let mut rng = SplitMix64(seed);
@@ -128,6 +284,13 @@ pub fn clouds_for(model: &[u8], seed: u64, sizes: &[usize]) -> Vec<(String, Vec<
             ],
         ],
     ));
+    let line: Vec<[f32; 3]> = (0..30)
+        .map(|_| {
+            let t = rng.uniform(-1.0, 1.0);
+            [0.3 * t, -0.2 * t, 0.5 * t]
+        })
+        .collect();
+    out.push(("points on a line".into(), line));
     out.push(("empty".into(), Vec::new()));
     let mut nan = uniform(&mut rng, 12, 1.0);
     nan[5][1] = f32::NAN;
@@ -153,11 +316,11 @@ pub fn expected(model: &[u8], case: &Case) -> Expected {
             pose: m
                 .pose(&r.head)
                 .map(|p| pose_bits(&p))
-                .map_err(|e| format!("{e:?}")),
+                .map_err(|e| error_text(&e)),
         },
         Err(e) => Expected::Err {
             encoded,
-            error: format!("{e:?}"),
+            error: error_text(&e),
         },
     }
 }
@@ -172,13 +335,67 @@ fn align4(buf: &mut Vec<u8>) {
     }
 }
 
+/// An option set as the container's words: `passes tolerance hypotheses
+/// screen_iterations icp_iterations icp_tolerance icp_distance
+/// inlier_distance max_points max_residual` (counts as u32, f32 as their
+/// bits). Every field: a field added to `Options` fails to compile here.
+pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
+    let Options {
+        passes,
+        tolerance,
+        hypotheses,
+        screen_iterations,
+        icp_iterations,
+        icp_tolerance,
+        icp_distance,
+        inlier_distance,
+        max_points,
+        max_residual,
+    } = *o;
+    Ok([
+        u32::try_from(passes)?,
+        tolerance.to_bits(),
+        u32::try_from(hypotheses)?,
+        u32::try_from(screen_iterations)?,
+        u32::try_from(icp_iterations)?,
+        icp_tolerance.to_bits(),
+        icp_distance.to_bits(),
+        inlier_distance.to_bits(),
+        u32::try_from(max_points)?,
+        max_residual.to_bits(),
+    ])
+}
+
+/// What the device makes of [`options_words`] (the same code as the runner's).
+pub fn options_from_words(w: &[u32; OPTIONS_WORDS]) -> Options {
+    Options {
+        passes: w[0] as usize,
+        tolerance: f32::from_bits(w[1]),
+        hypotheses: w[2] as usize,
+        screen_iterations: w[3] as usize,
+        icp_iterations: w[4] as usize,
+        icp_tolerance: f32::from_bits(w[5]),
+        icp_distance: f32::from_bits(w[6]),
+        inlier_distance: f32::from_bits(w[7]),
+        max_points: w[8] as usize,
+        max_residual: f32::from_bits(w[9]),
+    }
+}
+
+fn push_options(buf: &mut Vec<u8>, o: &Options) -> anyhow::Result<()> {
+    for w in options_words(o)? {
+        buf.extend_from_slice(&w.to_le_bytes());
+    }
+    Ok(())
+}
+
 /// Lays out the container the device runner reads (see `tests/firmware`).
 pub fn container(models: &[TestModel], cases: &[Case]) -> anyhow::Result<Vec<u8>> {
-    let header = 16 + 8 * models.len() + 20 * cases.len();
+    let header = 16 + 8 * models.len() + 4 * CASE_WORDS * cases.len();
     let mut data = vec![0u8; header];
     let mut table = Vec::with_capacity(header);
     table.extend_from_slice(b"PCRV");
-    push_u32(&mut table, 2);
+    push_u32(&mut table, CONTAINER_VERSION as usize);
     push_u32(&mut table, models.len());
     push_u32(&mut table, cases.len());
     for m in models {
@@ -197,7 +414,13 @@ pub fn container(models: &[TestModel], cases: &[Case]) -> anyhow::Result<Vec<u8>
         for v in c.cloud.iter().flatten() {
             data.extend_from_slice(&v.to_le_bytes());
         }
+        push_u32(&mut table, c.registrations.len());
+        push_u32(&mut table, data.len());
+        for o in &c.registrations {
+            push_options(&mut data, o)?;
+        }
     }
+    debug_assert_eq!(table.len(), header);
     data[..header].copy_from_slice(&table);
     anyhow::ensure!(
         data.len() <= PSRAM_LEN,
@@ -205,4 +428,35 @@ pub fn container(models: &[TestModel], cases: &[Case]) -> anyhow::Result<Vec<u8>
         data.len()
     );
     Ok(data)
+}
+
+/// A cloud stored as x, y, z f32 little-endian per point (as
+/// `models/embedded-default-source.f32`, the shipped model's demo source).
+pub fn read_cloud(path: &std::path::Path) -> anyhow::Result<Vec<[f32; 3]>> {
+    use anyhow::Context;
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    anyhow::ensure!(
+        !bytes.is_empty() && bytes.len().is_multiple_of(12),
+        "{}: {} bytes is not a whole number of f32 x y z points",
+        path.display(),
+        bytes.len()
+    );
+    Ok(bytes
+        .chunks_exact(12)
+        .map(|p| {
+            [0, 1, 2]
+                .map(|k| f32::from_le_bytes([p[4 * k], p[4 * k + 1], p[4 * k + 2], p[4 * k + 3]]))
+        })
+        .collect())
+}
+
+/// The cloud twice, the second copy moved by a seeded jitter in
+/// `[-jitter, jitter)` per coordinate: a denser scan of the same surface.
+pub fn doubled(cloud: &[[f32; 3]], seed: u64, jitter: f32) -> Vec<[f32; 3]> {
+    let mut rng = SplitMix64(seed);
+    let second: Vec<[f32; 3]> = cloud
+        .iter()
+        .map(|p| p.map(|x| x + rng.uniform(-jitter, jitter)))
+        .collect();
+    cloud.iter().copied().chain(second).collect()
 }

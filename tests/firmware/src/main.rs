@@ -4,12 +4,31 @@
 //! MPS2 PSRAM (0x2100_0000, 16 MiB; big enough for the paper-size model).
 //! For every model in it, this program parses the model in place, then for
 //! every case of that model measures the encoder alone and the whole
-//! inference with the SysTick instruction counter, and prints the outputs as
-//! text over semihosting. The host compares them with its own, bit for bit.
+//! inference with the SysTick instruction counter, runs the iterative
+//! network pass and every `register` call the case asks for (instructions
+//! and peak stack measured per call), and prints the outputs as text over
+//! semihosting. The host compares them with its own, bit for bit.
 //!
-//! Container (all u32 little-endian, offsets from its start, 4-aligned):
-//! `b"PCRV" version n_models n_cases`, then `n_models x (offset, len)`,
-//! then `n_cases x (model, cloud_offset, n_points, tile)`.
+//! Container, version 3 (all u32 little-endian, offsets from its start,
+//! 4-aligned):
+//! - header: `b"PCRV" version n_models n_cases`;
+//! - `n_models x (blob_offset, blob_len)`;
+//! - `n_cases x (model, cloud_offset, n_points, tile, iterations,
+//!   n_registrations, options_offset)`: the cloud is `n_points x [f32; 3]`
+//!   at `cloud_offset`; `iterations` i-PCRNet passes (tolerance 0) run
+//!   after the inference when non-zero;
+//! - at `options_offset`, `n_registrations` option sets of 10 words each,
+//!   every `Options` field: `passes tolerance hypotheses screen_iterations
+//!   icp_iterations icp_tolerance icp_distance inlier_distance max_points
+//!   max_residual` (counts as u32, f32 as their bits).
+//!
+//! Output lines (f32 as 8 hex digits of their bits, `{:?}` for errors):
+//! - `case C ok ENCODE_INSTR INFER_INSTR STACK feature HEX head H0..H6 pose Q0..T2`
+//!   (or `pose_error E`), or `case C error ENCODED E`;
+//! - `case C iter ok PASSES Q0..T2`, or `case C iter error E`;
+//! - `case C reg K ok INSTR STACK QW QX QY QZ TX TY TZ RESIDUAL RELATIVE
+//!   FITNESS RMSE HYPOTHESIS PASSES ICP_ITERATIONS SATURATED none|Point|Line
+//!   true|false`, or `case C reg K error INSTR STACK E`.
 #![no_std]
 #![no_main]
 
@@ -19,12 +38,18 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use heapless::String;
 use panic_semihosting as _;
-use pcrnet_core::Int8Model;
+use pcrnet_core::{Int8Model, Options};
 use pcrnet_firmware_example::{icount::Counter, stack};
 
 const BASE: usize = 0x2100_0000;
 const PSRAM_LEN: usize = 16 << 20;
 const SCRATCH: usize = 64 * 1024;
+/// Container version this runner reads.
+const VERSION: u32 = 3;
+/// u32 words per case in the container's table.
+const CASE_WORDS: usize = 7;
+/// u32 words per option set.
+const OPTIONS_WORDS: usize = 10;
 
 fn word(index: usize) -> u32 {
     // SAFETY: PSRAM is always mapped on mps2-an386; reads stay inside it.
@@ -44,6 +69,24 @@ fn points(offset: u32, n: u32) -> &'static [[f32; 3]] {
     // SAFETY: the host aligns clouds to 4 bytes inside PSRAM; [f32; 3] has
     // alignment 4 and every bit pattern is a valid f32.
     unsafe { core::slice::from_raw_parts((BASE + o.min(PSRAM_LEN)) as *const [f32; 3], n) }
+}
+
+/// The option set at word `index` (see the container layout above; the
+/// host's `vectors::options_from_words` mirrors this).
+fn read_options(index: usize) -> Options {
+    let w = |k: usize| word(index + k);
+    Options {
+        passes: w(0) as usize,
+        tolerance: f32::from_bits(w(1)),
+        hypotheses: w(2) as usize,
+        screen_iterations: w(3) as usize,
+        icp_iterations: w(4) as usize,
+        icp_tolerance: f32::from_bits(w(5)),
+        icp_distance: f32::from_bits(w(6)),
+        inlier_distance: f32::from_bits(w(7)),
+        max_points: w(8) as usize,
+        max_residual: f32::from_bits(w(9)),
+    }
 }
 
 /// Prints one line (semihosting is slow per call: build the line first).
@@ -66,7 +109,7 @@ fn main() -> ! {
     hprintln!("calibration {} {}", 2 * 1_000_000u64, t1 - t0);
     let _ = n;
 
-    if &word(0).to_le_bytes() != b"PCRV" || word(1) != 2 {
+    if &word(0).to_le_bytes() != b"PCRV" || word(1) != VERSION {
         hprintln!("error no test vectors at {:#x}", BASE);
         debug::exit(debug::EXIT_FAILURE);
     }
@@ -83,11 +126,9 @@ fn main() -> ! {
                 continue;
             }
         };
-        for c in (0..n_cases).filter(|&c| word(cases + 5 * c) as usize == m) {
-            let (cloud, tile) = (
-                points(word(cases + 5 * c + 1), word(cases + 5 * c + 2)),
-                word(cases + 5 * c + 3) as usize,
-            );
+        for c in (0..n_cases).filter(|&c| word(cases + CASE_WORDS * c) as usize == m) {
+            let entry = |k: usize| word(cases + CASE_WORDS * c + k);
+            let (cloud, tile) = (points(entry(1), entry(2)), entry(3) as usize);
             let baseline = stack::paint();
             let e0 = counter.instructions();
             let encoded = model.encode_tiled(cloud, tile, SCRATCH_BUF).is_ok();
@@ -126,7 +167,7 @@ fn main() -> ! {
                 }
             }
             emit(&line);
-            let iterations = word(cases + 5 * c + 4) as usize;
+            let iterations = entry(4) as usize;
             if iterations > 0 {
                 line.clear();
                 match model.network_pose(cloud, iterations, 0.0, SCRATCH_BUF) {
@@ -138,6 +179,41 @@ fn main() -> ! {
                     }
                     Err(e) => {
                         let _ = write!(line, "case {c} iter error {e:?}");
+                    }
+                }
+                emit(&line);
+            }
+            let (n_registrations, options_at) = (entry(5) as usize, entry(6) as usize / 4);
+            for k in 0..n_registrations {
+                let options = read_options(options_at + OPTIONS_WORDS * k);
+                let baseline = stack::paint();
+                let r0 = counter.instructions();
+                let result = model.register(cloud, &options, SCRATCH_BUF);
+                let r1 = counter.instructions();
+                let peak = stack::used_below(baseline);
+                line.clear();
+                match result {
+                    Ok(r) => {
+                        let _ = write!(line, "case {c} reg {k} ok {} {peak}", r1 - r0);
+                        for v in r.pose.rotation.iter().chain(&r.pose.translation) {
+                            let _ = write!(line, " {:08x}", v.to_bits());
+                        }
+                        for v in [r.residual, r.relative_residual, r.fitness, r.inlier_rmse] {
+                            let _ = write!(line, " {:08x}", v.to_bits());
+                        }
+                        let _ = write!(
+                            line,
+                            " {} {} {} {} ",
+                            r.hypothesis, r.passes, r.icp_iterations, r.saturated
+                        );
+                        let _ = match r.degenerate {
+                            None => write!(line, "none"),
+                            Some(d) => write!(line, "{d:?}"),
+                        };
+                        let _ = write!(line, " {}", r.reliable);
+                    }
+                    Err(e) => {
+                        let _ = write!(line, "case {c} reg {k} error {} {peak} {e:?}", r1 - r0);
                     }
                 }
                 emit(&line);
