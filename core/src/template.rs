@@ -189,6 +189,19 @@ impl<'a> Template<'a> {
                         if ring != r {
                             continue;
                         }
+                        // Skip a cell that cannot hold a point closer than
+                        // the best so far: its box is at least this far.
+                        let mut gap2 = 0u64;
+                        for (a, cc) in [cx, cy, cz].into_iter().enumerate() {
+                            let lo = self.cloud.origin[a] as i64 + cc as i64 * cell;
+                            let hi = lo + cell - 1;
+                            let v = q[a] as i64;
+                            let d = (lo - v).max(v - hi).max(0) as u64;
+                            gap2 += d * d;
+                        }
+                        if gap2 >= bound {
+                            continue;
+                        }
                         let c = ((cx * g + cy) * g + cz) as usize;
                         for i in self.offset(c)..self.offset(c + 1) {
                             let d = distance_squared(self.point(i), q);
