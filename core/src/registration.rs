@@ -34,8 +34,8 @@ pub struct Options {
     /// Starting poses tried by flip resolution: 1 (the network's pose only)
     /// up to 1 + the turns stored in the blob (clamped).
     pub hypotheses: usize,
-    /// ICP iterations every hypothesis gets before the two best (lowest
-    /// residual) go on to `icp_iterations` (see [`crate::refine::resolve`]).
+    /// ICP iterations every hypothesis gets before the network's own and
+    /// the best turned one go on to `icp_iterations` (see [`crate::refine::resolve`]).
     pub screen_iterations: usize,
     /// Most ICP iterations in all for a finalist (0: no refinement).
     pub icp_iterations: usize,

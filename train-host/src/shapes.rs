@@ -84,13 +84,19 @@ pub fn frame_of(pts: &[[f32; 3]]) -> Option<Frame> {
     (extent > 0.0 && scale.is_finite()).then_some(Frame { centre, scale })
 }
 
+/// The frame [`normalise`] applies: [`frame_of`], or for a cloud with no
+/// extent only the centring.
+pub fn normalising_frame(pts: &[[f32; 3]]) -> Frame {
+    frame_of(pts).unwrap_or_else(|| Frame {
+        centre: pcrnet_core::pose::centroid(pts).unwrap_or([0.0; 3]),
+        scale: 1.0,
+    })
+}
+
 /// Centres a cloud on its centroid and scales it so it fits in
 /// `[-0.5, 0.5]^3` (see [`frame_of`]); a cloud with no extent is only centred.
 pub fn normalise(pts: &mut [[f32; 3]]) {
-    let frame = frame_of(pts).unwrap_or_else(|| Frame {
-        centre: pcrnet_core::pose::centroid(pts).unwrap_or([0.0; 3]),
-        scale: 1.0,
-    });
+    let frame = normalising_frame(pts);
     for p in pts.iter_mut() {
         *p = frame.to_model(*p);
     }

@@ -29,6 +29,7 @@ fn pairs(max_deg: f32, max_t: f32, count: usize) -> Vec<Pair> {
         },
         count,
         seed: 5,
+        resample: false,
     };
     let shapes = spec.load_shapes().unwrap();
     PairSet::generate(spec, &shapes)
@@ -167,6 +168,6 @@ fn results_markdown_shows_tables_plots_and_what_is_missing() {
     assert!(md.contains("| sigma 0.00 | 0.987 |"));
     assert!(md.contains("noise-auc.png"));
     assert!(md.contains("commit `abc`"));
-    assert!(md.contains("Not run yet: generalisation, partial, sparse, speed, iterations."));
+    assert!(md.contains("Not run yet: generalisation, partial, sparse, speed, iterations, trust."));
     std::fs::remove_dir_all(dir).ok();
 }

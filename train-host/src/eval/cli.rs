@@ -51,6 +51,10 @@ pub struct PairsArgs {
     /// Sparse source: fraction of points kept, FRAC or LO,HI.
     #[arg(long)]
     pub sparse: Option<String>,
+    /// Resample: make each source from the shape's points the template did
+    /// not keep (no shared points, as with a real sensor).
+    #[arg(long)]
+    pub resample: bool,
     /// Output file (JSON).
     #[arg(long)]
     pub out: PathBuf,
@@ -226,6 +230,7 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
         },
         count: args.count,
         seed: args.seed,
+        resample: args.resample,
     };
     let loaded = spec.load_shapes()?;
     let set = PairSet::generate(spec, &loaded);

@@ -307,6 +307,7 @@ pub(super) fn folder(
         },
         count: ctx.pairs,
         seed: ctx.seed,
+        resample: false,
     }
 }
 

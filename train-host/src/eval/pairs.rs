@@ -61,6 +61,12 @@ pub struct PairSetSpec {
     /// Number of pairs (0: one per shape, in order). Otherwise templates
     /// are a seeded shuffle of the shapes, repeated as needed.
     pub count: usize,
+    /// Make each source from the shape's other points ([`Dataset::rest`]),
+    /// not the template's: template and source then share no point, as
+    /// with a real sensor. The transform, crop, thinning and noise are the
+    /// same as without.
+    #[serde(default)]
+    pub resample: bool,
     /// Seed of the preprocessing, the template order and every pair.
     pub seed: u64,
 }
@@ -198,6 +204,7 @@ impl PairSet {
             .enumerate()
             .map(|(k, &i)| {
                 let seed = data::mix_seed(spec.seed, 0xE7A1, k as u64);
+                // The transform is drawn first: it does not depend on the points.
                 let (_, rotation, translation) = data::make_pair(&shapes.clouds[i], &cfg, seed);
                 PairRecord {
                     template: i,
@@ -265,7 +272,18 @@ impl PairSet {
                         index,
                         what: "template file",
                     })?;
-                let (source, r_gt, t_gt) = data::make_pair(template, &cfg, rec.seed);
+                let base = if self.spec.resample {
+                    let rest = shapes.rest.get(rec.template).map_or(&[][..], Vec::as_slice);
+                    data::reduce(rest, self.spec.points, Sampling::Random, rec.seed).ok_or(
+                        PairSetError::Mismatch {
+                            index,
+                            what: "the shape's other points (--resample needs shapes with more points than --points)",
+                        },
+                    )?
+                } else {
+                    template.clone()
+                };
+                let (source, r_gt, t_gt) = data::make_pair(&base, &cfg, rec.seed);
                 if r_gt != rec.rotation || t_gt != rec.translation {
                     return Err(PairSetError::Mismatch {
                         index,
@@ -309,6 +327,46 @@ mod tests {
             pairs: PairConfig::default(),
             count,
             seed: 3,
+            resample: false,
+        }
+    }
+
+    #[test]
+    fn resampled_sources_share_no_point_but_the_pose() {
+        let plain = spec(6);
+        let shapes = plain.load_shapes().unwrap();
+        let resampled = PairSetSpec {
+            resample: true,
+            ..plain.clone()
+        };
+        let a = PairSet::generate(plain, &shapes)
+            .materialise(&shapes)
+            .unwrap();
+        let b = PairSet::generate(resampled, &shapes)
+            .materialise(&shapes)
+            .unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!((x.r_gt, x.t_gt), (y.r_gt, y.t_gt));
+            assert_eq!(y.source.len(), y.template.len());
+            // Moved back onto the template, no source point lands on a template point...
+            let back: Vec<[f32; 3]> = y
+                .source
+                .iter()
+                .map(|s| apply(&y.r_gt, &y.t_gt, s))
+                .collect();
+            let nearest = |q: &[f32; 3]| {
+                y.template
+                    .iter()
+                    .map(|t| (0..3).map(|k| (q[k] - t[k]).powi(2)).sum::<f32>().sqrt())
+                    .fold(f32::INFINITY, f32::min)
+            };
+            assert!(back.iter().all(|q| nearest(q) > 1e-4));
+            // ...but all lie on the same surface, near the template.
+            let mean = back.iter().map(nearest).sum::<f32>() / back.len() as f32;
+            assert!(
+                mean < 0.15,
+                "mean distance {mean} (64-point clouds: spacing about 0.2)"
+            );
         }
     }
 

@@ -132,13 +132,18 @@ pub enum DataError {
 }
 
 /// A class name, a file name and its preprocessed cloud.
-type Labelled = (String, String, Vec<[f32; 3]>);
+type Labelled = (String, String, Vec<[f32; 3]>, Vec<[f32; 3]>);
 
 /// A set of preprocessed shapes, all with the same number of points.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dataset {
     /// The clouds, each `points` long, centred and in the unit box.
     pub clouds: Vec<Vec<[f32; 3]>>,
+    /// For each cloud, the shape's other points: those of the file the
+    /// reduction did not keep (or, for generated shapes, a second sampling
+    /// of the surface), in the cloud's own frame. Sources resampled from
+    /// these share no point with the template, as a sensor's would not.
+    pub rest: Vec<Vec<[f32; 3]>>,
     /// Class name of each cloud.
     pub labels: Vec<String>,
     /// Where each cloud came from: its path below the data root
@@ -196,6 +201,46 @@ pub fn preprocess(
     let mut out = reduce(cloud, points, sampling, seed)?;
     shapes::normalise(&mut out);
     Some(out)
+}
+
+/// A preprocessed cloud and the shape's other points in its frame.
+pub type KeptAndRest = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+
+/// [`preprocess`], also returning the finite points the reduction did not
+/// keep, moved into the same frame (empty when every point was kept).
+pub fn preprocess_split(
+    cloud: &[[f32; 3]],
+    points: usize,
+    sampling: Sampling,
+    seed: u64,
+) -> Option<KeptAndRest> {
+    let kept = reduce(cloud, points, sampling, seed)?;
+    let mut taken: std::collections::HashMap<[u32; 3], usize> = std::collections::HashMap::new();
+    for p in &kept {
+        *taken.entry(p.map(f32::to_bits)).or_default() += 1;
+    }
+    let rest: Vec<[f32; 3]> = cloud
+        .iter()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .filter(|p| match taken.get_mut(&p.map(f32::to_bits)) {
+            Some(n) if *n > 0 => {
+                *n -= 1;
+                false
+            }
+            _ => true,
+        })
+        .copied()
+        .collect();
+    Some(normalise_together(kept, rest))
+}
+
+/// Normalises `kept` ([`shapes::normalise`]) and moves `rest` by the same frame.
+fn normalise_together(mut kept: Vec<[f32; 3]>, mut rest: Vec<[f32; 3]>) -> KeptAndRest {
+    let frame = shapes::normalising_frame(&kept);
+    for p in kept.iter_mut().chain(rest.iter_mut()) {
+        *p = frame.to_model(*p);
+    }
+    (kept, rest)
 }
 
 /// Reduces (or pads) a cloud's finite points to `points` points, keeping
@@ -445,19 +490,21 @@ impl Dataset {
                     .to_string_lossy()
                     .into_owned();
                 Ok(
-                    preprocess(&raw, points, sampling, mix_seed(seed, 0x10AD, i as u64))
-                        .map(|c| (label.clone(), name, c)),
+                    preprocess_split(&raw, points, sampling, mix_seed(seed, 0x10AD, i as u64))
+                        .map(|(c, rest)| (label.clone(), name, c, rest)),
                 )
             })
             .collect();
         let mut clouds = Vec::new();
+        let mut rest = Vec::new();
         let mut labels = Vec::new();
         let mut names = Vec::new();
         for r in loaded {
-            if let Some((l, n, c)) = r? {
+            if let Some((l, n, c, o)) = r? {
                 labels.push(l);
                 names.push(n);
                 clouds.push(c);
+                rest.push(o);
             }
         }
         if clouds.is_empty() {
@@ -465,6 +512,7 @@ impl Dataset {
         }
         Ok(Dataset {
             clouds,
+            rest,
             labels,
             names,
             points,
@@ -481,6 +529,7 @@ impl Dataset {
             (Shape::Ell, "ell"),
         ];
         let mut clouds = Vec::with_capacity(count);
+        let mut rest = Vec::with_capacity(count);
         let mut labels = Vec::with_capacity(count);
         let mut names = Vec::with_capacity(count);
         for i in 0..count {
@@ -488,18 +537,25 @@ impl Dataset {
             let s = mix_seed(seed, 0x6E7, i as u64);
             let mut rng = ChaCha8Rng::seed_from_u64(s);
             let stretch: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.6..=1.0));
-            let raw: Vec<[f32; 3]> = shapes::sample(kind, points, s)
-                .into_iter()
-                .map(|p| std::array::from_fn(|k| p[k] * stretch[k]))
-                .collect();
-            if let Some(c) = preprocess(&raw, points, Sampling::Random, s) {
+            let stretched = |seed| -> Vec<[f32; 3]> {
+                shapes::sample(kind, points, seed)
+                    .into_iter()
+                    .map(|p| std::array::from_fn(|k| p[k] * stretch[k]))
+                    .collect()
+            };
+            let raw = stretched(s);
+            if let Some(kept) = reduce(&raw, points, Sampling::Random, s) {
+                // A second, independent sampling of the same surface.
+                let (c, o) = normalise_together(kept, stretched(s ^ 0x5EC0));
                 clouds.push(c);
+                rest.push(o);
                 labels.push(name.to_string());
                 names.push(format!("generated/{name}/{i}"));
             }
         }
         Dataset {
             clouds,
+            rest,
             labels,
             names,
             points,
@@ -510,6 +566,7 @@ impl Dataset {
     pub fn single_model(mut self, index: usize) -> Self {
         let i = index.min(self.clouds.len().saturating_sub(1));
         self.clouds = self.clouds.drain(i..=i).collect();
+        self.rest = self.rest.drain(i..=i).collect();
         self.labels = self.labels.drain(i..=i).collect();
         self.names = self.names.drain(i..=i).collect();
         self
