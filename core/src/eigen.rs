@@ -1,5 +1,7 @@
-//! Eigen-decomposition of small symmetric matrices (3x3, 4x4) by cyclic
-//! Jacobi rotations, in f32 with `libm::sqrtf` and single IEEE-754
+//! Small dense linear algebra for refinement: eigen-decomposition of small
+//! symmetric matrices (3x3, 4x4) by cyclic Jacobi rotations, and a damped
+//! Cholesky solve of symmetric positive semi-definite systems (6x6 for
+//! point-to-plane ICP). Both in f32 with `libm::sqrtf` and single IEEE-754
 //! operations in a fixed order, so the result is bit-identical on every
 //! target. Used by ICP (Horn's quaternion, 4x4) and by the degeneracy check
 //! of a source (its covariance, 3x3).
@@ -76,6 +78,64 @@ pub fn symmetric<const N: usize>(mut a: [[f32; N]; N]) -> ([f32; N], [[f32; N]; 
     (sorted, vectors)
 }
 
+/// Solves `(A + lambda I) x = b` for a symmetric positive semi-definite `A`
+/// (upper triangle read) by Cholesky, with `lambda = damping x trace(A) / N`
+/// so that the factorisation exists even when the data leave directions
+/// unconstrained (a planar source's in-plane motion, say): there `b`, a sum
+/// of `J r` while `A` is the sum of `J J^T`, has no component either, so the
+/// step along them is zero instead of undefined. Returns
+/// `None` if `A` is zero or the factorisation fails (non-finite input).
+pub fn solve_damped<const N: usize>(
+    a: &[[f32; N]; N],
+    b: &[f32; N],
+    damping: f32,
+) -> Option<[f32; N]> {
+    let mut trace = 0f32;
+    for i in 0..N {
+        trace += a[i][i];
+    }
+    let lambda = damping * trace / N as f32;
+    if !(lambda.is_finite() && lambda > 0.0) {
+        return None;
+    }
+    // Lower-triangular L with L L^T = A + lambda I.
+    let mut l = [[0f32; N]; N];
+    for i in 0..N {
+        for j in 0..=i {
+            let mut sum = if i == j { a[j][i] + lambda } else { a[j][i] };
+            for k in 0..j {
+                sum -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if !(sum > 0.0 && sum.is_finite()) {
+                    return None;
+                }
+                l[i][i] = libm::sqrtf(sum);
+            } else {
+                l[i][j] = sum / l[j][j];
+            }
+        }
+    }
+    // L y = b, then L^T x = y.
+    let mut y = [0f32; N];
+    for i in 0..N {
+        let mut sum = b[i];
+        for k in 0..i {
+            sum -= l[i][k] * y[k];
+        }
+        y[i] = sum / l[i][i];
+    }
+    let mut x = [0f32; N];
+    for i in (0..N).rev() {
+        let mut sum = y[i];
+        for k in i + 1..N {
+            sum -= l[k][i] * x[k];
+        }
+        x[i] = sum / l[i][i];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
 /// One Jacobi rotation in the (p, q) plane zeroing `a[p][q]`.
 fn rotate<const N: usize>(a: &mut [[f32; N]; N], v: &mut [[f32; N]; N], p: usize, q: usize) {
     let apq = a[p][q];
@@ -146,6 +206,23 @@ mod tests {
         }
         let trace: f32 = values.iter().sum();
         assert!((trace - 6.5).abs() < 1e-4);
+    }
+
+    #[test]
+    fn damped_cholesky_solves_and_refuses_zero() {
+        let a = [[4.0f32, 1.0, 0.0], [0.0, 3.0, 0.5], [0.0, 0.0, 2.0]];
+        let b = [1.0f32, 2.0, 3.0];
+        let x = solve_damped(&a, &b, 1e-9).unwrap();
+        let full = [[4.0f32, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]];
+        for i in 0..3 {
+            let ax: f32 = (0..3).map(|j| full[i][j] * x[j]).sum();
+            assert!((ax - b[i]).abs() < 1e-5);
+        }
+        assert_eq!(solve_damped(&[[0f32; 3]; 3], &b, 1e-3), None);
+        // A direction A does not constrain (b, a sum of J r with A the sum of
+        // J J^T, has no component there either) gets no step.
+        let x = solve_damped(&[[1.0f32, 0.0], [0.0, 0.0]], &[2.0, 0.0], 1e-3).unwrap();
+        assert!((x[0] - 2.0).abs() < 1e-2 && x[1] == 0.0);
     }
 
     #[test]

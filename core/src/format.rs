@@ -81,6 +81,9 @@ impl Frame {
 ///
 /// - `points`: `M x 3` int16 little-endian, `p_model = q * step`, sorted
 ///   by grid cell (x slowest, z fastest);
+/// - `normals`: `M x 3` int8, the surface normal at each point times 127
+///   (rounded; sign arbitrary), in the same order, for point-to-plane
+///   distances;
 /// - the grid has `grid^3` cubic cells of `cell` int16 steps, its lowest
 ///   corner at `origin` (int16 steps); `cells` holds `grid^3 + 1` u16
 ///   little-endian offsets into the points: cell `c` holds points
@@ -96,6 +99,8 @@ pub struct TemplateCloud<'a> {
     pub step: f32,
     /// Points, `M x 3` int16 little-endian, sorted by cell.
     pub points: &'a [u8],
+    /// Unit normals times 127, `M x 3` int8, in the points' order.
+    pub normals: &'a [u8],
     /// Cells per axis (1..=32).
     pub grid: u8,
     /// Lowest corner of the grid, int16 steps.

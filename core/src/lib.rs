@@ -85,5 +85,5 @@ pub use float::F32Model;
 pub use format::Frame;
 pub use int8::{Int8Inference, Int8Model};
 pub use pose::Pose;
-pub use refine::Degeneracy;
+pub use refine::{Degeneracy, Metric};
 pub use registration::{Options, Registration};

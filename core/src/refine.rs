@@ -45,6 +45,21 @@ impl<'s> Subset<'s> {
     }
 }
 
+/// What ICP minimises. (The residual is always point-to-point: measured,
+/// the point-to-plane distance separates wrong poses from right ones worse,
+/// because a wrong pose still puts many points near some tangent plane.)
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Metric {
+    /// Distances to the nearest template points (Besl & McKay).
+    PointToPoint,
+    /// Distances to the tangent planes at the nearest template points,
+    /// `n . (p - q)` (Chen & Medioni): a source sampled elsewhere on the
+    /// surface than the template's points is not pulled towards them, so
+    /// the fit is unbiased, and ICP converges in fewer iterations.
+    PointToPlane,
+}
+
 /// How well a posed source fits the template (model units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fit {
@@ -104,6 +119,8 @@ pub fn score(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, max_dist
 /// ICP settings (model units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IcpSettings {
+    /// What each iteration minimises.
+    pub metric: Metric,
     /// Most iterations.
     pub iterations: usize,
     /// Stop once an update's `||dT - I||_F` is below this.
@@ -127,7 +144,11 @@ pub fn icp(
     let lim = limit(template, settings.max_distance);
     let mut pose = start;
     for done in 1..=settings.iterations {
-        let Some(delta) = icp_step(template, subset, &pose, lim) else {
+        let step = match settings.metric {
+            Metric::PointToPoint => icp_step(template, subset, &pose, lim),
+            Metric::PointToPlane => plane_step(template, subset, &pose, lim),
+        };
+        let Some(delta) = step else {
             return (pose, done - 1);
         };
         pose = pose.then(&delta);
@@ -193,6 +214,73 @@ fn icp_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64)
     Some(Pose {
         rotation,
         translation: [0, 1, 2].map(|k| (mean_q[k] - rp[k]) * step),
+    })
+}
+
+/// One point-to-plane ICP update (model frame): the small motion
+/// `(omega, t)` minimising `sum (n . (R p + t - q))^2` linearised at the
+/// current pose (`R ~ I + [omega]x`; Low, *Linear least-squares
+/// optimization for point-to-plane ICP*, 2004), solved as 6x6 normal
+/// equations accumulated in f32 in point order and applied as the exact
+/// rotation of angle `|omega|`. `None` with fewer than 6 pairs or a
+/// singular system.
+fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64) -> Option<Pose> {
+    let map = PointMap::new(subset.frame, pose);
+    let step = template.step();
+    let mut a = [[0f32; 6]; 6];
+    let mut b = [0f32; 6];
+    let mut n_pairs = 0u32;
+    for p in subset.points() {
+        let pq = template.quantize(map.apply(*p));
+        let Some(nb) = template.nearest(pq, lim + 1) else {
+            continue;
+        };
+        let (t, n) = (template.point(nb.index), template.normal(nb.index));
+        let nn = libm::sqrtf((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) as f32);
+        let n = n.map(|v| v as f32 / nn);
+        let p = pq.map(|v| v as f32 * step);
+        // r = n . (t - p), exact in i64 before the one rounding.
+        let mut dot = 0i64;
+        for k in 0..3 {
+            dot += (t[k] - pq[k]) as i64 * template.normal(nb.index)[k] as i64;
+        }
+        let r = dot as f32 / nn * step;
+        let j = [
+            p[1] * n[2] - p[2] * n[1],
+            p[2] * n[0] - p[0] * n[2],
+            p[0] * n[1] - p[1] * n[0],
+            n[0],
+            n[1],
+            n[2],
+        ];
+        for i in 0..6 {
+            for k in i..6 {
+                a[i][k] += j[i] * j[k];
+            }
+            b[i] += j[i] * r;
+        }
+        n_pairs += 1;
+    }
+    if n_pairs < 6 {
+        return None;
+    }
+    let x = eigen::solve_damped(&a, &b, 1e-6)?;
+    let omega = [x[0], x[1], x[2]];
+    let angle = libm::sqrtf(omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]);
+    let rotation = if angle > 0.0 {
+        let s = libm::sinf(0.5 * angle) / angle;
+        [
+            libm::cosf(0.5 * angle),
+            omega[0] * s,
+            omega[1] * s,
+            omega[2] * s,
+        ]
+    } else {
+        Pose::IDENTITY.rotation
+    };
+    Some(Pose {
+        rotation,
+        translation: [x[3], x[4], x[5]],
     })
 }
 

@@ -18,7 +18,7 @@
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{self, PointMap, Pose};
-use crate::refine::{self, Degeneracy, IcpSettings, Subset};
+use crate::refine::{self, Degeneracy, IcpSettings, Metric, Subset};
 use crate::template::Template;
 
 /// How to register. Distances are in **model units**: the template spans
@@ -39,6 +39,8 @@ pub struct Options {
     pub screen_iterations: usize,
     /// Most ICP iterations in all for a finalist (0: no refinement).
     pub icp_iterations: usize,
+    /// What ICP minimises: point-to-plane (default) or point-to-point.
+    pub metric: Metric,
     /// ICP stops once an update's `||dT - I||_F` is below this.
     pub icp_tolerance: f32,
     /// ICP leaves out pairs farther apart than this (model units).
@@ -60,8 +62,9 @@ impl Default for Options {
             passes: 1,
             tolerance: 0.0,
             hypotheses: 10,
-            screen_iterations: 50,
+            screen_iterations: 10,
             icp_iterations: 50,
+            metric: Metric::PointToPlane,
             icp_tolerance: 1e-3,
             icp_distance: 0.3,
             inlier_distance: 0.05,
@@ -170,6 +173,7 @@ pub(crate) fn run(
     let subset = Subset::new(source, *frame, options.max_points);
     let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
     let icp = IcpSettings {
+        metric: options.metric,
         iterations: options.icp_iterations,
         tolerance: options.icp_tolerance,
         max_distance: options.icp_distance,

@@ -54,6 +54,18 @@ impl<'a> Template<'a> {
         if !(1..=MAX_GRID).contains(&cloud.grid) || cloud.cell == 0 {
             return bad("template grid size or cell");
         }
+        if cloud.normals.len() != 3 * len {
+            return bad("template normals: 3 bytes per point");
+        }
+        for n in cloud.normals.chunks_exact(3) {
+            let sq: i32 = n.iter().map(|&v| (v as i8 as i32).pow(2)).sum();
+            // 127 x a unit vector, each component rounded: |n|^2 within 10%.
+            if !(14_500..=17_800).contains(&sq) {
+                return Err(Error::InvalidParameter {
+                    what: "template normal is not 127 x a unit vector",
+                });
+            }
+        }
         let grid = cloud.grid as i32;
         let cells = (grid * grid * grid) as usize;
         if cloud.cells.len() != 2 * (cells + 1) {
@@ -120,6 +132,14 @@ impl<'a> Template<'a> {
                 i16::from_le_bytes([c, d]) as i32,
                 i16::from_le_bytes([e, f]) as i32,
             ],
+            _ => [0; 3],
+        }
+    }
+
+    /// The normal at point `i`, times 127 (zero past the end).
+    pub fn normal(&self, i: usize) -> [i32; 3] {
+        match self.cloud.normals.get(3 * i..3 * i + 3) {
+            Some(&[a, b, c]) => [a as i8 as i32, b as i8 as i32, c as i8 as i32],
             _ => [0; 3],
         }
     }
@@ -251,25 +271,46 @@ pub fn distance_squared(a: [i32; 3], b: [i32; 3]) -> u64 {
 }
 
 /// Bytes [`build`] writes for `points` points on a `grid^3` grid:
-/// `(points bytes, cell offset bytes)`.
-pub const fn build_len(points: usize, grid: u8) -> (usize, usize) {
+/// `(points bytes, normals bytes, cell offset bytes)`.
+pub const fn build_len(points: usize, grid: u8) -> (usize, usize, usize) {
     let g = grid as usize;
-    (6 * points, 2 * (g * g * g + 1))
+    (6 * points, 3 * points, 2 * (g * g * g + 1))
 }
 
-/// Lays out quantized template points for [`Template`]: picks the cell
-/// edge so the `grid^3` cells cover the points' bounding box, sorts the
-/// points by cell (counting sort, stable, no allocation) into
-/// `points_out` and writes the offsets into `cells_out` (sizes from
-/// [`build_len`]). Returns the [`TemplateCloud`] borrowing both.
+/// Where [`build`] writes: points, normals and cell offsets (sizes from [`build_len`]).
+#[derive(Debug)]
+pub struct BuildOut<'o> {
+    /// Points, 6 bytes each.
+    pub points: &'o mut [u8],
+    /// Normals, 3 bytes each.
+    pub normals: &'o mut [u8],
+    /// Cell offsets.
+    pub cells: &'o mut [u8],
+}
+
+/// Lays out quantized template points and their normals (127 x unit) for
+/// [`Template`]: picks the cell edge so the `grid^3` cells cover the
+/// points' bounding box, sorts points and normals by cell (counting sort,
+/// stable, no allocation) into `out` and writes the cell offsets. Returns
+/// the [`TemplateCloud`] borrowing `out`.
 pub fn build<'o>(
     points: &[[i16; 3]],
+    normals: &[[i8; 3]],
     step: f32,
     grid: u8,
     turns: &[[f32; 4]],
-    points_out: &'o mut [u8],
-    cells_out: &'o mut [u8],
+    out: BuildOut<'o>,
 ) -> Result<TemplateCloud<'o>> {
+    if normals.len() != points.len() {
+        return Err(Error::InconsistentDimensions {
+            what: "template normals: one per point",
+        });
+    }
+    let BuildOut {
+        points: points_out,
+        normals: normals_out,
+        cells: cells_out,
+    } = out;
     if points.is_empty() || points.len() > MAX_POINTS {
         return Err(Error::InconsistentDimensions {
             what: "template point count outside 1..=65535",
@@ -280,8 +321,12 @@ pub fn build<'o>(
             what: "template grid outside 1..=32",
         });
     }
-    let (np, nc) = build_len(points.len(), grid);
-    for (needed, available) in [(np, points_out.len()), (nc, cells_out.len())] {
+    let (np, nn, nc) = build_len(points.len(), grid);
+    for (needed, available) in [
+        (np, points_out.len()),
+        (nn, normals_out.len()),
+        (nc, cells_out.len()),
+    ] {
         if available < needed {
             return Err(Error::BufferTooSmall { needed, available });
         }
@@ -327,11 +372,13 @@ pub fn build<'o>(
     // Place each point at its cell's cursor (slot c, advanced), then shift
     // the cursors back into starts.
     let points_out = &mut points_out[..np];
-    for p in points {
+    let normals_out = &mut normals_out[..nn];
+    for (p, n) in points.iter().zip(normals) {
         let c = cell_of(p);
         let at = read(cells_out, c) as usize;
         for k in 0..3 {
             points_out[6 * at + 2 * k..6 * at + 2 * k + 2].copy_from_slice(&p[k].to_le_bytes());
+            normals_out[3 * at + k] = n[k] as u8;
         }
         cells_out[2 * c..2 * c + 2].copy_from_slice(&(at as u16 + 1).to_le_bytes());
     }
@@ -343,6 +390,7 @@ pub fn build<'o>(
     let cloud = TemplateCloud {
         step,
         points: points_out,
+        normals: normals_out,
         grid,
         origin,
         cell: cell as u16,
@@ -373,8 +421,14 @@ mod tests {
             for p in points.iter_mut() {
                 *p = [0; 3].map(|_: i32| rng.int(-9000, 9000) as i16);
             }
-            let (mut pb, mut cb) = ([0u8; 6 * 300], [0u8; 2 * (8 * 8 * 8 + 1)]);
-            let cloud = build(&points, 1e-4, grid, &[], &mut pb, &mut cb).unwrap();
+            let (mut pb, mut nb, mut cb) = ([0u8; 6 * 300], [0u8; 900], [0u8; 2 * (8 * 8 * 8 + 1)]);
+            let normals = [[127i8, 0, 0]; 300];
+            let out = BuildOut {
+                points: &mut pb,
+                normals: &mut nb,
+                cells: &mut cb,
+            };
+            let cloud = build(&points, &normals, 1e-4, grid, &[], out).unwrap();
             let t = Template::new(cloud).unwrap();
             assert_eq!(t.len(), 300);
             for _ in 0..500 {
@@ -391,10 +445,16 @@ mod tests {
     #[test]
     fn rejects_inconsistent_clouds() {
         let points = [[0i16, 0, 0], [100, 100, 100], [-50, 20, 7]];
-        let (np, nc) = build_len(3, 2);
-        let (mut pb, mut cb) = ([0u8; 18], [0u8; 18]);
-        assert_eq!((np, nc), (18, 18));
-        let cloud = build(&points, 1e-4, 2, &[[1.0, 0.0, 0.0, 0.0]], &mut pb, &mut cb).unwrap();
+        let (np, nn, nc) = build_len(3, 2);
+        let (mut pb, mut nb, mut cb) = ([0u8; 18], [0u8; 9], [0u8; 18]);
+        assert_eq!((np, nn, nc), (18, 9, 18));
+        let normals = [[0i8, 127, 0], [0, 0, -127], [90, 90, 0]];
+        let out = BuildOut {
+            points: &mut pb,
+            normals: &mut nb,
+            cells: &mut cb,
+        };
+        let cloud = build(&points, &normals, 1e-4, 2, &[[1.0, 0.0, 0.0, 0.0]], out).unwrap();
         assert!(Template::new(cloud.clone()).is_ok());
         // A point moved out of its cell.
         let mut moved = [0u8; 18];
@@ -407,6 +467,12 @@ mod tests {
         assert!(Template::new(bad).is_err());
         let bad = TemplateCloud {
             step: f32::NAN,
+            ..cloud.clone()
+        };
+        assert!(Template::new(bad).is_err());
+        let zero = [0u8; 9];
+        let bad = TemplateCloud {
+            normals: &zero,
             ..cloud.clone()
         };
         assert!(Template::new(bad).is_err());

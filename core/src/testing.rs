@@ -133,24 +133,35 @@ pub fn random_int8_blob_into<'o>(
 pub const RANDOM_TEMPLATE_STEP: f32 = 1.0 / 16384.0;
 
 /// The template cloud of a random model: `cloud` (model frame) on the
-/// int16 grid, a 4^3 grid, and half turns about the three axes.
+/// int16 grid with radial normals, a 4^3 grid, and half turns about the
+/// three axes.
 fn random_template<'o>(cloud: &[[f32; 3]], arena: &mut &'o mut [u8]) -> Result<TemplateCloud<'o>> {
     let mut q = [[0i16; 3]; 64];
+    let mut n = [[0i8; 3]; 64];
     let q = q.get_mut(..cloud.len()).ok_or(Error::InvalidParameter {
         what: "random template wider than 64 points",
     })?;
-    for (q, p) in q.iter_mut().zip(cloud) {
+    for ((q, n), p) in q.iter_mut().zip(n.iter_mut()).zip(cloud) {
         *q = p.map(|x| libm::roundf(x / RANDOM_TEMPLATE_STEP) as i16);
+        let len = libm::sqrtf(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+        *n = if len > 1e-3 {
+            p.map(|x| libm::roundf(127.0 * x / len) as i8)
+        } else {
+            [127, 0, 0]
+        };
     }
-    let (np, nc) = template::build_len(q.len(), 4);
-    let points = take(arena, np)?;
-    let cells = take(arena, nc)?;
+    let (np, nn, nc) = template::build_len(q.len(), 4);
+    let out = template::BuildOut {
+        points: take(arena, np)?,
+        normals: take(arena, nn)?,
+        cells: take(arena, nc)?,
+    };
     let turns = [
         [0.0, 1.0, 0.0, 0.0],
         [0.0, 0.0, 1.0, 0.0],
         [0.0, 0.0, 0.0, 1.0],
     ];
-    template::build(q, RANDOM_TEMPLATE_STEP, 4, &turns, points, cells)
+    template::build(q, &n[..q.len()], RANDOM_TEMPLATE_STEP, 4, &turns, out)
 }
 
 /// As [`random_int8_blob_into`], choosing whether the model centres sources

@@ -4,7 +4,7 @@
 
 use pcrnet_core::format::Frame;
 use pcrnet_core::pose::Pose;
-use pcrnet_core::refine::{self, Degeneracy, IcpSettings, Subset};
+use pcrnet_core::refine::{self, Degeneracy, IcpSettings, Metric, Subset};
 use pcrnet_core::template::{self, Template};
 use pcrnet_core::testing::SplitMix64;
 
@@ -32,26 +32,46 @@ fn ell(seed: u64) -> Vec<[f32; 3]> {
         .collect()
 }
 
-struct Owned {
-    points: Vec<u8>,
-    cells: Vec<u8>,
+/// Unit normals by PCA of the 10 nearest points (brute force), times 127.
+fn normals(cloud: &[[f32; 3]]) -> Vec<[i8; 3]> {
+    cloud
+        .iter()
+        .map(|p| {
+            let mut near: Vec<(f32, [f32; 3])> = cloud
+                .iter()
+                .map(|q| ((0..3).map(|k| (p[k] - q[k]).powi(2)).sum(), *q))
+                .collect();
+            near.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let near: Vec<[f32; 3]> = near[..10].iter().map(|x| x.1).collect();
+            let c: [f32; 3] =
+                std::array::from_fn(|k| near.iter().map(|q| q[k]).sum::<f32>() / 10.0);
+            let mut m = [[0f32; 3]; 3];
+            for q in &near {
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m[i][j] += (q[i] - c[i]) * (q[j] - c[j]);
+                    }
+                }
+            }
+            let (_, v) = pcrnet_core::eigen::symmetric(m);
+            v[2].map(|x| (127.0 * x).round() as i8)
+        })
+        .collect()
 }
 
-fn template_of(cloud: &[[f32; 3]], turns: &[[f32; 4]], owned: &mut Owned) -> Template<'static> {
+fn template_of(cloud: &[[f32; 3]], turns: &[[f32; 4]]) -> Template<'static> {
     let q: Vec<[i16; 3]> = cloud
         .iter()
         .map(|p| p.map(|x| (x / STEP).round() as i16))
         .collect();
-    let (np, nc) = template::build_len(q.len(), 6);
-    owned.points = vec![0; np];
-    owned.cells = vec![0; nc];
-    let cloud = template::build(&q, STEP, 6, turns, &mut owned.points, &mut owned.cells).unwrap();
-    // Leak for a 'static view in tests only.
-    let cloud = pcrnet_core::format::TemplateCloud {
-        points: Box::leak(cloud.points.to_vec().into_boxed_slice()),
-        cells: Box::leak(cloud.cells.to_vec().into_boxed_slice()),
-        ..cloud
+    let (np, nn, nc) = template::build_len(q.len(), 6);
+    // Leaked for a 'static view, in tests only.
+    let out = template::BuildOut {
+        points: Box::leak(vec![0u8; np].into_boxed_slice()),
+        normals: Box::leak(vec![0u8; nn].into_boxed_slice()),
+        cells: Box::leak(vec![0u8; nc].into_boxed_slice()),
     };
+    let cloud = template::build(&q, &normals(cloud), STEP, 6, turns, out).unwrap();
     Template::new(cloud).unwrap()
 }
 
@@ -77,11 +97,7 @@ fn angle_deg(a: &Pose, b: &Pose) -> f32 {
 #[test]
 fn icp_recovers_a_known_transform() {
     let cloud = ell(1);
-    let mut owned = Owned {
-        points: vec![],
-        cells: vec![],
-    };
-    let t = template_of(&cloud, &[], &mut owned);
+    let t = template_of(&cloud, &[]);
     // Source: the template moved by the inverse of `truth`, so `truth` maps it back.
     let mut truth = rotation([0.3, -1.0, 0.5], 12.0);
     truth.translation = [0.03, -0.02, 0.05];
@@ -107,37 +123,39 @@ fn icp_recovers_a_known_transform() {
     };
     let source: Vec<[f32; 3]> = cloud.iter().map(|&p| inv.transform_point(p)).collect();
     let subset = Subset::new(&source, Frame::IDENTITY, 256);
-    let settings = IcpSettings {
-        iterations: 50,
-        tolerance: 1e-6,
-        max_distance: 0.2,
-    };
-    let (pose, iterations) = refine::icp(&t, &subset, Pose::IDENTITY, &settings);
-    assert!(iterations > 1 && iterations <= 50);
-    assert!(angle_deg(&pose, &truth) < 0.1, "{pose:?} vs {truth:?}");
-    for k in 0..3 {
+    for metric in [Metric::PointToPoint, Metric::PointToPlane] {
+        let settings = IcpSettings {
+            metric,
+            iterations: 50,
+            tolerance: 1e-6,
+            max_distance: 0.2,
+        };
+        let (pose, iterations) = refine::icp(&t, &subset, Pose::IDENTITY, &settings);
+        assert!(iterations > 1 && iterations <= 50, "{metric:?}");
         assert!(
-            (pose.translation[k] - truth.translation[k]).abs() < 1e-3,
-            "{pose:?}"
+            angle_deg(&pose, &truth) < 0.1,
+            "{metric:?}: {pose:?} vs {truth:?}"
         );
+        for k in 0..3 {
+            assert!(
+                (pose.translation[k] - truth.translation[k]).abs() < 1e-3,
+                "{metric:?}: {pose:?}"
+            );
+        }
+        let fit = refine::score(&t, &subset, &pose, 0.05);
+        assert!(fit.residual < 1e-3 && fit.fitness == 1.0, "{fit:?}");
+        // The identity is a worse fit.
+        let off = refine::score(&t, &subset, &Pose::IDENTITY, 0.05);
+        assert!(off.residual > 10.0 * fit.residual, "{off:?}");
     }
-    let fit = refine::score(&t, &subset, &pose, 0.05);
-    assert!(fit.residual < 1e-3 && fit.fitness == 1.0, "{fit:?}");
-    // The identity is a worse fit.
-    let off = refine::score(&t, &subset, &Pose::IDENTITY, 0.05);
-    assert!(off.residual > 10.0 * fit.residual, "{off:?}");
 }
 
 #[test]
 fn flip_resolution_picks_the_turn_that_fits() {
     let cloud = ell(2);
-    let mut owned = Owned {
-        points: vec![],
-        cells: vec![],
-    };
     let half_z = [0.0, 0.0, 0.0, 1.0];
     let half_x = [0.0, 1.0, 0.0, 0.0];
-    let t = template_of(&cloud, &[half_x, half_z], &mut owned);
+    let t = template_of(&cloud, &[half_x, half_z]);
     // The source is the template turned half about z: the network's
     // "identity" is a flip; turn 2 (half about z) undoes it.
     let flip = Pose {
@@ -147,6 +165,7 @@ fn flip_resolution_picks_the_turn_that_fits() {
     let source: Vec<[f32; 3]> = cloud.iter().map(|&p| flip.transform_point(p)).collect();
     let subset = Subset::new(&source, Frame::IDENTITY, 300);
     let settings = IcpSettings {
+        metric: Metric::PointToPoint,
         iterations: 10,
         tolerance: 1e-5,
         max_distance: 0.1,
@@ -162,11 +181,7 @@ fn flip_resolution_picks_the_turn_that_fits() {
 #[test]
 fn degenerate_sources_are_flagged() {
     let cloud = ell(3);
-    let mut owned = Owned {
-        points: vec![],
-        cells: vec![],
-    };
-    let t = template_of(&cloud, &[], &mut owned);
+    let t = template_of(&cloud, &[]);
     let point = vec![[0.1f32, 0.2, 0.3]; 40];
     let line: Vec<[f32; 3]> = (0..40).map(|i| [i as f32 * 0.01, 0.2, 0.3]).collect();
     for (cloud, expected) in [

@@ -18,7 +18,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
-use pcrnet_core::{Frame, Int8Model, MAX_TILE, Options};
+use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options};
 use pcrnet_qemu_tests::compare::{
     DeviceRun, first_difference, iterative_difference, parse, registration_difference,
 };
@@ -66,6 +66,7 @@ fn unusual_options() -> Options {
         hypotheses: 3,
         screen_iterations: 3,
         icp_iterations: 10,
+        metric: Metric::PointToPoint,
         icp_tolerance: 2e-3,
         icp_distance: 0.2,
         inlier_distance: 0.1,

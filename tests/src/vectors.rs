@@ -1,21 +1,21 @@
 //! Test models, clouds and the container the device reads.
 
 use pcrnet_core::testing::{SplitMix64, random_int8_blob_with};
-use pcrnet_core::{Frame, Int8Model, MAX_TILE, Options, POSE_DIM, Registration};
+use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options, POSE_DIM, Registration};
 
 /// Where the container goes in the MPS2 PSRAM.
 pub const PSRAM_BASE: u32 = 0x2100_0000;
 /// PSRAM size.
 pub const PSRAM_LEN: usize = 16 << 20;
 /// Container format version (the device checks it).
-pub const CONTAINER_VERSION: u32 = 3;
+pub const CONTAINER_VERSION: u32 = 4;
 /// Scratch bytes on the device (and lent to the host's `register`, so both
 /// pick the same tile).
 pub const SCRATCH_LEN: usize = 64 * 1024;
 /// u32 words per case in the container's table.
 const CASE_WORDS: usize = 7;
 /// u32 words per [`Options`] in the container.
-pub const OPTIONS_WORDS: usize = 10;
+pub const OPTIONS_WORDS: usize = 11;
 
 /// A named int8 model blob.
 pub struct TestModel {
@@ -131,11 +131,12 @@ pub fn describe(o: &Options) -> String {
         return format!("K={} + ICP {}", o.hypotheses, o.icp_iterations);
     }
     format!(
-        "{} passes (tol {}), K={}, ICP {} (screen {}, tol {}, {}), inlier {}, {} points, max residual {}",
+        "{} passes (tol {}), K={}, ICP {} {:?} (screen {}, tol {}, {}), inlier {}, {} points, max residual {}",
         o.passes,
         o.tolerance,
         o.hypotheses,
         o.icp_iterations,
+        o.metric,
         o.screen_iterations,
         o.icp_tolerance,
         o.icp_distance,
@@ -336,9 +337,9 @@ fn align4(buf: &mut Vec<u8>) {
 }
 
 /// An option set as the container's words: `passes tolerance hypotheses
-/// screen_iterations icp_iterations icp_tolerance icp_distance
+/// screen_iterations icp_iterations metric icp_tolerance icp_distance
 /// inlier_distance max_points max_residual` (counts as u32, f32 as their
-/// bits). Every field: a field added to `Options` fails to compile here.
+/// bits, metric 0 point-to-point / 1 point-to-plane). Every field: a field added to `Options` fails to compile here.
 pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
     let Options {
         passes,
@@ -346,6 +347,7 @@ pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
         hypotheses,
         screen_iterations,
         icp_iterations,
+        metric,
         icp_tolerance,
         icp_distance,
         inlier_distance,
@@ -358,6 +360,10 @@ pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
         u32::try_from(hypotheses)?,
         u32::try_from(screen_iterations)?,
         u32::try_from(icp_iterations)?,
+        match metric {
+            Metric::PointToPoint => 0,
+            Metric::PointToPlane => 1,
+        },
         icp_tolerance.to_bits(),
         icp_distance.to_bits(),
         inlier_distance.to_bits(),
@@ -374,11 +380,16 @@ pub fn options_from_words(w: &[u32; OPTIONS_WORDS]) -> Options {
         hypotheses: w[2] as usize,
         screen_iterations: w[3] as usize,
         icp_iterations: w[4] as usize,
-        icp_tolerance: f32::from_bits(w[5]),
-        icp_distance: f32::from_bits(w[6]),
-        inlier_distance: f32::from_bits(w[7]),
-        max_points: w[8] as usize,
-        max_residual: f32::from_bits(w[9]),
+        metric: if w[5] == 0 {
+            Metric::PointToPoint
+        } else {
+            Metric::PointToPlane
+        },
+        icp_tolerance: f32::from_bits(w[6]),
+        icp_distance: f32::from_bits(w[7]),
+        inlier_distance: f32::from_bits(w[8]),
+        max_points: w[9] as usize,
+        max_residual: f32::from_bits(w[10]),
     }
 }
 

@@ -5,7 +5,8 @@
 //! `export`, `quantize` and `register` with a template file go through
 //! [`Reference`] and [`bind`].
 
-use nalgebra::{Matrix3, SymmetricEigen};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use pcrnet_core::format::{
     self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, TemplateCloud, write_blob,
 };
@@ -46,6 +47,7 @@ pub struct Reference {
     /// The template as given (user units): its feature is computed from these.
     pub points: Vec<[f32; 3]>,
     point_bytes: Vec<u8>,
+    normal_bytes: Vec<u8>,
     cell_bytes: Vec<u8>,
     grid: u8,
     origin: [i16; 3],
@@ -71,23 +73,24 @@ impl Reference {
             .collect();
         let grid = ((kept.len() as f64 / 2.0).cbrt().round() as u8).clamp(1, MAX_GRID);
         let turns = principal_turns(&model);
-        let (np, nc) = template::build_len(quantized.len(), grid);
-        let (mut point_bytes, mut cell_bytes) = (vec![0u8; np], vec![0u8; nc]);
+        let normals = normals(&model, &kept);
+        let (np, nn, nc) = template::build_len(quantized.len(), grid);
+        let (mut point_bytes, mut normal_bytes, mut cell_bytes) =
+            (vec![0u8; np], vec![0u8; nn], vec![0u8; nc]);
         let (origin, cell) = {
-            let c = template::build(
-                &quantized,
-                TEMPLATE_STEP,
-                grid,
-                &turns,
-                &mut point_bytes,
-                &mut cell_bytes,
-            )?;
+            let out = template::BuildOut {
+                points: &mut point_bytes,
+                normals: &mut normal_bytes,
+                cells: &mut cell_bytes,
+            };
+            let c = template::build(&quantized, &normals, TEMPLATE_STEP, grid, &turns, out)?;
             (c.origin, c.cell)
         };
         Ok(Reference {
             frame,
             points: template.to_vec(),
             point_bytes,
+            normal_bytes,
             cell_bytes,
             grid,
             origin,
@@ -101,6 +104,7 @@ impl Reference {
         TemplateCloud {
             step: TEMPLATE_STEP,
             points: &self.point_bytes,
+            normals: &self.normal_bytes,
             grid: self.grid,
             origin: self.origin,
             cell: self.cell,
@@ -117,11 +121,58 @@ impl Reference {
             .map(|&p| self.frame.to_model(p))
             .collect()
     }
+}
 
-    /// Flash the template block takes in a blob (points, cells, turns, frame).
-    pub fn flash_bytes(&self) -> usize {
-        self.point_bytes.len() + self.cell_bytes.len() + 16 * self.turns.len() + 16
-    }
+/// Neighbours whose covariance gives a point's normal.
+const NORMAL_NEIGHBOURS: usize = 12;
+
+/// The unit normal (times 127, sign arbitrary) at each of `kept`: the
+/// direction of least spread of its [`NORMAL_NEIGHBOURS`] nearest points of
+/// `model` (principal component analysis, as PCL and Open3D estimate
+/// normals). A point whose neighbourhood has no such direction (all
+/// neighbours equal) gets `+x`.
+fn normals(model: &[[f32; 3]], kept: &[[f32; 3]]) -> Vec<[i8; 3]> {
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(
+        &model
+            .iter()
+            .map(|p| p.map(|v| v as f64))
+            .collect::<Vec<_>>(),
+    );
+    let k = NORMAL_NEIGHBOURS.min(model.len()).max(1);
+    kept.iter()
+        .map(|p| {
+            let q = p.map(|v| v as f64);
+            let near = tree.nearest_n::<SquaredEuclidean>(
+                &q,
+                std::num::NonZero::new(k).unwrap_or(std::num::NonZero::<usize>::MIN),
+            );
+            let pts: Vec<Vector3<f64>> = near
+                .iter()
+                .map(|n| {
+                    let m = model[n.item as usize];
+                    Vector3::new(m[0] as f64, m[1] as f64, m[2] as f64)
+                })
+                .collect();
+            let c = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
+            let cov = pts
+                .iter()
+                .fold(Matrix3::zeros(), |a, v| a + (v - c) * (v - c).transpose());
+            let eig = SymmetricEigen::new(cov);
+            let (mut best, mut value) = (0usize, f64::INFINITY);
+            for i in 0..3 {
+                if eig.eigenvalues[i] < value {
+                    (best, value) = (i, eig.eigenvalues[i]);
+                }
+            }
+            let n = eig.eigenvectors.column(best);
+            let len = n.norm();
+            if len > 0.0 && eig.eigenvalues.iter().any(|&v| v > 0.0) {
+                [0, 1, 2].map(|i| (127.0 * n[i] / len).round() as i8)
+            } else {
+                [127, 0, 0]
+            }
+        })
+        .collect()
 }
 
 /// Half turns then quarter turns (+-90 degrees) about the principal axes

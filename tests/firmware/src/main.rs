@@ -17,10 +17,11 @@
 //!   n_registrations, options_offset)`: the cloud is `n_points x [f32; 3]`
 //!   at `cloud_offset`; `iterations` i-PCRNet passes (tolerance 0) run
 //!   after the inference when non-zero;
-//! - at `options_offset`, `n_registrations` option sets of 10 words each,
+//! - at `options_offset`, `n_registrations` option sets of 11 words each,
 //!   every `Options` field: `passes tolerance hypotheses screen_iterations
-//!   icp_iterations icp_tolerance icp_distance inlier_distance max_points
-//!   max_residual` (counts as u32, f32 as their bits).
+//!   icp_iterations metric icp_tolerance icp_distance inlier_distance
+//!   max_points max_residual` (counts as u32, f32 as their bits, metric 0
+//!   point-to-point / 1 point-to-plane).
 //!
 //! Output lines (f32 as 8 hex digits of their bits, `{:?}` for errors):
 //! - `case C ok ENCODE_INSTR INFER_INSTR STACK feature HEX head H0..H6 pose Q0..T2`
@@ -38,18 +39,18 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use heapless::String;
 use panic_semihosting as _;
-use pcrnet_core::{Int8Model, Options};
+use pcrnet_core::{Int8Model, Metric, Options};
 use pcrnet_firmware_example::{icount::Counter, stack};
 
 const BASE: usize = 0x2100_0000;
 const PSRAM_LEN: usize = 16 << 20;
 const SCRATCH: usize = 64 * 1024;
 /// Container version this runner reads.
-const VERSION: u32 = 3;
+const VERSION: u32 = 4;
 /// u32 words per case in the container's table.
 const CASE_WORDS: usize = 7;
 /// u32 words per option set.
-const OPTIONS_WORDS: usize = 10;
+const OPTIONS_WORDS: usize = 11;
 
 fn word(index: usize) -> u32 {
     // SAFETY: PSRAM is always mapped on mps2-an386; reads stay inside it.
@@ -81,11 +82,16 @@ fn read_options(index: usize) -> Options {
         hypotheses: w(2) as usize,
         screen_iterations: w(3) as usize,
         icp_iterations: w(4) as usize,
-        icp_tolerance: f32::from_bits(w(5)),
-        icp_distance: f32::from_bits(w(6)),
-        inlier_distance: f32::from_bits(w(7)),
-        max_points: w(8) as usize,
-        max_residual: f32::from_bits(w(9)),
+        metric: if w(5) == 0 {
+            Metric::PointToPoint
+        } else {
+            Metric::PointToPlane
+        },
+        icp_tolerance: f32::from_bits(w(6)),
+        icp_distance: f32::from_bits(w(7)),
+        inlier_distance: f32::from_bits(w(8)),
+        max_points: w(9) as usize,
+        max_residual: f32::from_bits(w(10)),
     }
 }
 

@@ -104,6 +104,9 @@ pub struct MethodOptions {
     /// Most ICP iterations of the device pipeline in all (0: no refinement).
     #[arg(long)]
     pub icp_iterations: Option<usize>,
+    /// What the device pipeline's ICP and residual measure.
+    #[arg(long, value_enum)]
+    pub metric: Option<super::methods::DeviceMetric>,
     /// Most source points the device pipeline scores and refines (every
     /// k-th point is used).
     #[arg(long)]
@@ -132,6 +135,7 @@ impl MethodOptions {
         m.icp_iterations = self.icp_iterations.unwrap_or(m.icp_iterations);
         m.screen_iterations = self.screen_iterations.unwrap_or(m.screen_iterations);
         m.max_points = self.max_points.unwrap_or(m.max_points);
+        m.metric = self.metric.unwrap_or(m.metric);
         m.icp_distance = self.icp_distance.unwrap_or(m.icp_distance);
         m
     }

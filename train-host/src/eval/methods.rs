@@ -42,6 +42,25 @@ pub enum MethodKind {
     Device,
 }
 
+/// What the device pipeline's ICP and residual measure (`pcrnet_core::Metric`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+pub enum DeviceMetric {
+    /// To the tangent plane at the nearest template point.
+    #[default]
+    PointToPlane,
+    /// To the nearest template point.
+    PointToPoint,
+}
+
+impl From<DeviceMetric> for pcrnet_core::Metric {
+    fn from(m: DeviceMetric) -> Self {
+        match m {
+            DeviceMetric::PointToPlane => pcrnet_core::Metric::PointToPlane,
+            DeviceMetric::PointToPoint => pcrnet_core::Metric::PointToPoint,
+        }
+    }
+}
+
 /// A method with its settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Method {
@@ -65,6 +84,9 @@ pub struct Method {
     /// Most source points the device pipeline scores and refines.
     #[serde(default = "default_max_points")]
     pub max_points: usize,
+    /// The device pipeline's ICP and residual metric.
+    #[serde(default)]
+    pub metric: DeviceMetric,
     /// Device ICP pair distance (model units: share of the template's size).
     #[serde(default = "default_icp_distance")]
     pub icp_distance: f32,
@@ -109,6 +131,7 @@ impl Method {
             icp_iterations: default_icp_iterations(),
             screen_iterations: default_screen_iterations(),
             max_points: default_max_points(),
+            metric: DeviceMetric::default(),
             icp_distance: default_icp_distance(),
         }
     }
@@ -126,6 +149,7 @@ impl Method {
             icp_iterations: self.icp_iterations,
             screen_iterations: self.screen_iterations,
             max_points: self.max_points,
+            metric: self.metric.into(),
             icp_distance: self.icp_distance,
             ..pcrnet_core::Options::default()
         }
@@ -160,7 +184,15 @@ impl Method {
             (_, Some(Precision::F32)) => " f32".into(),
         };
         let precision = if self.kind == MethodKind::Device {
-            format!("{precision} K={} + device ICP", self.hypotheses)
+            let metric = match self.metric {
+                DeviceMetric::PointToPlane => "",
+                DeviceMetric::PointToPoint => " (point-to-point)",
+            };
+            if self.icp_iterations == 0 {
+                format!("{precision} K={}, scored, no ICP", self.hypotheses)
+            } else {
+                format!("{precision} K={} + device ICP{metric}", self.hypotheses)
+            }
         } else {
             precision
         };
