@@ -1,0 +1,137 @@
+//! The device pipeline with the shipped model (`models/`, in the
+//! repository): frames round-trip between units, a known transform is
+//! recovered, and degenerate or hostile sources give a typed error or a
+//! flagged result, never NaN or a runaway pose.
+
+use std::path::PathBuf;
+
+use pcrnet_core::{Degeneracy, Error, Int8Model, MAX_TILE, Options, Registration};
+use pcrnet_train::register::pipeline;
+use pcrnet_train::shapes::{Shape, random_transform, sample};
+use pcrnet_train::template::TemplateError;
+
+fn shipped() -> Vec<u8> {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/embedded-default-int8.pcrn");
+    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn angle_deg(a: &[f32; 4], b: &[f32; 4]) -> f32 {
+    let d: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+    2.0 * d.abs().min(1.0).acos().to_degrees()
+}
+
+fn register(template: &[[f32; 3]], source: &[[f32; 3]]) -> Result<Registration, TemplateError> {
+    pipeline(&shipped(), Some(template), source, &Options::default()).map(|(r, _)| r)
+}
+
+#[test]
+fn a_known_transform_is_recovered_in_any_unit_and_place() {
+    let unit = sample(Shape::Ell, 512, 11);
+    let source_unit = random_transform(&unit, 30.0, 0.3, 12);
+    // The same scene in metres near the origin, and in millimetres 2 km away.
+    let metres = |p: &[f32; 3]| p.map(|v| v * 0.4);
+    let far_mm = |p: &[f32; 3]| [p[0] * 400.0 + 2.0e6, p[1] * 400.0 - 5.0e5, p[2] * 400.0];
+    let (tm, sm): (Vec<_>, Vec<_>) = (
+        unit.iter().map(metres).collect(),
+        source_unit.iter().map(metres).collect(),
+    );
+    let (tf, sf): (Vec<_>, Vec<_>) = (
+        unit.iter().map(far_mm).collect(),
+        source_unit.iter().map(far_mm).collect(),
+    );
+    let m = register(&tm, &sm).unwrap();
+    let f = register(&tf, &sf).unwrap();
+    assert!(m.reliable && f.reliable, "{m:?} {f:?}");
+    // The source is the template moved: every point lands back (< 0.1 degree
+    // at the object's size, 0.4 m: 0.7 mm).
+    for (s, t) in sm.iter().zip(&tm) {
+        let p = m.pose.transform_point(*s);
+        let d = ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2) + (p[2] - t[2]).powi(2)).sqrt();
+        assert!(d < 7e-4, "{d} m: {m:?}");
+    }
+    // Same rotation in both frames; the residual scales with the unit.
+    assert!(
+        angle_deg(&m.pose.rotation, &f.pose.rotation) < 0.05,
+        "{m:?} {f:?}"
+    );
+    assert!((m.relative_residual - f.relative_residual).abs() < 1e-3);
+    assert!(f.residual < 1.0, "{f:?} (millimetres)");
+}
+
+#[test]
+fn degenerate_and_hostile_sources_are_errors_or_flagged() {
+    let template = sample(Shape::Ell, 512, 13);
+    let blob = shipped();
+    let model = Int8Model::from_bytes(&blob).unwrap();
+    let extent = 1.0f32;
+    let check = |name: &str, source: &[[f32; 3]]| -> Result<Registration, Error> {
+        let r = pipeline(&blob, Some(&template), source, &Options::default());
+        match r {
+            Ok((r, _)) => {
+                let values = r.pose.rotation.iter().chain(&r.pose.translation);
+                assert!(values.clone().all(|v| v.is_finite()), "{name}: {r:?}");
+                let t = r.pose.translation;
+                let size = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+                assert!(size < 100.0 * extent, "{name}: runaway translation {r:?}");
+                assert!(r.residual.is_finite() && r.fitness.is_finite(), "{name}");
+                Ok(r)
+            }
+            Err(TemplateError::Core(e)) => Err(e),
+            Err(e) => panic!("{name}: {e}"),
+        }
+    };
+    let one = check("one point", &[[0.1, 0.2, 0.3]]).unwrap();
+    assert_eq!(one.degenerate, Some(Degeneracy::Point));
+    assert!(!one.reliable);
+    let same = check("all equal", &[[0.3, -0.2, 0.1]; 50]).unwrap();
+    assert_eq!(same.degenerate, Some(Degeneracy::Point));
+    assert!(!same.reliable);
+    let line: Vec<[f32; 3]> = (0..60).map(|i| [i as f32 / 60.0 - 0.5, 0.1, 0.2]).collect();
+    let line = check("collinear", &line).unwrap();
+    assert_eq!(line.degenerate, Some(Degeneracy::Line));
+    assert!(!line.reliable);
+    // A planar patch determines a pose up to its own symmetries: not
+    // degenerate, judged by its residual.
+    let plane: Vec<[f32; 3]> = (0..400)
+        .map(|i| {
+            [
+                (i % 20) as f32 / 20.0 - 0.5,
+                (i / 20) as f32 / 20.0 - 0.5,
+                0.0,
+            ]
+        })
+        .collect();
+    assert_eq!(check("planar", &plane).unwrap().degenerate, None);
+    // One stray point far away: rejected with the index of the point.
+    let mut outlier = random_transform(&template, 20.0, 0.1, 3);
+    outlier.push([40.0, 0.0, 0.0]);
+    let index = outlier.len() - 1;
+    assert_eq!(
+        check("outlier", &outlier).unwrap_err(),
+        Error::CoordinateOutOfRange { index }
+    );
+    // Finite but huge coordinates: an error, not an infinite pose.
+    let huge = [
+        [3e38f32, 3e38, 3e38],
+        [-3e38, -3e38, -3e38],
+        [3e38, -3e38, 0.0],
+    ];
+    assert!(check("huge", &huge).is_err());
+    assert_eq!(check("empty", &[]).unwrap_err(), Error::EmptyCloud);
+    let nan = [[0.0, f32::NAN, 0.0]];
+    assert_eq!(
+        check("NaN", &nan).unwrap_err(),
+        Error::NonFiniteCoordinate { index: 0 }
+    );
+    // Bad options are typed errors too.
+    let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+    let zero = Options {
+        passes: 0,
+        ..Options::default()
+    };
+    assert!(matches!(
+        model.register(&template, &zero, &mut scratch),
+        Err(Error::InvalidOption { .. })
+    ));
+}
