@@ -77,6 +77,7 @@ pub struct F32Network<P> {
 #[derive(Debug, Clone)]
 pub struct F32Model<'a> {
     network: F32Network<LeF32<'a>>,
+    passes: u16,
     frame: Frame,
     template: Template<'a>,
 }
@@ -95,6 +96,11 @@ impl<'a> F32Model<'a> {
     /// User units -> model frame.
     pub fn frame(&self) -> &Frame {
         &self.frame
+    }
+
+    /// Network passes the model was trained for (1: PCRNet; more: i-PCRNet).
+    pub fn trained_passes(&self) -> usize {
+        self.passes as usize
     }
 
     /// The template's points (model frame).
@@ -160,10 +166,12 @@ impl<'a> F32Model<'a> {
             "template feature",
         )?;
         crate::int8::check_frame(&p.frame)?;
+        crate::int8::check_passes(p.passes)?;
         let network = F32Network::new(p.arch, layers, LeF32(p.template_feature))?
             .with_centring(p.centre_source);
         Ok(F32Model {
             network,
+            passes: p.passes,
             frame: p.frame,
             template: Template::new(p.template)?,
         })

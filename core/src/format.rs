@@ -156,6 +156,9 @@ pub struct Int8Payload<'a> {
     /// Whether the network expects the source centred on its centroid
     /// (see [`crate::pose::centring`]); the pose is then composed back.
     pub centre_source: bool,
+    /// Network passes the model was trained for: 1 for PCRNet, more for
+    /// i-PCRNet (run it with [`crate::Options::passes`] set to this).
+    pub passes: u16,
     /// User units and axes -> model frame.
     pub frame: Frame,
     /// The template's points, for checking and refining.
@@ -192,6 +195,9 @@ pub struct F32Payload<'a> {
     pub arch: Arch,
     /// Whether the network expects the source centred on its centroid.
     pub centre_source: bool,
+    /// Network passes the model was trained for: 1 for PCRNet, more for
+    /// i-PCRNet (run it with [`crate::Options::passes`] set to this).
+    pub passes: u16,
     /// User units and axes -> model frame.
     pub frame: Frame,
     /// The template's points, for checking and refining.

@@ -107,6 +107,7 @@ impl<'a> Int8Model<'a> {
             "template feature",
         )?;
         check_frame(&p.frame)?;
+        check_passes(p.passes)?;
         let template = Template::new(p.template.clone())?;
         Ok(Int8Model { p, template })
     }
@@ -119,6 +120,11 @@ impl<'a> Int8Model<'a> {
     /// User units -> model frame.
     pub fn frame(&self) -> &format::Frame {
         &self.p.frame
+    }
+
+    /// Network passes the model was trained for (1: PCRNet; more: i-PCRNet).
+    pub fn trained_passes(&self) -> usize {
+        self.p.passes as usize
     }
 
     /// The network shape.
@@ -456,6 +462,17 @@ impl<'a> Int8Model<'a> {
 /// Values at `i8::MAX`, the top of the activation range.
 fn count_saturated(values: &[i8]) -> u32 {
     values.iter().filter(|&&v| v == i8::MAX).count() as u32
+}
+
+/// Checks a blob's trained pass count (at least 1).
+pub(crate) fn check_passes(passes: u16) -> Result<()> {
+    if passes >= 1 {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter {
+            what: "trained passes must be at least 1",
+        })
+    }
 }
 
 /// Checks a blob's frame: finite centre, finite positive scale.

@@ -212,6 +212,7 @@ pub fn random_int8_blob_with<'o>(
     let mut payload = Int8Payload {
         arch,
         centre_source,
+        passes: 1,
         frame,
         template: template_cloud,
         input_scale: RANDOM_INPUT_SCALE,
@@ -280,6 +281,7 @@ pub fn random_f32_blob_into<'o>(
     let mut payload = F32Payload {
         arch,
         centre_source: false,
+        passes: 1,
         frame: Frame::IDENTITY,
         template: template_cloud,
         layers,

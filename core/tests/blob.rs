@@ -189,6 +189,26 @@ fn inconsistent_payloads_are_rejected() {
         Int8Model::from_payload(p),
         Err(Error::InconsistentDimensions { .. })
     ));
+    // Format 3: frame, trained passes and the template's points.
+    let mut p = model.payload().clone();
+    p.frame.scale = 0.0;
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let mut p = model.payload().clone();
+    p.passes = 0;
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let mut p = model.payload().clone();
+    p.template.points = &p.template.points[6..];
+    assert!(matches!(
+        Int8Model::from_payload(p),
+        Err(Error::InconsistentDimensions { .. })
+    ));
+    assert_eq!(model.trained_passes(), 1);
 }
 
 #[test]

@@ -19,7 +19,7 @@ pub mod template;
 pub mod train;
 pub mod upgrade;
 
-pub use net::F32Params;
+pub use net::{F32Params, TrainedFor};
 pub use quantize::{CalibrationRule, QuantizeError, quantize};
 
 /// Encoder widths of the embedded default (`models/embedded-default-*`):

@@ -8,6 +8,25 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::template::{Reference, TemplateError, f32_blob};
 
+/// How a network was trained, as its blobs record it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TrainedFor {
+    /// Sources were centred on their centroid (see `pcrnet_core::pose::centring`).
+    pub centre_source: bool,
+    /// Network passes per registration: 1 for PCRNet, more for i-PCRNet.
+    pub passes: u16,
+}
+
+impl TrainedFor {
+    /// A one-pass PCRNet.
+    pub fn pcrnet(centre_source: bool) -> Self {
+        TrainedFor {
+            centre_source,
+            passes: 1,
+        }
+    }
+}
+
 /// Weights (`outputs x inputs`, row-major) and biases of every layer:
 /// encoder layers, hidden head layers, then the output layer.
 #[derive(Debug, Clone, PartialEq)]
@@ -85,7 +104,7 @@ impl F32Params {
     pub fn to_f32_blob(
         &self,
         reference: &Reference,
-        centre_source: bool,
+        trained: TrainedFor,
     ) -> Result<Vec<u8>, TemplateError> {
         let bytes: Vec<(Vec<u8>, Vec<u8>)> = self
             .layers
@@ -105,7 +124,8 @@ impl F32Params {
         }
         let payload = F32Payload {
             arch: self.arch.clone(),
-            centre_source,
+            centre_source: trained.centre_source,
+            passes: trained.passes,
             frame: reference.frame,
             template: reference.cloud(),
             layers,

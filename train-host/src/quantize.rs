@@ -33,7 +33,7 @@ use pcrnet_core::format::{Int8Layer, Int8Output, Int8Payload};
 use pcrnet_core::pose::Rigid;
 use pcrnet_core::{Frame, POSE_DIM};
 
-use crate::net::{F32Params, le_bytes};
+use crate::net::{F32Params, TrainedFor, le_bytes};
 use crate::template::{Reference, TemplateError, int8_blob};
 
 /// Why quantization failed.
@@ -244,8 +244,9 @@ pub fn quantize(
     reference: &Reference,
     calibration: &[Vec<[f32; 3]>],
     rule: CalibrationRule,
-    centre_source: bool,
+    trained: TrainedFor,
 ) -> Result<Vec<u8>, QuantizeError> {
+    let centre_source = trained.centre_source;
     let centred: Vec<Vec<[f32; 3]>>;
     let calibration = if centre_source {
         centred = calibration
@@ -292,6 +293,7 @@ pub fn quantize(
     let payload = Int8Payload {
         arch: arch.clone(),
         centre_source,
+        passes: trained.passes,
         frame: reference.frame,
         template: reference.cloud(),
         input_scale,

@@ -41,7 +41,8 @@ fn model_for(blob: &[u8], template: Option<&[[f32; 3]]>) -> Result<Vec<u8>, Temp
     }
 }
 
-/// The device pipeline on the host: see the module docs.
+/// The device pipeline on the host: see the module docs. `options.passes`
+/// 0 means the passes the blob was trained for.
 pub fn pipeline(
     blob: &[u8],
     template: Option<&[[f32; 3]]>,
@@ -49,23 +50,40 @@ pub fn pipeline(
     options: &Options,
 ) -> Result<(Registration, Precision), TemplateError> {
     let blob = model_for(blob, template)?;
+    let with = |trained: usize| Options {
+        passes: if options.passes == 0 {
+            trained
+        } else {
+            options.passes
+        },
+        ..*options
+    };
     match Int8Model::from_bytes(&blob) {
         Ok(model) => {
             let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
-            Ok((
-                model.register(source, options, &mut scratch)?,
-                Precision::Int8,
-            ))
+            let options = with(model.trained_passes());
+            let r = model.register(source, &options, &mut scratch)?;
+            Ok((r, Precision::Int8))
         }
         Err(pcrnet_core::Error::WrongKind { .. }) => {
             let model = F32Model::from_bytes(&blob)?;
             let mut scratch = vec![0f32; model.scratch_len()];
-            Ok((
-                model.register(source, options, &mut scratch)?,
-                Precision::F32,
-            ))
+            let options = with(model.trained_passes());
+            let r = model.register(source, &options, &mut scratch)?;
+            Ok((r, Precision::F32))
         }
         Err(e) => Err(e.into()),
+    }
+}
+
+/// The network passes a blob of either kind was trained for (1: PCRNet).
+pub fn trained_passes(blob: &[u8]) -> Result<usize, pcrnet_core::Error> {
+    match Int8Model::from_bytes(blob) {
+        Ok(m) => Ok(m.trained_passes()),
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            Ok(F32Model::from_bytes(blob)?.trained_passes())
+        }
+        Err(e) => Err(e),
     }
 }
 
@@ -154,7 +172,7 @@ mod tests {
     use super::*;
     use crate::shapes::{Shape, random_transform, sample};
     use crate::template::Reference;
-    use crate::{CalibrationRule, F32Params, quantize};
+    use crate::{CalibrationRule, F32Params, TrainedFor, quantize};
     use pcrnet_core::Arch;
 
     #[test]
@@ -170,10 +188,12 @@ mod tests {
             &reference,
             &calib,
             CalibrationRule::default(),
-            true,
+            TrainedFor::pcrnet(true),
         )
         .unwrap();
-        let f32_blob = params.to_f32_blob(&reference, true).unwrap();
+        let f32_blob = params
+            .to_f32_blob(&reference, TrainedFor::pcrnet(true))
+            .unwrap();
         // The template in its own (scaled, shifted) coordinates.
         let world: Vec<[f32; 3]> = template
             .iter()
@@ -235,7 +255,7 @@ mod tests {
             &reference,
             &calib,
             CalibrationRule::default(),
-            true,
+            TrainedFor::pcrnet(true),
         )
         .unwrap();
         // The source: the template turned 15 degrees about a tilted axis

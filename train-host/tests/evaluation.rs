@@ -9,7 +9,7 @@ use pcrnet_train::eval::score;
 use pcrnet_train::shapes::random_transform;
 use pcrnet_train::template::Reference;
 use pcrnet_train::train::data::{PairConfig, Sampling};
-use pcrnet_train::{CalibrationRule, F32Params, quantize};
+use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
 
 fn temp_dir(tag: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("pcrnet-eval-{tag}-{}", std::process::id()));
@@ -45,8 +45,17 @@ fn blobs() -> (Vec<u8>, Vec<u8>) {
         .map(|i| random_transform(&template, 45.0, 1.0, 100 + i))
         .collect();
     let reference = Reference::new(&template, 256).unwrap();
-    let int8 = quantize(&params, &reference, &cal, CalibrationRule::default(), true).unwrap();
-    let f32 = params.to_f32_blob(&reference, true).unwrap();
+    let int8 = quantize(
+        &params,
+        &reference,
+        &cal,
+        CalibrationRule::default(),
+        TrainedFor::pcrnet(true),
+    )
+    .unwrap();
+    let f32 = params
+        .to_f32_blob(&reference, TrainedFor::pcrnet(true))
+        .unwrap();
     (int8, f32)
 }
 

@@ -3,7 +3,7 @@
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::Reference;
-use pcrnet_train::{CalibrationRule, F32Params, quantize};
+use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
 
 /// Worst and mean errors.
 #[derive(Default)]
@@ -49,11 +49,13 @@ fn measure(enc: &[u16], head: &[u16], seed: u64, coarsen: Option<f32>) -> Errors
         &reference,
         &calib,
         CalibrationRule::default(),
-        false,
+        TrainedFor::pcrnet(false),
     )
     .unwrap();
     let q = Int8Model::from_bytes(&blob).unwrap();
-    let fblob = params.to_f32_blob(&reference, false).unwrap();
+    let fblob = params
+        .to_f32_blob(&reference, TrainedFor::pcrnet(false))
+        .unwrap();
     let f = F32Model::from_bytes(&fblob).unwrap();
     let mut qs = vec![0i8; q.scratch_len(MAX_TILE)];
     let mut fs = vec![0f32; f.scratch_len()];

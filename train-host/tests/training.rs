@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE, Options, Pose};
+use pcrnet_train::TrainedFor;
 use pcrnet_train::template::Reference;
 use pcrnet_train::train::geometry::{apply, quat_to_mat};
 use pcrnet_train::train::model::{self, ModelKind};
@@ -97,7 +98,10 @@ fn batched_forward_matches_core() {
         }
         // Through the blob: same pose as the trainer's.
         let blob = params
-            .to_f32_blob(&Reference::new(tpl, 256).unwrap(), false)
+            .to_f32_blob(
+                &Reference::new(tpl, 256).unwrap(),
+                TrainedFor::pcrnet(false),
+            )
             .unwrap();
         let m = F32Model::from_bytes(&blob).unwrap();
         let mut s = vec![0.0; m.scratch_len()];
@@ -463,7 +467,14 @@ fn checkpoint_and_export() {
     let tpl = &train.clouds[0];
     let cal = export::calibration_clouds(tpl, &t.config.pairs, 8, 1);
     let reference = Reference::new(tpl, 256).unwrap();
-    let written = export::export(&t.params, &reference, Some(&cal), true, &dir).unwrap();
+    let written = export::export(
+        &t.params,
+        &reference,
+        Some(&cal),
+        TrainedFor::pcrnet(true),
+        &dir,
+    )
+    .unwrap();
     assert_eq!(written.len(), 2);
     let f = std::fs::read(dir.join(export::F32_BLOB)).unwrap();
     let m = F32Model::from_bytes(&f).unwrap();

@@ -11,7 +11,7 @@ use pcrnet_train::eval::methods::{self, MethodKind};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use pcrnet_train::{
-    CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, inspect, quantize,
+    CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, TrainedFor, inspect, quantize,
 };
 
 #[derive(Parser)]
@@ -212,6 +212,13 @@ fn register(
     let source = read_cloud(source_path)?;
     let method = options.method(kind);
     let blob = options.read_model()?;
+    if let (MethodKind::Ipcrnet, Some(b)) = (kind, blob.as_deref()) {
+        if pcrnet_train::register::trained_passes(b).is_ok_and(|p| p == 1) {
+            eprintln!(
+                "warning: this model was trained for one pass (PCRNet); --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
+            );
+        }
+    }
     let out = methods::run(&method, blob.as_deref(), template.as_deref(), &source).with_context(
         || match &options.model {
             Some(path) => format!("registering with {}", path.display()),
@@ -348,9 +355,9 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
         &reference,
         &calibration,
         CalibrationRule::default(),
-        true,
+        TrainedFor::pcrnet(true),
     )?;
-    let f32_blob = params.to_f32_blob(&reference, true)?;
+    let f32_blob = params.to_f32_blob(&reference, TrainedFor::pcrnet(true))?;
     let source = random_transform(&template, 45.0, 1.0, seed.wrapping_add(77));
     if let Some(dir) = out {
         std::fs::create_dir_all(&dir)?;

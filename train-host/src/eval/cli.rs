@@ -87,9 +87,9 @@ pub struct MethodOptions {
     /// Model blob: int8 or f32 for device / pcrnet / ipcrnet, f32 for pointnetlk.
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Network passes of device / ipcrnet (ipcrnet: 20; device: 1, give
-    /// more for an i-PCRNet model), steps of pointnetlk (20) or iterations
-    /// of icp (100).
+    /// Network passes of device / ipcrnet (ipcrnet: 20; device: as the blob
+    /// was trained, 1 for PCRNet), steps of pointnetlk (20) or iterations of
+    /// icp (100).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Starting poses the device pipeline tries: 1 (the network's pose)

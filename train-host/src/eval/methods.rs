@@ -66,7 +66,8 @@ impl From<DeviceMetric> for pcrnet_core::Metric {
 pub struct Method {
     /// Which family.
     pub kind: MethodKind,
-    /// Most passes (i-PCRNet), steps (PointNetLK) or iterations (ICP); 1 for PCRNet.
+    /// Most passes (i-PCRNet), steps (PointNetLK) or iterations (ICP); 1 for
+    /// PCRNet; for the device pipeline, network passes (0: as the blob was trained).
     pub iterations: usize,
     /// Refine the network's pose with ICP (network methods only).
     pub refine_icp: bool,
@@ -118,7 +119,9 @@ impl Method {
     /// ([`ITERATIVE_TOLERANCE`]); no refinement.
     pub fn new(kind: MethodKind) -> Self {
         let iterations = match kind {
-            MethodKind::Pcrnet | MethodKind::Device => 1,
+            MethodKind::Pcrnet => 1,
+            // The passes the blob was trained for.
+            MethodKind::Device => 0,
             MethodKind::Ipcrnet | MethodKind::Pointnetlk => 20,
             MethodKind::Icp => IcpConfig::default().max_iterations,
         };
@@ -140,11 +143,7 @@ impl Method {
     pub fn device_options(&self) -> pcrnet_core::Options {
         pcrnet_core::Options {
             passes: self.iterations,
-            tolerance: if self.iterations > 1 {
-                self.tolerance
-            } else {
-                0.0
-            },
+            tolerance: self.tolerance,
             hypotheses: self.hypotheses,
             icp_iterations: self.icp_iterations,
             screen_iterations: self.screen_iterations,

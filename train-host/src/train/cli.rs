@@ -410,12 +410,11 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
             trainer.config.seed,
         )
     });
-    let centre = trainer.config.pairs.centre;
     for p in exp::export(
         &trainer.params,
         &reference,
         cal.as_deref(),
-        centre,
+        trained_for(&trainer.config),
         &args.out,
     )? {
         eprintln!("wrote {}", p.display());
@@ -445,6 +444,10 @@ pub struct UpgradeArgs {
     /// Seed of the template reduction and the calibration clouds.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Network passes the model was trained for (format 2 did not record
+    /// it): 1 for PCRNet, the training's `--iterations` for i-PCRNet.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    pub passes: u16,
     /// Output folder (model-f32.pcrn, model-int8.pcrn).
     #[arg(long)]
     pub out: PathBuf,
@@ -466,10 +469,26 @@ pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
         ..data::PairConfig::default()
     };
     let cal = exp::calibration_clouds(&reference.normalised(), &pairs, 64, args.seed);
-    for p in exp::export(&params, &reference, Some(&cal), centre, &args.out)? {
+    let trained = crate::TrainedFor {
+        centre_source: centre,
+        passes: args.passes,
+    };
+    for p in exp::export(&params, &reference, Some(&cal), trained, &args.out)? {
         eprintln!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// How a training configuration's network should be run: centred
+/// sources as its pairs were, and i-PCRNet's passes.
+fn trained_for(config: &super::TrainConfig) -> crate::TrainedFor {
+    crate::TrainedFor {
+        centre_source: config.pairs.centre,
+        passes: match config.model {
+            ModelKind::Pcrnet => 1,
+            ModelKind::Ipcrnet { iterations } => u16::try_from(iterations).unwrap_or(u16::MAX),
+        },
+    }
 }
 
 /// Runs `pcrnet export`.
@@ -483,8 +502,13 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         64,
         ck.config.seed,
     );
-    let centre = ck.config.pairs.centre;
-    for p in exp::export(&ck.params(), &reference, Some(&cal), centre, &args.out)? {
+    for p in exp::export(
+        &ck.params(),
+        &reference,
+        Some(&cal),
+        trained_for(&ck.config),
+        &args.out,
+    )? {
         eprintln!("wrote {}", p.display());
     }
     Ok(())

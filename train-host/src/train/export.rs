@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use super::checkpoint::write_atomic;
 use super::data::{PairConfig, make_pair, mix_seed};
 use crate::template::Reference;
-use crate::{CalibrationRule, F32Params, quantize};
+use crate::{CalibrationRule, F32Params, TrainedFor, quantize};
 
 /// File name of the exported f32 blob.
 pub const F32_BLOB: &str = "model-f32.pcrn";
@@ -28,28 +28,23 @@ pub fn calibration_clouds(
 /// Writes the f32 blob (recording `reference`: frame, template points,
 /// feature) into `dir`, and the int8 blob too when `calibration` (model
 /// frame) is given. Files are written atomically.
-/// `centre_source` must be the training pairs' `centre`. Returns the paths written.
+/// `trained` must say how the network was trained (the pairs' `centre`,
+/// i-PCRNet's passes). Returns the paths written.
 pub fn export(
     params: &F32Params,
     reference: &Reference,
     calibration: Option<&[Vec<[f32; 3]>]>,
-    centre_source: bool,
+    trained: TrainedFor,
     dir: &Path,
 ) -> anyhow::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir)?;
     let mut written = Vec::new();
-    let f32_blob = params.to_f32_blob(reference, centre_source)?;
+    let f32_blob = params.to_f32_blob(reference, trained)?;
     let p = dir.join(F32_BLOB);
     write_atomic(&p, &f32_blob)?;
     written.push(p);
     if let Some(cal) = calibration {
-        let int8 = quantize(
-            params,
-            reference,
-            cal,
-            CalibrationRule::default(),
-            centre_source,
-        )?;
+        let int8 = quantize(params, reference, cal, CalibrationRule::default(), trained)?;
         let p = dir.join(INT8_BLOB);
         write_atomic(&p, &int8)?;
         written.push(p);
