@@ -302,7 +302,11 @@ impl<P: Params> F32Network<P> {
         let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
             self.pass(source, &PointMap::new(*frame, current), scratch)
         })?;
-        Ok((frame.pose_to_user(&pose), n))
+        let pose = frame.pose_to_user(&pose);
+        if !pose.is_finite() {
+            return Err(Error::NonFiniteResult);
+        }
+        Ok((pose, n))
     }
 
     /// One pass on the source moved by `map`: the pose in the model frame.

@@ -207,7 +207,11 @@ impl<'a> Int8Model<'a> {
                 .pass(source, &PointMap::new(frame, current), tile, scratch)?
                 .0)
         })?;
-        Ok((frame.pose_to_user(&pose), n))
+        let pose = frame.pose_to_user(&pose);
+        if !pose.is_finite() {
+            return Err(Error::NonFiniteResult);
+        }
+        Ok((pose, n))
     }
 
     /// One network pass on the source moved by `map`: the pose (model

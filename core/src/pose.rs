@@ -109,6 +109,14 @@ impl Pose {
         }
     }
 
+    /// Whether every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.rotation
+            .iter()
+            .chain(&self.translation)
+            .all(|v| v.is_finite())
+    }
+
     /// `||T - I||_F^2` of the 4x4 matrix: how far the pose is from the identity.
     pub fn distance_to_identity_squared(&self) -> f32 {
         let r = self.rotation_matrix();

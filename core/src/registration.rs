@@ -167,7 +167,7 @@ pub(crate) fn run(
         saturated = saturated.saturating_add(s);
         Ok(delta)
     })?;
-    if !finite(&network) {
+    if !network.is_finite() {
         return Err(Error::NonFiniteResult);
     }
     let subset = Subset::new(source, *frame, options.max_points);
@@ -190,7 +190,7 @@ pub(crate) fn run(
     let pose = frame.pose_to_user(&r.pose);
     let residual = r.fit.residual / frame.scale;
     let inlier_rmse = r.fit.inlier_rmse / frame.scale;
-    if !(finite(&pose) && residual.is_finite() && inlier_rmse.is_finite()) {
+    if !(pose.is_finite() && residual.is_finite() && inlier_rmse.is_finite()) {
         return Err(Error::NonFiniteResult);
     }
     Ok(Registration {
@@ -206,11 +206,4 @@ pub(crate) fn run(
         degenerate,
         reliable: degenerate.is_none() && r.fit.residual <= options.max_residual,
     })
-}
-
-fn finite(p: &Pose) -> bool {
-    p.rotation
-        .iter()
-        .chain(&p.translation)
-        .all(|v| v.is_finite())
 }

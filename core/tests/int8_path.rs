@@ -335,3 +335,45 @@ fn centring_models_see_the_centred_source() {
         assert!((x - y).abs() < 1e-3, "{pose:?} vs {other:?}");
     }
 }
+
+#[test]
+fn finite_clouds_never_give_non_finite_poses() {
+    use pcrnet_core::testing::random_int8_blob_with;
+    let (mut arena, mut out) = (vec![0u8; 1 << 20], vec![0u8; 1 << 20]);
+    let centred = random_int8_blob_with(
+        83,
+        SMALL_ENC,
+        SMALL_HEAD,
+        true,
+        pcrnet_core::Frame::IDENTITY,
+        &mut arena,
+        &mut out,
+    )
+    .unwrap()
+    .to_vec();
+    let model = Int8Model::from_bytes(&centred).unwrap();
+    let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
+    // Centred, these points are in range; composing the centroid back
+    // overflows f32: an error, not an infinite translation.
+    for c in [3e38f32, -3e38] {
+        let pts = [[c, c, c], [c, c, c], [c, -c, c], [c, c, -c]];
+        for result in [
+            model.network_pose(&pts[..2], 1, 0.0, &mut s).map(|r| r.0),
+            model
+                .register(&pts[..2], &pcrnet_core::Options::default(), &mut s)
+                .map(|r| r.pose),
+            model.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0),
+        ] {
+            match result {
+                Ok(p) => assert!(p.is_finite(), "{p:?}"),
+                Err(e) => assert!(
+                    matches!(
+                        e,
+                        Error::NonFiniteResult | Error::CoordinateOutOfRange { .. }
+                    ),
+                    "{e:?}"
+                ),
+            }
+        }
+    }
+}
