@@ -28,11 +28,16 @@ pub struct Subset<'s> {
     pub stride: usize,
 }
 
+/// Most points a [`Subset`] keeps, whatever `max_points` says: the exact
+/// integer sums of ICP and of the degeneracy check stay inside i64 up to
+/// this many points of at most 2^15 steps.
+pub const MAX_SUBSET: usize = 65_535;
+
 impl<'s> Subset<'s> {
     /// Every point if the cloud has at most `max_points`, else a stride
-    /// that keeps at most `max_points` (>= 1) of them.
+    /// that keeps at most `max_points` (1..=[`MAX_SUBSET`]) of them.
     pub fn new(source: &'s [[f32; 3]], frame: Frame, max_points: usize) -> Self {
-        let max = max_points.max(1);
+        let max = max_points.clamp(1, MAX_SUBSET);
         Subset {
             source,
             frame,
