@@ -203,17 +203,17 @@ pub struct Context {
 }
 
 /// A model blob with its name.
-type NamedBlob<'a> = (&'a str, &'a [u8]);
+pub(super) type NamedBlob<'a> = (&'a str, &'a [u8]);
 
 /// A trained model's two blobs.
-struct Model {
+pub(super) struct Model {
     name: String,
     int8: Vec<u8>,
     f32: Vec<u8>,
 }
 
 impl Model {
-    fn int8(&self) -> Option<NamedBlob<'_>> {
+    pub(super) fn int8(&self) -> Option<NamedBlob<'_>> {
         Some((&self.name, &self.int8))
     }
     fn f32(&self) -> Option<NamedBlob<'_>> {
@@ -397,7 +397,7 @@ impl<'a> Recorder<'a> {
         }
     }
 
-    fn model(&mut self, name: &str) -> anyhow::Result<Model> {
+    pub(super) fn model(&mut self, name: &str) -> anyhow::Result<Model> {
         let m = model(self.ctx, name)?;
         if let Some(r) = Recipe::named(name) {
             let cmd = r.command(&self.ctx.data, &self.ctx.work.join("models").join(name));
@@ -685,7 +685,7 @@ fn lk() -> Method {
 }
 
 const SEEN: [&str; 5] = ["bathtub", "bed", "chair", "desk", "dresser"];
-const UNSEEN: [&str; 5] = ["monitor", "night_stand", "sofa", "table", "toilet"];
+pub(super) const UNSEEN: [&str; 5] = ["monitor", "night_stand", "sofa", "table", "toilet"];
 
 fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();

@@ -175,7 +175,9 @@ impl Method {
             MethodKind::Pointnetlk => "PointNetLK",
             MethodKind::Icp => "ICP",
             MethodKind::Device if self.iterations > 1 => "device i-PCRNet",
-            MethodKind::Device => "device PCRNet",
+            MethodKind::Device if self.iterations == 1 => "device PCRNet",
+            // As many passes as the blob was trained for.
+            MethodKind::Device => "device pipeline",
         };
         let precision = match (self.kind, precision) {
             (MethodKind::Icp | MethodKind::Pointnetlk, _) | (_, None) => String::new(),
