@@ -145,9 +145,10 @@ impl fmt::Display for Error {
             Error::NonFiniteCoordinate { index } => {
                 write!(f, "point {index} has a NaN or infinite coordinate")
             }
-            Error::CoordinateOutOfRange { index } => {
-                write!(f, "point {index} lies outside the model's input range")
-            }
+            Error::CoordinateOutOfRange { index } => write!(
+                f,
+                "point {index} lies outside the model's input range (`pcrnet inspect` prints it, in template sizes around the template's frame or the source's centroid): a stray point far from the object, or a cloud in other units than the template; remove outliers or crop the cloud to the object"
+            ),
             Error::DegeneratePose => write!(f, "network output has a zero quaternion"),
             Error::NonFiniteResult => write!(
                 f,
