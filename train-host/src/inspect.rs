@@ -99,6 +99,7 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
             l.out_scale, l.out_zero_point
         );
     }
+    template_lines(m.trained_passes(), m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "flash (blob, weights used in place): {flash} bytes");
     let _ = writeln!(
         s,
@@ -109,10 +110,41 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
     s
 }
 
+/// How the model runs and what it records of its template.
+fn template_lines(
+    passes: usize,
+    centred: bool,
+    frame: &pcrnet_core::Frame,
+    template: &pcrnet_core::template::Template<'_>,
+    s: &mut String,
+) {
+    let kind = if passes > 1 { "i-PCRNet" } else { "PCRNet" };
+    let _ = writeln!(
+        s,
+        "  trained for {passes} pass(es) ({kind}), sources {}",
+        if centred { "centred on their centroid" } else { "as given" }
+    );
+    let _ = writeln!(
+        s,
+        "  frame: p_model = {:e} x (p - {:?}); the template spans about {:.4} user units",
+        frame.scale,
+        frame.centre,
+        1.0 / frame.scale
+    );
+    let _ = writeln!(
+        s,
+        "  template: {} points with normals, {} turns (flip hypotheses up to {})",
+        template.len(),
+        template.turns().len(),
+        1 + template.turns().len()
+    );
+}
+
 fn describe_f32(m: &F32Model<'_>, size: usize) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "f32 model: {}", widths(m.network().arch()));
     shape_table(m.network().arch(), &mut s);
+    template_lines(m.trained_passes(), m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "size: {size} bytes");
     let _ = writeln!(
         s,
