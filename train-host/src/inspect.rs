@@ -99,7 +99,13 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
             l.out_scale, l.out_zero_point
         );
     }
-    template_lines(m.trained_passes(), m.centres_source(), m.frame(), m.template(), &mut s);
+    template_lines(
+        m.trained_passes(),
+        m.centres_source(),
+        m.frame(),
+        m.template(),
+        &mut s,
+    );
     let _ = writeln!(s, "flash (blob, weights used in place): {flash} bytes");
     let _ = writeln!(
         s,
@@ -122,7 +128,11 @@ fn template_lines(
     let _ = writeln!(
         s,
         "  trained for {passes} pass(es) ({kind}), sources {}",
-        if centred { "centred on their centroid" } else { "as given" }
+        if centred {
+            "centred on their centroid"
+        } else {
+            "as given"
+        }
     );
     let _ = writeln!(
         s,
@@ -144,7 +154,13 @@ fn describe_f32(m: &F32Model<'_>, size: usize) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "f32 model: {}", widths(m.network().arch()));
     shape_table(m.network().arch(), &mut s);
-    template_lines(m.trained_passes(), m.centres_source(), m.frame(), m.template(), &mut s);
+    template_lines(
+        m.trained_passes(),
+        m.centres_source(),
+        m.frame(),
+        m.template(),
+        &mut s,
+    );
     let _ = writeln!(s, "size: {size} bytes");
     let _ = writeln!(
         s,
