@@ -892,14 +892,16 @@ fn off_errors() {
     for (text, words) in cases {
         assert_err_mentions(off::parse_sampled(text.as_bytes(), 10, 0), words);
     }
-    // No faces, only degenerate faces, zero area.
-    assert_err_mentions(
-        off::parse_sampled(b"OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", 10, 0),
-        &["no faces"],
+    // No faces, or only point and edge faces: the vertices are the cloud
+    // (a common way to store a scan); zero area is still an error.
+    let tri = vec![[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    assert_eq!(
+        off::parse_sampled(b"OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", 10, 0).unwrap(),
+        tri
     );
-    assert_err_mentions(
-        off::parse_sampled(b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", 10, 0),
-        &["no faces"],
+    assert_eq!(
+        off::parse_sampled(b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", 10, 0).unwrap(),
+        tri
     );
     assert_err_mentions(
         off::parse_sampled(b"OFF\n3 1 0\n0 0 0\n1 1 1\n2 2 2\n3 0 1 2\n", 10, 0),
@@ -1092,4 +1094,32 @@ fn reads_modelnet_chair_if_present() {
     assert!(pts.iter().flatten().all(|v| v.is_finite() && v.abs() < 1e4));
     // Not all identical: a real shape.
     assert!(pts.iter().any(|p| p != &pts[0]));
+}
+
+#[test]
+fn a_utf8_byte_order_mark_is_accepted_in_every_format() {
+    let bom = b"\xEF\xBB\xBF";
+    let points = vec![[1.0f32, 2.0, 3.0], [4.0, 5.0, 6.0]];
+    let files: [(&str, &[u8]); 4] = [
+        ("bom.xyz", b"1 2 3\n4 5 6\n"),
+        (
+            "bom.pcd",
+            b"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 6\n",
+        ),
+        (
+            "bom.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 5 6\n",
+        ),
+        ("bom.off", b"OFF\n2 0 0\n1 2 3\n4 5 6\n"),
+    ];
+    for (name, body) in files {
+        let path = temp_file(name, &cat(&[bom, body]));
+        let read = pcrnet_train::io::read_cloud(&path);
+        assert_eq!(
+            read.unwrap_or_else(|e| panic!("{name}: {e}")),
+            points,
+            "{name}"
+        );
+        let _ = std::fs::remove_file(path);
+    }
 }

@@ -177,6 +177,7 @@ impl Format {
     /// Parses `bytes` in this format. OFF meshes are sampled with
     /// [`DEFAULT_OFF_SAMPLES`] points and [`DEFAULT_OFF_SEED`].
     pub fn parse(self, bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+        let bytes = strip_bom(bytes);
         match self {
             Format::Pcd => pcd::parse(bytes),
             Format::Ply => ply::parse(bytes),
@@ -226,7 +227,13 @@ pub fn read_cloud(path: &Path) -> Result<Vec<[f32; 3]>, ReadError> {
 /// deterministically for a given `seed` (see [`off::sample`]).
 pub fn read_off_sampled(path: &Path, n: usize, seed: u64) -> Result<Vec<[f32; 3]>, ReadError> {
     let bytes = read_bytes(path)?;
-    with_path(path, off::parse_sampled(&bytes, n, seed))
+    with_path(path, off::parse_sampled(strip_bom(&bytes), n, seed))
+}
+
+/// The bytes after a UTF-8 byte-order mark, as Windows editors save text
+/// (every format's header is text, so this is safe for binary bodies too).
+fn strip_bom(bytes: &[u8]) -> &[u8] {
+    bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
 }
 
 /// Keeps the point if all three coordinates are finite.

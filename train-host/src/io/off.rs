@@ -249,7 +249,19 @@ pub fn sample(mesh: &Mesh, n: usize, seed: u64) -> Result<Vec<[f32; 3]>, FormatE
     Ok(out)
 }
 
-/// Parses an OFF file and samples `n` points from its surface (see [`sample`]).
+/// Parses an OFF file and samples `n` points from its surface (see
+/// [`sample`]); a file without triangles is a point cloud: its finite
+/// vertices, as stored.
 pub fn parse_sampled(bytes: &[u8], n: usize, seed: u64) -> Result<Vec<[f32; 3]>, FormatError> {
-    sample(&parse(bytes)?, n, seed)
+    let mesh = parse(bytes)?;
+    if mesh.triangles.is_empty() {
+        // Vertices without a surface (`OFF` / `N 0 0`, a common way to store
+        // a scan, or only point and edge "faces"): a point cloud.
+        return Ok(mesh
+            .vertices
+            .into_iter()
+            .filter_map(super::finite)
+            .collect());
+    }
+    sample(&mesh, n, seed)
 }
