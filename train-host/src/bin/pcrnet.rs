@@ -135,7 +135,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             let blob =
                 std::fs::read(&model).with_context(|| format!("reading {}", model.display()))?;
             let text = inspect::describe(&blob).with_context(|| format!("{}", model.display()))?;
-            print!("{text}");
+            write_stdout(&text);
         }
         Command::Demo {
             seed,
@@ -232,7 +232,7 @@ fn register(
         if to_stdout {
             eprintln!("{line}");
         } else {
-            println!("{line}");
+            write_stdout(&format!("{line}\n"));
         }
     };
     say(format!(
@@ -286,12 +286,7 @@ fn register(
         let value = report_json(&method.name(out.precision), &out);
         let text = serde_json::to_string_pretty(&value)? + "\n";
         if to_stdout {
-            use std::io::Write;
-            let mut stdout = std::io::stdout().lock();
-            match stdout.write_all(text.as_bytes()) {
-                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
-                r => r?,
-            }
+            write_stdout(&text);
         } else {
             std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
         }
@@ -326,6 +321,31 @@ fn report_json(method: &str, out: &methods::Outcome) -> serde_json::Value {
     v
 }
 
+/// `println!` through [`write_stdout`].
+macro_rules! outln {
+    ($($t:tt)*) => {
+        write_stdout(&format!("{}\n", format_args!($($t)*)))
+    };
+}
+
+/// Writes to standard output; a reader that has gone away (a closed pipe,
+/// `| head -1`) ends the program quietly with status 0, as Unix tools do,
+/// instead of a panic.
+fn write_stdout(text: &str) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: writing to standard output: {e}");
+        std::process::exit(1);
+    }
+}
+
 /// Writes a cloud as XYZ text (one `x y z` line per point, exact f32 values).
 fn write_xyz(path: &Path, cloud: &[[f32; 3]]) -> anyhow::Result<()> {
     let text: String = cloud
@@ -342,7 +362,10 @@ fn read_cloud(path: &Path) -> anyhow::Result<Vec<[f32; 3]>> {
 }
 
 fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
-    println!("NOTE: weights are seeded random (untrained): this shows the pipeline, not accuracy.");
+    write_stdout(
+        "NOTE: weights are seeded random (untrained): this shows the pipeline, not accuracy.
+",
+    );
     let params = F32Params::init(arch, seed);
     let template = sample(Shape::Ell, 1024, seed);
     let calibration: Vec<_> = (0..32)
@@ -369,12 +392,12 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
             .flat_map(|v| v.to_le_bytes())
             .collect();
         std::fs::write(dir.join("demo-source.f32"), bytes)?;
-        println!(
+        outln!(
             "wrote demo-untrained-int8.pcrn, demo-untrained-f32.pcrn, demo-source.f32 to {}",
             dir.display()
         );
     }
-    print!("{}", inspect::describe(&int8_blob)?);
+    write_stdout(&inspect::describe(&int8_blob)?);
 
     let model = Int8Model::from_bytes(&int8_blob)?;
     let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
@@ -382,19 +405,24 @@ fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
     let fmodel = F32Model::from_bytes(&f32_blob)?;
     let mut fscratch = vec![0f32; fmodel.scratch_len()];
     let (fpose, _) = fmodel.network_pose(&source, 1, 0.0, &mut fscratch)?;
-    println!("source: {} points", source.len());
-    println!(
+    outln!("source: {} points", source.len());
+    outln!(
         "int8 pose: q = {:?}, t = {:?}",
-        pose.rotation, pose.translation
+        pose.rotation,
+        pose.translation
     );
-    println!(
+    outln!(
         "f32  pose: q = {:?}, t = {:?}",
-        fpose.rotation, fpose.translation
+        fpose.rotation,
+        fpose.translation
     );
     for row in pose.matrix() {
-        println!(
+        outln!(
             "  [{:>9.5} {:>9.5} {:>9.5} {:>9.5}]",
-            row[0], row[1], row[2], row[3]
+            row[0],
+            row[1],
+            row[2],
+            row[3]
         );
     }
     Ok(())

@@ -236,6 +236,7 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
         seed: args.seed,
         resample: args.resample,
     };
+    spec.pairs.validate().map_err(anyhow::Error::msg)?;
     let loaded = spec.load_shapes()?;
     let set = PairSet::generate(spec, &loaded);
     set.save(&args.out)?;

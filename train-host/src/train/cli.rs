@@ -220,7 +220,7 @@ pub fn parse_range(s: &str) -> anyhow::Result<[f32; 2]> {
 
 fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     let (encoder, head) = parse_arch(&args.arch)?;
-    Ok(TrainConfig {
+    let config = TrainConfig {
         encoder,
         head,
         model: match args.model {
@@ -259,7 +259,9 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         val_pairs: args.val_pairs,
         points: args.points,
         sampling: sampling(args.sampling),
-    })
+    };
+    config.pairs.validate().map_err(anyhow::Error::msg)?;
+    Ok(config)
 }
 
 fn sampling(a: SamplingArg) -> Sampling {

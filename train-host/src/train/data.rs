@@ -79,6 +79,46 @@ pub struct PairConfig {
     pub centre: bool,
 }
 
+impl PairConfig {
+    /// Checks the ranges a pair can be drawn from, naming the command-line
+    /// flag of a bad value: `--max-deg` in `0..=180`, `--max-t` and
+    /// `--noise` finite and `>= 0`, `--partial` and `--sparse` fractions in
+    /// `(0, 1]` (all finite, low <= high).
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.max_deg.is_finite() && (0.0..=180.0).contains(&self.max_deg)) {
+            return Err(format!(
+                "--max-deg must be between 0 and 180 degrees (got {})",
+                self.max_deg
+            ));
+        }
+        if !(self.max_t.is_finite() && self.max_t >= 0.0) {
+            return Err(format!(
+                "--max-t must be a finite number >= 0 (got {})",
+                self.max_t
+            ));
+        }
+        let range = |flag: &str, r: Option<[f32; 2]>, lo_ok: fn(f32) -> bool| match r {
+            Some([lo, hi])
+                if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo_ok(lo) && hi <= 1e6) =>
+            {
+                Err(format!(
+                    "{flag} must be LO[,HI] with finite LO <= HI in range (got {lo},{hi})"
+                ))
+            }
+            _ => Ok(()),
+        };
+        range("--noise", self.noise, |lo| lo >= 0.0)?;
+        range("--partial", self.partial, |lo| lo > 0.0)?;
+        range("--sparse", self.sparse, |lo| lo > 0.0)?;
+        for (flag, r) in [("--partial", self.partial), ("--sparse", self.sparse)] {
+            if r.is_some_and(|[_, hi]| hi > 1.0) {
+                return Err(format!("{flag} fractions must be at most 1"));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for PairConfig {
     /// The paper's: 45 degrees, translation 1, clean full sources,
     /// centred (as the reference implementation).
@@ -611,5 +651,70 @@ impl Dataset {
             batch.centroids.push(c);
         }
         batch
+    }
+}
+
+#[cfg(test)]
+mod validate_tests {
+    use super::PairConfig;
+
+    #[test]
+    fn bad_pair_ranges_name_their_flag() {
+        assert!(PairConfig::default().validate().is_ok());
+        let bad = |c: PairConfig, flag: &str| {
+            let e = c.validate().unwrap_err();
+            assert!(e.contains(flag), "{e}");
+        };
+        let d = PairConfig::default();
+        bad(
+            PairConfig {
+                max_deg: -10.0,
+                ..d
+            },
+            "--max-deg",
+        );
+        bad(
+            PairConfig {
+                max_deg: f32::NAN,
+                ..d
+            },
+            "--max-deg",
+        );
+        bad(
+            PairConfig {
+                max_deg: 200.0,
+                ..d
+            },
+            "--max-deg",
+        );
+        bad(
+            PairConfig {
+                max_t: f32::NAN,
+                ..d
+            },
+            "--max-t",
+        );
+        bad(PairConfig { max_t: -1.0, ..d }, "--max-t");
+        bad(
+            PairConfig {
+                noise: Some([0.0, f32::NAN]),
+                ..d
+            },
+            "--noise",
+        );
+        bad(
+            PairConfig {
+                partial: Some([0.0, 0.5]),
+                ..d
+            },
+            "--partial",
+        );
+        bad(
+            PairConfig {
+                sparse: Some([0.5, 1.5]),
+                ..d
+            },
+            "--sparse",
+        );
     }
 }

@@ -1,0 +1,105 @@
+//! The `pcrnet` binary as a user's shell runs it: bad flag values and a
+//! closed output pipe give a clear exit, never a panic.
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+
+fn pcrnet() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_pcrnet"))
+}
+
+fn models() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models")
+}
+
+#[test]
+fn a_closed_output_pipe_ends_quietly() {
+    let m = models();
+    let runs: [Vec<PathBuf>; 2] = [
+        vec![
+            "register".into(),
+            m.join("embedded-default-template.xyz"),
+            m.join("embedded-default-source.xyz"),
+            "--method".into(),
+            "icp".into(),
+        ],
+        vec!["inspect".into(), m.join("embedded-default-int8.pcrn")],
+    ];
+    for args in runs {
+        let mut child = pcrnet()
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The reader goes away before anything is written (`| head -0`).
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn bad_flag_values_are_errors_naming_the_flag() {
+    for (args, flag) in [
+        (
+            vec![
+                "pairs",
+                "--generated",
+                "3",
+                "--max-deg=-10",
+                "--out",
+                "/dev/null",
+            ],
+            "--max-deg",
+        ),
+        (
+            vec![
+                "pairs",
+                "--generated",
+                "3",
+                "--max-deg",
+                "nan",
+                "--out",
+                "/dev/null",
+            ],
+            "--max-deg",
+        ),
+        (
+            vec![
+                "pairs",
+                "--generated",
+                "3",
+                "--max-t",
+                "nan",
+                "--out",
+                "/dev/null",
+            ],
+            "--max-t",
+        ),
+        (
+            vec![
+                "train",
+                "--generated",
+                "3",
+                "--max-t",
+                "nan",
+                "--out",
+                "/dev/null",
+            ],
+            "--max-t",
+        ),
+    ] {
+        let out = pcrnet().args(&args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(flag) && !stderr.contains("panicked"),
+            "{args:?}: {stderr}"
+        );
+        // One chain of messages, no backtrace even when one is asked for.
+        assert!(!stderr.contains("stack backtrace"), "{stderr}");
+    }
+}
