@@ -487,3 +487,15 @@ fn checkpoint_and_export() {
     m.register(&src, &Options::default(), &mut s).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_model_with_non_finite_weights_is_not_written() {
+    let mut params = pcrnet_train::F32Params::init(Arch::new(&[8, 16], &[16]).unwrap(), 3);
+    params.layers[1].0[5] = f32::NAN;
+    let tpl = pcrnet_train::shapes::sample(pcrnet_train::shapes::Shape::Ell, 64, 1);
+    let reference = Reference::new(&tpl, 64).unwrap();
+    let dir = std::env::temp_dir().join(format!("pcrnet-nan-{}", std::process::id()));
+    let e = export::export(&params, &reference, None, TrainedFor::pcrnet(true), &dir).unwrap_err();
+    assert!(e.to_string().contains("layer 1"), "{e}");
+    assert!(!dir.join(export::F32_BLOB).exists());
+}

@@ -261,6 +261,15 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         sampling: sampling(args.sampling),
     };
     config.pairs.validate().map_err(anyhow::Error::msg)?;
+    if !(config.lr.is_finite() && config.lr > 0.0) {
+        bail!("--lr must be a finite number > 0 (got {})", config.lr);
+    }
+    if config.epochs == 0 || config.batch == 0 || config.points == 0 {
+        bail!("--epochs, --batch and --points must be at least 1");
+    }
+    if config.steps_per_epoch == Some(0) {
+        bail!("--steps-per-epoch must be at least 1");
+    }
     Ok(config)
 }
 
@@ -286,6 +295,13 @@ fn load_data(args: &TrainArgs, seed: u64) -> anyhow::Result<(Dataset, Dataset)> 
         bail!("give --data PATH or --generated COUNT");
     };
     if let Some(i) = args.single_model {
+        if i >= train.len() {
+            bail!(
+                "--single-model {i}: the training set has {} shapes (0..{})",
+                train.len(),
+                train.len()
+            );
+        }
         train = train.single_model(i);
         val = train.clone();
     }

@@ -37,6 +37,15 @@ pub fn export(
     trained: TrainedFor,
     dir: &Path,
 ) -> anyhow::Result<Vec<PathBuf>> {
+    if let Some(l) = params
+        .layers
+        .iter()
+        .position(|(w, b)| w.iter().chain(b).any(|v| !v.is_finite()))
+    {
+        anyhow::bail!(
+            "layer {l} has a NaN or infinite weight (training diverged: lower --lr or add --clip); no model written"
+        );
+    }
     std::fs::create_dir_all(dir)?;
     let mut written = Vec::new();
     let f32_blob = params.to_f32_blob(reference, trained)?;
