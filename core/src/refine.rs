@@ -240,14 +240,14 @@ fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u6
         let Some(nb) = template.nearest(pq, lim + 1) else {
             continue;
         };
-        let (t, n) = (template.point(nb.index), template.normal(nb.index));
-        let nn = libm::sqrtf((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) as f32);
-        let n = n.map(|v| v as f32 / nn);
+        let (t, ni) = (template.point(nb.index), template.normal(nb.index));
+        let nn = libm::sqrtf((ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]) as f32);
+        let n = ni.map(|v| v as f32 / nn);
         let p = pq.map(|v| v as f32 * step);
         // r = n . (t - p), exact in i64 before the one rounding.
         let mut dot = 0i64;
         for k in 0..3 {
-            dot += (t[k] - pq[k]) as i64 * template.normal(nb.index)[k] as i64;
+            dot += (t[k] - pq[k]) as i64 * ni[k] as i64;
         }
         let r = dot as f32 / nn * step;
         let j = [
