@@ -182,21 +182,6 @@ impl Frame {
             translation: [0, 1, 2].map(|k| t[k] / self.scale + self.centre[k] - rc[k]),
         }
     }
-
-    /// A pose between user-unit clouds as one between model-frame clouds
-    /// (the inverse of [`Self::pose_to_user`]): `t_model = s (t + R c - c)`.
-    pub fn pose_to_model(&self, pose: &Pose) -> Pose {
-        let r = Pose {
-            rotation: pose.rotation,
-            translation: [0.0; 3],
-        };
-        let rc = r.transform_point(self.centre);
-        let t = pose.translation;
-        Pose {
-            rotation: pose.rotation,
-            translation: [0, 1, 2].map(|k| (t[k] + rc[k] - self.centre[k]) * self.scale),
-        }
-    }
 }
 
 /// How a source point is moved before the network or the template search:
@@ -378,10 +363,6 @@ mod tests {
             for k in 0..3 {
                 assert!((lhs[k] - rhs[k]).abs() < 1e-5, "{lhs:?} vs {rhs:?}");
             }
-        }
-        let back = frame.pose_to_model(&user);
-        for k in 0..3 {
-            assert!((back.translation[k] - model.translation[k]).abs() < 1e-5);
         }
     }
 
