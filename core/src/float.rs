@@ -298,15 +298,14 @@ impl<P: Params> F32Network<P> {
         tolerance: f32,
         scratch: &mut [f32],
     ) -> Result<(Pose, usize)> {
-        let start = pose::centring(source, self.centre_source, frame)?;
-        let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
-            self.pass(source, &PointMap::new(*frame, current), scratch)
-        })?;
-        let pose = frame.pose_to_user(&pose);
-        if !pose.is_finite() {
-            return Err(Error::NonFiniteResult);
-        }
-        Ok((pose, n))
+        registration::network_pose(
+            frame,
+            self.centre_source,
+            source,
+            passes,
+            tolerance,
+            |map| self.pass(source, map, scratch),
+        )
     }
 
     /// One pass on the source moved by `map`: the pose in the model frame.

@@ -200,18 +200,14 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
     ) -> Result<(Pose, usize)> {
         let tile = self.tile_for(scratch.len())?;
-        let frame = self.p.frame;
-        let start = pose::centring(source, self.p.centre_source, &frame)?;
-        let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
-            Ok(self
-                .pass(source, &PointMap::new(frame, current), tile, scratch)?
-                .0)
-        })?;
-        let pose = frame.pose_to_user(&pose);
-        if !pose.is_finite() {
-            return Err(Error::NonFiniteResult);
-        }
-        Ok((pose, n))
+        registration::network_pose(
+            &self.p.frame,
+            self.p.centre_source,
+            source,
+            passes,
+            tolerance,
+            |map| Ok(self.pass(source, map, tile, scratch)?.0),
+        )
     }
 
     /// One network pass on the source moved by `map`: the pose (model

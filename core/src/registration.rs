@@ -160,16 +160,19 @@ pub(crate) fn run(
     if source.is_empty() {
         return Err(Error::EmptyCloud);
     }
-    let start = pose::centring(source, centre_source, frame)?;
     let mut saturated = 0u32;
-    let (network, passes) = pose::iterate(start, options.passes, options.tolerance, |current| {
-        let (delta, s) = pass(&PointMap::new(*frame, current))?;
-        saturated = saturated.saturating_add(s);
-        Ok(delta)
-    })?;
-    if !network.is_finite() {
-        return Err(Error::NonFiniteResult);
-    }
+    let (network, passes) = network_passes(
+        frame,
+        centre_source,
+        source,
+        options.passes,
+        options.tolerance,
+        |map| {
+            let (delta, s) = pass(map)?;
+            saturated = saturated.saturating_add(s);
+            Ok(delta)
+        },
+    )?;
     let subset = Subset::new(source, *frame, options.max_points);
     let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
     let icp = IcpSettings {
@@ -206,4 +209,45 @@ pub(crate) fn run(
         degenerate,
         reliable: degenerate.is_none() && r.fit.residual <= options.max_residual,
     })
+}
+
+/// The network's passes from where registration starts ([`pose::centring`]),
+/// each on the source moved by the pose so far ([`pose::iterate`]): the pose
+/// in the model frame and the passes run. A non-finite pose is an error.
+fn network_passes(
+    frame: &Frame,
+    centre_source: bool,
+    source: &[[f32; 3]],
+    passes: usize,
+    tolerance: f32,
+    mut pass: impl FnMut(&PointMap) -> Result<Pose>,
+) -> Result<(Pose, usize)> {
+    let start = pose::centring(source, centre_source, frame)?;
+    let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
+        pass(&PointMap::new(*frame, current))
+    })?;
+    if pose.is_finite() {
+        Ok((pose, n))
+    } else {
+        Err(Error::NonFiniteResult)
+    }
+}
+
+/// [`network_passes`] with the pose in user units: the network alone, as
+/// `Int8Model::network_pose` and `F32Model::network_pose` give it.
+pub(crate) fn network_pose(
+    frame: &Frame,
+    centre_source: bool,
+    source: &[[f32; 3]],
+    passes: usize,
+    tolerance: f32,
+    pass: impl FnMut(&PointMap) -> Result<Pose>,
+) -> Result<(Pose, usize)> {
+    let (pose, n) = network_passes(frame, centre_source, source, passes, tolerance, pass)?;
+    let pose = frame.pose_to_user(&pose);
+    if pose.is_finite() {
+        Ok((pose, n))
+    } else {
+        Err(Error::NonFiniteResult)
+    }
 }
