@@ -212,6 +212,12 @@ pub struct F32Payload<'a> {
 
 /// Checks the envelope of a blob and returns its payload bytes.
 pub fn open(blob: &[u8], expected: ModelKind) -> Result<&[u8]> {
+    open_version(blob, expected, FORMAT_VERSION)
+}
+
+/// [`open`] for a blob of format `version` (tools that read older formats
+/// to upgrade them; this build decodes only [`FORMAT_VERSION`] payloads).
+pub fn open_version(blob: &[u8], expected: ModelKind, version: u16) -> Result<&[u8]> {
     let header = blob.get(..HEADER_LEN).ok_or(Error::Truncated {
         needed: HEADER_LEN + CRC_LEN,
         available: blob.len(),
@@ -231,9 +237,9 @@ pub fn open(blob: &[u8], expected: ModelKind) -> Result<&[u8]> {
         return Err(Error::BadMagic);
     }
     let header = header?;
-    let version = u16::from_le_bytes([header[4], header[5]]);
-    if version != FORMAT_VERSION {
-        return Err(Error::UnsupportedVersion { found: version });
+    let found = u16::from_le_bytes([header[4], header[5]]);
+    if found != version {
+        return Err(Error::UnsupportedVersion { found });
     }
     if header[6] != expected as u8 {
         return Err(Error::WrongKind {
