@@ -50,9 +50,8 @@ impl<'s> Subset<'s> {
     }
 }
 
-/// What ICP minimises. (The residual is always point-to-point: measured,
-/// the point-to-plane distance separates wrong poses from right ones worse,
-/// because a wrong pose still puts many points near some tangent plane.)
+/// What ICP minimises. (Scoring is the same for both: [`Fit`] carries the
+/// point-to-point and the point-to-plane residual.)
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Metric {
@@ -75,6 +74,15 @@ pub struct Fit {
     pub fitness: f32,
     /// Root mean square of `d` over those inliers (0 without inliers).
     pub inlier_rmse: f32,
+    /// Mean over the used points of `|n . (p - q)|`, the distance to the
+    /// tangent plane at the nearest template point `q`, counting
+    /// `max_distance` for a point without one. A right pose scores about
+    /// the noise, however the source's samples fall between the
+    /// template's; `residual` adds that sampling gap. Measured (the `trust`
+    /// experiment), it separates right poses from wrong ones at least as
+    /// well as `residual` on every set, and with one threshold for sources
+    /// that do and do not share points with the template.
+    pub plane_residual: f32,
 }
 
 /// `max_distance` (model units) as a squared int16-step limit for the search.
@@ -95,6 +103,7 @@ pub fn score(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, max_dist
     let lim = limit(template, max_distance);
     let cap = libm::sqrtf(lim as f32);
     let (mut sum, mut sum_sq, mut inliers, mut used) = (0f32, 0f32, 0u32, 0u32);
+    let mut plane = 0f32;
     for p in subset.points() {
         let q = template.quantize(map.apply(*p));
         used += 1;
@@ -104,14 +113,19 @@ pub fn score(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, max_dist
                 sum += libm::sqrtf(d2);
                 sum_sq += d2;
                 inliers += 1;
+                plane += libm::fabsf(template.plane_offset(n.index, q).0);
             }
-            None => sum += cap,
+            None => {
+                sum += cap;
+                plane += cap;
+            }
         }
     }
     let step = template.step();
     let n = used.max(1) as f32;
     Fit {
         residual: sum / n * step,
+        plane_residual: plane / n * step,
         fitness: inliers as f32 / n,
         inlier_rmse: if inliers > 0 {
             libm::sqrtf(sum_sq / inliers as f32) * step
@@ -240,16 +254,9 @@ fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u6
         let Some(nb) = template.nearest(pq, lim + 1) else {
             continue;
         };
-        let (t, ni) = (template.point(nb.index), template.normal(nb.index));
-        let nn = libm::sqrtf((ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]) as f32);
-        let n = ni.map(|v| v as f32 / nn);
+        let (offset, n) = template.plane_offset(nb.index, pq);
         let p = pq.map(|v| v as f32 * step);
-        // r = n . (t - p), exact in i64 before the one rounding.
-        let mut dot = 0i64;
-        for k in 0..3 {
-            dot += (t[k] - pq[k]) as i64 * ni[k] as i64;
-        }
-        let r = dot as f32 / nn * step;
+        let r = offset * step;
         let j = [
             p[1] * n[2] - p[2] * n[1],
             p[2] * n[0] - p[0] * n[2],

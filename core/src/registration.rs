@@ -7,7 +7,9 @@
 //!   -> network passes       PCRNet: 1; i-PCRNet: up to `passes`, composed
 //!   -> hypotheses           the network's pose, then it followed by each template turn
 //!   -> ICP                  point-to-point against the template's points, each hypothesis
-//!   -> residual             lowest wins; fitness, RMSE, degeneracy, saturation
+//!   -> residuals            lowest point-to-point residual wins; the
+//!                           plane residual judges reliability; fitness,
+//!                           RMSE, degeneracy, saturation
 //!   -> pose (user units)    p_template = R p_source + t
 //! ```
 //!
@@ -50,7 +52,8 @@ pub struct Options {
     pub inlier_distance: f32,
     /// Most source points scored and refined (every k-th point is used).
     pub max_points: usize,
-    /// A pose is [`Registration::reliable`] when its relative residual is at most this.
+    /// A pose is [`Registration::reliable`] when its relative plane
+    /// residual ([`Registration::relative_plane_residual`]) is at most this.
     pub max_residual: f32,
 }
 
@@ -69,7 +72,7 @@ impl Default for Options {
             icp_distance: 0.3,
             inlier_distance: 0.05,
             max_points: 256,
-            max_residual: 0.02,
+            max_residual: 0.015,
         }
     }
 }
@@ -127,6 +130,16 @@ pub struct Registration {
     pub fitness: f32,
     /// RMS distance of those inliers, user units.
     pub inlier_rmse: f32,
+    /// Mean distance from the moved source's points to the tangent plane
+    /// at their nearest template point (`|n . (p - q)|`), each capped at
+    /// the inlier distance: user units. Unlike [`Registration::residual`],
+    /// it does not grow with how far apart the source's and the template's
+    /// samples lie along the surface, so a right pose scores about the
+    /// sensor noise whether or not the source shares points with the template.
+    pub plane_residual: f32,
+    /// The same as a share of the template's size (model units): what
+    /// [`Registration::reliable`] is judged on.
+    pub relative_plane_residual: f32,
     /// The starting pose that won: 0 the network's, `k` the network's followed by turn `k - 1`.
     pub hypothesis: usize,
     /// Network passes run.
@@ -139,7 +152,8 @@ pub struct Registration {
     pub saturated: u32,
     /// The source's shape does not determine a pose.
     pub degenerate: Option<Degeneracy>,
-    /// Not degenerate, and the relative residual is at most the option's `max_residual`.
+    /// Not degenerate, and the relative plane residual is at most the
+    /// option's `max_residual`.
     pub reliable: bool,
 }
 
@@ -193,7 +207,9 @@ pub(crate) fn run(
     let pose = frame.pose_to_user(&r.pose);
     let residual = r.fit.residual / frame.scale;
     let inlier_rmse = r.fit.inlier_rmse / frame.scale;
-    if !(pose.is_finite() && residual.is_finite() && inlier_rmse.is_finite()) {
+    let plane_residual = r.fit.plane_residual / frame.scale;
+    let finite = residual.is_finite() && inlier_rmse.is_finite() && plane_residual.is_finite();
+    if !(pose.is_finite() && finite) {
         return Err(Error::NonFiniteResult);
     }
     Ok(Registration {
@@ -202,12 +218,14 @@ pub(crate) fn run(
         relative_residual: r.fit.residual,
         fitness: r.fit.fitness,
         inlier_rmse,
+        plane_residual,
+        relative_plane_residual: r.fit.plane_residual,
         hypothesis: r.hypothesis,
         passes,
         icp_iterations: r.icp_iterations,
         saturated,
         degenerate,
-        reliable: degenerate.is_none() && r.fit.residual <= options.max_residual,
+        reliable: degenerate.is_none() && r.fit.plane_residual <= options.max_residual,
     })
 }
 

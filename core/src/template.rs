@@ -144,6 +144,19 @@ impl<'a> Template<'a> {
         }
     }
 
+    /// How far `q` (int16 steps) lies from the tangent plane at point `i`,
+    /// `n . (point_i - q)` in steps (signed), and that unit normal. The dot
+    /// product is exact in integers; the one division by `|n|` rounds.
+    pub fn plane_offset(&self, i: usize, q: [i32; 3]) -> (f32, [f32; 3]) {
+        let (t, ni) = (self.point(i), self.normal(i));
+        let norm = libm::sqrtf((ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]) as f32);
+        let mut dot = 0i64;
+        for k in 0..3 {
+            dot += (t[k] - q[k]) as i64 * ni[k] as i64;
+        }
+        (dot as f32 / norm, ni.map(|v| v as f32 / norm))
+    }
+
     /// A model-frame point on the int16 grid, `round(x / step)` by
     /// `libm::roundf`, clamped to `-32767..=32767` (a clamped point is at
     /// least `32767 step - max|template|` away from every template point,

@@ -123,9 +123,10 @@ fn report(r: &Registration) {
     log!("rotation (w, x, y, z): {:?}", r.pose.rotation);
     log!("translation: {:?}", r.pose.translation);
     log!(
-        "residual: {:?} ({:?} of the template's size), fitness {:?}, hypothesis {}, ICP iterations {}, saturated {}",
+        "residual: {:?}, plane residual {:?} ({:?} of the template's size), fitness {:?}, hypothesis {}, ICP iterations {}, saturated {}",
         r.residual,
-        r.relative_residual,
+        r.plane_residual,
+        r.relative_plane_residual,
         r.fitness,
         r.hypothesis,
         r.icp_iterations,

@@ -111,6 +111,8 @@ fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
         relative,
         fitness,
         rmse,
+        plane,
+        relative_plane,
         hypothesis,
         passes,
         icp,
@@ -132,6 +134,8 @@ fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
             relative_residual: hex_bits(relative)?,
             fitness: hex_bits(fitness)?,
             inlier_rmse: hex_bits(rmse)?,
+            plane_residual: hex_bits(plane)?,
+            relative_plane_residual: hex_bits(relative_plane)?,
             hypothesis: hypothesis.parse().ok()?,
             passes: passes.parse().ok()?,
             icp_iterations: icp.parse().ok()?,
@@ -293,6 +297,14 @@ pub fn registration_difference(
             })
             .or_else(|| f32_difference("fitness", h.fitness, d.fitness))
             .or_else(|| f32_difference("inlier_rmse", h.inlier_rmse, d.inlier_rmse))
+            .or_else(|| f32_difference("plane_residual", h.plane_residual, d.plane_residual))
+            .or_else(|| {
+                f32_difference(
+                    "relative_plane_residual",
+                    h.relative_plane_residual,
+                    d.relative_plane_residual,
+                )
+            })
             .or_else(|| int_difference("hypothesis", h.hypothesis, d.hypothesis))
             .or_else(|| int_difference("passes", h.passes, d.passes))
             .or_else(|| int_difference("icp_iterations", h.icp_iterations, d.icp_iterations))
@@ -361,7 +373,7 @@ mod tests {
         let out = "calibration 2000000 2000000\nstatic_ram 65600\n\
                    case 0 ok 100 250 512 feature 7f80ff00 head 1 -2 3 4 5 6 7 pose 3f800000 0 0 0 0 0 0\n\
                    case 0 iter ok 3 3f800000 0 0 0 0 0 1\n\
-                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 1 1 7 12 none true\n\
+                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 1 1 7 12 none true\n\
                    case 1 error false EmptyCloud\ncase 1 iter error EmptyCloud\n\
                    case 1 reg 0 error 20 100 InvalidOption { what: \"hypotheses must be at least 1\" }\n\
                    case 1 reg 1 error 20 100 EmptyCloud\ndone\n";
@@ -407,6 +419,8 @@ mod tests {
             relative_residual: 0x3c23_d70a,
             fitness: 0x3f80_0000,
             inlier_rmse: 0,
+            plane_residual: 0x3c23_d70a,
+            relative_plane_residual: 0x3c23_d70a,
             hypothesis: 1,
             passes: 1,
             icp_iterations: 7,

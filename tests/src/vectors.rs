@@ -54,6 +54,10 @@ pub struct RegistrationBits {
     pub fitness: u32,
     /// `inlier_rmse` bits.
     pub inlier_rmse: u32,
+    /// `plane_residual` bits.
+    pub plane_residual: u32,
+    /// `relative_plane_residual` bits.
+    pub relative_plane_residual: u32,
     /// Winning hypothesis.
     pub hypothesis: usize,
     /// Network passes run.
@@ -76,6 +80,8 @@ impl From<&Registration> for RegistrationBits {
             relative_residual: r.relative_residual.to_bits(),
             fitness: r.fitness.to_bits(),
             inlier_rmse: r.inlier_rmse.to_bits(),
+            plane_residual: r.plane_residual.to_bits(),
+            relative_plane_residual: r.relative_plane_residual.to_bits(),
             hypothesis: r.hypothesis,
             passes: r.passes,
             icp_iterations: r.icp_iterations,

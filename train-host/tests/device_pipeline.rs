@@ -135,3 +135,24 @@ fn degenerate_and_hostile_sources_are_errors_or_flagged() {
         Err(Error::InvalidOption { .. })
     ));
 }
+
+#[test]
+fn sources_sampled_apart_from_the_template_are_judged_by_the_plane_residual() {
+    // Template and source sampled independently from the same surface, as
+    // a sensor samples it: no point shared.
+    let template = sample(Shape::Ell, 512, 21);
+    let source = random_transform(&sample(Shape::Ell, 512, 22), 30.0, 0.3, 23);
+    let r = register(&template, &source).unwrap();
+    // The point-to-point residual carries the gap between the samplings;
+    // the plane residual does not, and the verdict uses it.
+    assert!(
+        r.relative_plane_residual < 0.5 * r.relative_residual,
+        "{r:?}"
+    );
+    assert!(r.reliable, "{r:?}");
+    // A different object scored against this template is not trusted.
+    let torus = random_transform(&sample(Shape::Torus, 512, 24), 30.0, 0.3, 25);
+    let wrong = register(&template, &torus).unwrap();
+    assert!(!wrong.reliable, "{wrong:?}");
+    assert!(wrong.relative_plane_residual > 2.0 * r.relative_plane_residual);
+}

@@ -204,7 +204,14 @@ fn main() -> ! {
                         for v in r.pose.rotation.iter().chain(&r.pose.translation) {
                             let _ = write!(line, " {:08x}", v.to_bits());
                         }
-                        for v in [r.residual, r.relative_residual, r.fitness, r.inlier_rmse] {
+                        for v in [
+                            r.residual,
+                            r.relative_residual,
+                            r.fitness,
+                            r.inlier_rmse,
+                            r.plane_residual,
+                            r.relative_plane_residual,
+                        ] {
                             let _ = write!(line, " {:08x}", v.to_bits());
                         }
                         let _ = write!(

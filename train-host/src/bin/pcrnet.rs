@@ -258,8 +258,13 @@ fn register(
     }
     if let Some(c) = &out.check {
         say(format!(
-            "residual: {:.6} (source units), {:.4} of the template's size; fitness {:.3}; inlier RMSE {:.6}",
-            c.residual, c.relative_residual, c.fitness, c.inlier_rmse
+            "residual: {:.6} (source units), {:.4} of the template's size; plane residual {:.6}, {:.4} of the size; fitness {:.3}; inlier RMSE {:.6}",
+            c.residual,
+            c.relative_residual,
+            c.plane_residual,
+            c.relative_plane_residual,
+            c.fitness,
+            c.inlier_rmse
         ));
         say(format!(
             "hypothesis {} won; {} ICP iteration(s); {} saturated int8 value(s){}",
@@ -272,9 +277,9 @@ fn register(
             }
         ));
         say(if c.reliable {
-            "trust: RELIABLE (relative residual within the threshold)".into()
+            "trust: RELIABLE (relative plane residual within the threshold)".into()
         } else {
-            "trust: NOT RELIABLE - do not act on this pose (residual above the threshold, or a degenerate source)".into()
+            "trust: NOT RELIABLE - do not act on this pose (plane residual above the threshold, or a degenerate source)".into()
         });
     }
     if let Some(out_path) = aligned {
@@ -311,6 +316,8 @@ fn report_json(method: &str, out: &methods::Outcome) -> serde_json::Value {
         v["relative_residual"] = c.relative_residual.into();
         v["fitness"] = c.fitness.into();
         v["inlier_rmse"] = c.inlier_rmse.into();
+        v["plane_residual"] = c.plane_residual.into();
+        v["relative_plane_residual"] = c.relative_plane_residual.into();
         v["hypothesis"] = c.hypothesis.into();
         v["passes"] = c.passes.into();
         v["icp_iterations"] = c.icp_iterations.into();

@@ -93,8 +93,9 @@ pub struct MethodOptions {
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Starting poses the device pipeline tries: 1 (the network's pose)
-    /// up to 1 + the turns stored in the blob (default 4: the network's pose
-    /// and the half turns about the template's principal axes).
+    /// up to 1 + the turns stored in the blob (default: `pcrnet-core`'s
+    /// recommended 10, the network's pose and its half and quarter turns
+    /// about the template's principal axes).
     #[arg(long)]
     pub hypotheses: Option<usize>,
     /// ICP iterations every hypothesis of the device pipeline gets before
@@ -104,7 +105,7 @@ pub struct MethodOptions {
     /// Most ICP iterations of the device pipeline in all (0: no refinement).
     #[arg(long)]
     pub icp_iterations: Option<usize>,
-    /// What the device pipeline's ICP and residual measure.
+    /// What the device pipeline's ICP minimises.
     #[arg(long, value_enum)]
     pub metric: Option<super::methods::DeviceMetric>,
     /// Most source points the device pipeline scores and refines (every
@@ -307,7 +308,7 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
     );
     if let Some(c) = &s.confidence {
         println!(
-            "confidence ({} good below {}°, {} bad): residual AUROC {}; flagged unreliable: {:.1}% of bad, {:.1}% of good; {:.1}% of reliable ones are bad",
+            "confidence ({} good below {}°, {} bad): plane residual AUROC {}; flagged unreliable: {:.1}% of bad, {:.1}% of good; {:.1}% of reliable ones are bad",
             c.good,
             c.good_below_deg,
             c.bad,

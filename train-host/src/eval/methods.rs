@@ -42,7 +42,7 @@ pub enum MethodKind {
     Device,
 }
 
-/// What the device pipeline's ICP and residual measure (`pcrnet_core::Metric`).
+/// What the device pipeline's ICP minimises (`pcrnet_core::Metric`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 pub enum DeviceMetric {
     /// To the tangent plane at the nearest template point.
@@ -85,7 +85,7 @@ pub struct Method {
     /// Most source points the device pipeline scores and refines.
     #[serde(default = "default_max_points")]
     pub max_points: usize,
-    /// The device pipeline's ICP and residual metric.
+    /// What the device pipeline's ICP minimises.
     #[serde(default)]
     pub metric: DeviceMetric,
     /// Device ICP pair distance (model units: share of the template's size).
@@ -189,10 +189,18 @@ impl Method {
                 DeviceMetric::PointToPlane => "",
                 DeviceMetric::PointToPoint => " (point-to-point)",
             };
-            if self.icp_iterations == 0 {
-                format!("{precision} K={}, scored, no ICP", self.hypotheses)
+            let points = if self.max_points == default_max_points() {
+                String::new()
             } else {
-                format!("{precision} K={} + device ICP{metric}", self.hypotheses)
+                format!(", {} points", self.max_points)
+            };
+            if self.icp_iterations == 0 {
+                format!("{precision} K={}{points}, scored, no ICP", self.hypotheses)
+            } else {
+                format!(
+                    "{precision} K={}{points} + device ICP{metric}",
+                    self.hypotheses
+                )
             }
         } else {
             precision

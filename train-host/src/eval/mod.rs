@@ -49,9 +49,13 @@ pub struct PairScore {
     pub ms: f64,
     /// Passes, steps or iterations run.
     pub iterations: usize,
-    /// The device pipeline's relative residual (share of the template's size).
+    /// The device pipeline's relative (point-to-point) residual (share of the template's size).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub residual: Option<f64>,
+    /// The device pipeline's relative plane residual, what its verdict is
+    /// judged on and the confidence scores rank by.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane_residual: Option<f64>,
     /// The device pipeline's verdict.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reliable: Option<bool>,
@@ -139,6 +143,7 @@ pub fn score(
                 ms: seconds * 1e3,
                 iterations,
                 residual: check.map(|c| c.relative_residual as f64),
+                plane_residual: check.map(|c| c.plane_residual as f64),
                 reliable: check.map(|c| c.reliable),
                 hypothesis: check.map(|c| c.hypothesis),
             },
@@ -165,12 +170,12 @@ pub fn score(
     let rot: Vec<f64> = scores.iter().map(|s| s.rot_deg).collect();
     let trans: Vec<f64> = scores.iter().map(|s| s.trans).collect();
     let secs: Vec<f64> = scores.iter().map(|s| s.ms / 1e3).collect();
-    // A failed registration has no residual: it counts as unreliable with
-    // the worst residual.
-    let confidence = scores.iter().any(|s| s.residual.is_some()).then(|| {
+    // Ranked by the plane residual, which the verdict is judged on. A
+    // failed registration has none: it counts as unreliable with the worst.
+    let confidence = scores.iter().any(|s| s.plane_residual.is_some()).then(|| {
         let residual: Vec<f64> = scores
             .iter()
-            .map(|s| s.residual.unwrap_or(f64::INFINITY))
+            .map(|s| s.plane_residual.unwrap_or(f64::INFINITY))
             .collect();
         let reliable: Vec<bool> = scores.iter().map(|s| s.reliable.unwrap_or(false)).collect();
         metrics::Confidence::of(&rot, &residual, &reliable, GOOD_BELOW_DEG)

@@ -9,6 +9,7 @@ use super::experiments::{
     Context, Recorder, Report, Table, UNSEEN, folder, label, pair_set, success_chart,
 };
 use super::methods::{DeviceMetric, Method, MethodKind};
+use super::metrics::Confidence;
 use super::pairs::PairSetSpec;
 use super::{GOOD_BELOW_DEG, MethodScore};
 use crate::train::data::PairConfig;
@@ -74,6 +75,11 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
             metric: DeviceMetric::PointToPoint,
             ..device(recommended)
         };
+        // Every source point scored and refined (the default uses 256).
+        let dense = Method {
+            max_points: 512,
+            ..device(recommended)
+        };
         for method in [
             Method::new(MethodKind::Pcrnet),
             Method::new(MethodKind::Pcrnet).then_icp(),
@@ -81,6 +87,7 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
             device(1),
             device(recommended),
             point,
+            dense,
         ] {
             rec.score(set, method, model, &pairs, true)?;
         }
@@ -117,7 +124,7 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
     rec.plot("ModelNet10-heldout", &chart)?;
     let table = Table {
         caption: format!(
-            "Errors, success and confidence per method; a pose is good below {GOOD_BELOW_DEG}° rotation error; the device pipeline's verdict is `reliable` (relative residual <= {})",
+            "Errors, success and confidence per method; a pose is good below {GOOD_BELOW_DEG}° rotation error; the device pipeline's verdict is `reliable` (relative plane residual <= {})",
             pcrnet_core::Options::default().max_residual
         ),
         header: [
@@ -128,7 +135,8 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
             "AUC",
             "ok (5°, 0.05)",
             "errors > 30°",
-            "residual AUROC",
+            "plane residual AUROC",
+            "point residual AUROC",
             "bad flagged",
             "good flagged",
             "ms mean",
@@ -147,7 +155,7 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
             "PCRNet: the network alone; + ICP: host point-to-point ICP (f64, k-d tree, all template points, 100 iterations); device K=k: `pcrnet-core`'s register (what the firmware runs, bit for bit): k starting poses (the network's, then half and quarter turns about the template's principal axes), each refined 10 ICP iterations against the 512 stored template points, the network's and the best turned one continued to 50, a turn wins only below 0.7 x the network's residual; point-to-plane ICP unless marked point-to-point; `K=1, scored, no ICP` is the network's pose scored, unrefined (where the residual has many bad poses to tell apart).".into(),
             "Resampled: each source is made from the shape's points that the template did not keep (no point shared with the template, as with a real sensor).".into(),
             format!("Held-out classes: {} with `mn10-seen5-ipcrnet`, the generalisation experiment's i-PCRNet trained on the other five ModelNet10 classes (its blob records 8 passes, which the device pipeline runs; i-PCRNet alone: up to 20 passes).", UNSEEN.join(", ")),
-            "Residual AUROC: the probability that a good pose has a lower residual than a bad one; bad / good flagged: shares marked not reliable.".into(),
+            "Plane / point residual AUROC: the probability that a good pose has a lower plane (point-to-plane) / point (point-to-point) residual than a bad one; the verdict is judged on the plane residual; bad / good flagged: shares marked not reliable.".into(),
         ],
         vec![table],
         started,
@@ -173,8 +181,26 @@ fn row(set: &str, s: &MethodScore) -> Vec<String> {
         ),
         c.and_then(|c| c.auroc)
             .map_or("-".into(), |a| format!("{a:.3}")),
+        point_auroc(s).map_or("-".into(), |a| format!("{a:.3}")),
         c.map_or("-".into(), |c| format!("{:.1}%", 100.0 * c.bad_flagged)),
         c.map_or("-".into(), |c| format!("{:.1}%", 100.0 * c.good_flagged)),
         m.time_ms.map_or("-".into(), |t| format!("{:.1}", t.mean)),
     ]
+}
+
+/// The AUROC the point-to-point residual would give, for comparison with
+/// the plane residual the verdict uses.
+fn point_auroc(s: &MethodScore) -> Option<f64> {
+    if s.pairs.iter().all(|p| p.residual.is_none()) {
+        return None;
+    }
+    let rot: Vec<f64> = s.pairs.iter().map(|p| p.rot_deg).collect();
+    // As for the plane residual, a failed registration counts as the worst.
+    let residual: Vec<f64> = s
+        .pairs
+        .iter()
+        .map(|p| p.residual.unwrap_or(f64::INFINITY))
+        .collect();
+    let reliable: Vec<bool> = s.pairs.iter().map(|p| p.reliable == Some(true)).collect();
+    Confidence::of(&rot, &residual, &reliable, GOOD_BELOW_DEG).auroc
 }
