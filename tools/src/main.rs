@@ -24,6 +24,9 @@ cargo xtask <command>
                 the device is caught
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
+  c-header [--check]
+                write capi/include/pcrnet.h from the C API crate (cbindgen);
+                --check fails if the committed header differs
   bench         host benchmarks (criterion): encoder throughput, training step
   results [DATA] run the paper's six experiments and `trust` on DATA (default
                 ../shared/data; trains the models they need into
@@ -43,6 +46,7 @@ fn main() -> ExitCode {
         Some("qemu-test") => qemu_test(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
         Some("firmware-run") => firmware_run(),
+        Some("c-header") => c_header(args.get(1).map(String::as_str) == Some("--check")),
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
         Some("help") | None => {
             print!("{HELP}");
@@ -164,6 +168,8 @@ fn ci() -> Result<(), String> {
         &["build", "--release", "--features", "defmt"],
     )?;
     cargo(&["build", "-p", "pcrnet-core", "--target", TARGET])?;
+    c_header(true)?;
+    cargo(&["build", "-p", "pcrnet-capi", "--release", "--target", TARGET])?;
     cargo(&[
         "clippy",
         "-p",
@@ -248,4 +254,34 @@ fn demo(extra: &[String]) -> Result<(), String> {
     ];
     args.extend(extra.iter().map(String::as_str));
     pcrnet(&args)
+}
+
+/// The C API's header, generated from `capi/` with `capi/cbindgen.toml`:
+/// written, or with `check` compared with the committed file.
+fn c_header(check: bool) -> Result<(), String> {
+    let dir = root().join("capi");
+    let config = cbindgen::Config::from_file(dir.join("cbindgen.toml"))
+        .map_err(|e| format!("capi/cbindgen.toml: {e}"))?;
+    let bindings = cbindgen::Builder::new()
+        .with_crate(&dir)
+        .with_config(config)
+        .generate()
+        .map_err(|e| format!("generating the C header: {e}"))?;
+    let mut text = Vec::new();
+    bindings.write(&mut text);
+    let path = dir.join("include").join("pcrnet.h");
+    if check {
+        let committed = std::fs::read(&path).unwrap_or_default();
+        if committed != text {
+            return Err(format!(
+                "{} is stale: run `cargo xtask c-header` and commit it",
+                path.display()
+            ));
+        }
+        println!("{} is up to date", path.display());
+        return Ok(());
+    }
+    std::fs::write(&path, &text).map_err(|e| format!("writing {}: {e}", path.display()))?;
+    println!("wrote {}", path.display());
+    Ok(())
 }

@@ -28,8 +28,9 @@
 //!   (or `pose_error E`), or `case C error ENCODED E`;
 //! - `case C iter ok PASSES Q0..T2`, or `case C iter error E`;
 //! - `case C reg K ok INSTR STACK QW QX QY QZ TX TY TZ RESIDUAL RELATIVE
-//!   FITNESS RMSE HYPOTHESIS PASSES ICP_ITERATIONS SATURATED none|Point|Line
-//!   true|false`, or `case C reg K error INSTR STACK E`.
+//!   FITNESS RMSE PLANE RELATIVE_PLANE HYPOTHESIS PASSES ICP_ITERATIONS
+//!   SATURATED none|Point|Line true|false`, or `case C reg K error INSTR
+//!   STACK E`.
 #![no_std]
 #![no_main]
 

@@ -1,0 +1,386 @@
+/* pcrnet: learned point cloud registration (PCRNet) for microcontrollers, C API.
+ *
+ * Generated from capi/src/lib.rs by `cargo xtask c-header`; do not edit.
+ * Ownership, alignment and errors: see capi/README.md. Every function that
+ * can fail returns a PcrnetStatus (0 = PCRNET_OK); pcrnet_status_message()
+ * explains each one. Nothing allocates, nothing aborts. */
+
+#ifndef PCRNET_H
+#define PCRNET_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdbool.h>
+
+/*
+ Most points per encoder pass (`pcrnet_core::MAX_TILE`); a scratch
+ sized for it is the fastest.
+ */
+#define PCRNET_MAX_TILE 8
+
+/*
+ Storage words of a `PcrnetModel` (8 bytes each; 2,560 bytes, the
+ same on every target: the Rust model takes 1,944 on 64-bit hosts and
+ less on 32-bit cores, checked at compile time).
+ */
+#define PCRNET_MODEL_WORDS 320
+
+/*
+ `PcrnetOptions::metric`: point-to-point ICP.
+ */
+#define PCRNET_METRIC_POINT_TO_POINT 0
+
+/*
+ `PcrnetOptions::metric`: point-to-plane ICP (the default).
+ */
+#define PCRNET_METRIC_POINT_TO_PLANE 1
+
+/*
+ `PcrnetRegistration::degenerate`: the source determines a pose.
+ */
+#define PCRNET_DEGENERATE_NONE 0
+
+/*
+ `PcrnetRegistration::degenerate`: all points (nearly) coincide.
+ */
+#define PCRNET_DEGENERATE_POINT 1
+
+/*
+ `PcrnetRegistration::degenerate`: the points (nearly) lie on a line.
+ */
+#define PCRNET_DEGENERATE_LINE 2
+
+/*
+ Status of a call: `PCRNET_OK` (0) or what went wrong (negative).
+ */
+enum PcrnetStatus
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : int32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  /*
+   Success; outputs were written.
+   */
+  PCRNET_OK = 0,
+  /*
+   A required pointer is null.
+   */
+  PCRNET_ERROR_NULL_POINTER = -1,
+  /*
+   The point array is not 4-byte aligned.
+   */
+  PCRNET_ERROR_MISALIGNED = -2,
+  /*
+   The model handle was not filled by a successful `pcrnet_model_load`.
+   */
+  PCRNET_ERROR_NOT_LOADED = -3,
+  /*
+   The blob does not start with the magic bytes `PCRN`.
+   */
+  PCRNET_ERROR_BAD_MAGIC = -10,
+  /*
+   The blob's format version is not one this build reads.
+   */
+  PCRNET_ERROR_UNSUPPORTED_VERSION = -11,
+  /*
+   The blob holds another kind of model (the C API loads int8 blobs).
+   */
+  PCRNET_ERROR_WRONG_KIND = -12,
+  /*
+   The blob is shorter than its header says.
+   */
+  PCRNET_ERROR_TRUNCATED = -13,
+  /*
+   Bytes follow the blob's CRC.
+   */
+  PCRNET_ERROR_TRAILING_DATA = -14,
+  /*
+   The blob's CRC does not match its contents.
+   */
+  PCRNET_ERROR_BAD_CRC = -15,
+  /*
+   The payload does not decode.
+   */
+  PCRNET_ERROR_MALFORMED = -16,
+  /*
+   Layer sizes disagree.
+   */
+  PCRNET_ERROR_INCONSISTENT_DIMENSIONS = -17,
+  /*
+   A model parameter is outside its range.
+   */
+  PCRNET_ERROR_INVALID_PARAMETER = -18,
+  /*
+   The scratch buffer is smaller than `pcrnet_model_scratch_len(model, 1)`.
+   */
+  PCRNET_ERROR_SCRATCH_TOO_SMALL = -20,
+  /*
+   An output buffer is too small.
+   */
+  PCRNET_ERROR_BUFFER_TOO_SMALL = -21,
+  /*
+   The cloud has no points.
+   */
+  PCRNET_ERROR_EMPTY_CLOUD = -30,
+  /*
+   A coordinate is NaN or infinite.
+   */
+  PCRNET_ERROR_NON_FINITE_COORDINATE = -31,
+  /*
+   A coordinate is outside the model's input range.
+   */
+  PCRNET_ERROR_COORDINATE_OUT_OF_RANGE = -32,
+  /*
+   The network produced a zero quaternion.
+   */
+  PCRNET_ERROR_DEGENERATE_POSE = -33,
+  /*
+   The pose or a residual came out non-finite.
+   */
+  PCRNET_ERROR_NON_FINITE_RESULT = -34,
+  /*
+   A registration option is out of range.
+   */
+  PCRNET_ERROR_INVALID_OPTION = -40,
+  /*
+   An error this version of the C API has no code for (a newer core).
+   */
+  PCRNET_ERROR_OTHER = -99,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum PcrnetStatus PcrnetStatus;
+#else
+typedef int32_t PcrnetStatus;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
+/*
+ A loaded model: storage the caller owns, filled by `pcrnet_model_load`.
+ Its contents are private; its size and 8-byte alignment are fixed on
+ every target.
+ */
+typedef struct {
+  uint64_t storage[PCRNET_MODEL_WORDS];
+} PcrnetModel;
+
+/*
+ How to register (`pcrnet_core::Options`; distances in model units,
+ i.e. shares of the template's size). Start from
+ `pcrnet_options_default` and change what you need.
+ */
+typedef struct {
+  /*
+   Network passes (1: PCRNet; more: i-PCRNet).
+   */
+  uint32_t passes;
+  /*
+   i-PCRNet stops once a pass moves the pose by less than this (0: never).
+   */
+  float tolerance;
+  /*
+   Starting poses of flip resolution, 1 up to 1 + the blob's turns.
+   */
+  uint32_t hypotheses;
+  /*
+   ICP iterations every start gets before the two best continue.
+   */
+  uint32_t screen_iterations;
+  /*
+   Most ICP iterations in all (0: no refinement).
+   */
+  uint32_t icp_iterations;
+  /*
+   `PCRNET_METRIC_POINT_TO_PLANE` or `PCRNET_METRIC_POINT_TO_POINT`.
+   */
+  uint32_t metric;
+  /*
+   ICP stops once an update moves the pose by less than this.
+   */
+  float icp_tolerance;
+  /*
+   ICP leaves out pairs farther apart than this.
+   */
+  float icp_distance;
+  /*
+   Residuals count a point at most this far; fitness counts points within it.
+   */
+  float inlier_distance;
+  /*
+   Most source points scored and refined (every k-th point is used).
+   */
+  uint32_t max_points;
+  /*
+   `reliable` when the relative plane residual is at most this.
+   */
+  float max_residual;
+} PcrnetOptions;
+
+/*
+ What a registration found and how far to trust it
+ (`pcrnet_core::Registration`): `p_template = R p_source + t`, in the
+ source's units.
+ */
+typedef struct {
+  /*
+   Unit quaternion `[w, x, y, z]`, `w >= 0`.
+   */
+  float rotation[4];
+  /*
+   Translation `[x, y, z]`, source units.
+   */
+  float translation[3];
+  /*
+   Mean distance to the nearest template point (capped), source units.
+   */
+  float residual;
+  /*
+   The same as a share of the template's size.
+   */
+  float relative_residual;
+  /*
+   Mean distance to the tangent plane at the nearest template point (capped), source units.
+   */
+  float plane_residual;
+  /*
+   The same as a share of the template's size: what `reliable` is judged on.
+   */
+  float relative_plane_residual;
+  /*
+   Share of used source points within the inlier distance.
+   */
+  float fitness;
+  /*
+   RMS distance of those inliers, source units.
+   */
+  float inlier_rmse;
+  /*
+   Winning start: 0 the network's pose, `k` it followed by turn `k - 1`.
+   */
+  uint32_t hypothesis;
+  /*
+   Network passes run.
+   */
+  uint32_t passes;
+  /*
+   ICP iterations from the winning start.
+   */
+  uint32_t icp_iterations;
+  /*
+   int8 values that reached the top of their range.
+   */
+  uint32_t saturated;
+  /*
+   `PCRNET_DEGENERATE_NONE`, `_POINT` or `_LINE`.
+   */
+  uint32_t degenerate;
+  /*
+   Not degenerate and the relative plane residual within `max_residual`.
+   */
+  bool reliable;
+} PcrnetRegistration;
+
+#ifdef __cplusplus
+extern "C" {
+#endif // __cplusplus
+
+/*
+ Validates `blob` (magic, version, CRC, sizes, every parameter) and fills
+ `model`. The blob must stay valid and unchanged while `model` is used.
+ On failure `model` is marked not loaded.
+
+ # Safety
+ `blob` must point to `blob_len` readable bytes (or be null), and
+ `model` to writable storage of a `PcrnetModel` (or be null).
+ */
+PcrnetStatus pcrnet_model_load(const uint8_t *blob, size_t blob_len, PcrnetModel *model);
+
+/*
+ Bytes of scratch a call needs with `tile` points per encoder pass
+ (1..=`PCRNET_MAX_TILE`; the largest is the fastest); 0 for a handle
+ that is not loaded or a tile out of range.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`.
+ */
+size_t pcrnet_model_scratch_len(const PcrnetModel *model, size_t tile);
+
+/*
+ Network passes the model was trained for (1: PCRNet; more: i-PCRNet),
+ the `passes` to register with; 0 for a handle that is not loaded.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`.
+ */
+uint32_t pcrnet_model_trained_passes(const PcrnetModel *model);
+
+/*
+ Writes the recommended options (`pcrnet_core::Options::default()`:
+ one pass, 10 starts, point-to-plane ICP). Does nothing if `out` is null.
+
+ # Safety
+ `out` must be null or point to a writable `PcrnetOptions`.
+ */
+void pcrnet_options_default(PcrnetOptions *out);
+
+/*
+ Writes the options of the network alone, scored: one start, no ICP.
+ Does nothing if `out` is null.
+
+ # Safety
+ `out` must be null or point to a writable `PcrnetOptions`.
+ */
+void pcrnet_options_network_only(PcrnetOptions *out);
+
+/*
+ Registers `n_points` source points (`x y z` each, source units) to the
+ model's template: network, flip resolution, ICP and residuals, as
+ `options` say. Writes `out` on success.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`; `points` to
+ `3 * n_points` readable floats (or null); `options` to a
+ `PcrnetOptions` (or null); `scratch` to `scratch_len` writable bytes
+ (or null) overlapping none of the others; `out` to a writable
+ `PcrnetRegistration` (or null).
+ */
+PcrnetStatus pcrnet_register(const PcrnetModel *model,
+                             const float *points,
+                             size_t n_points,
+                             const PcrnetOptions *options,
+                             int8_t *scratch,
+                             size_t scratch_len,
+                             PcrnetRegistration *out);
+
+/*
+ The network alone (no check, no refinement): up to `passes` passes
+ (1: PCRNet; more: i-PCRNet, composing the estimates, stopping once a
+ pass moves the pose by less than `tolerance`). Writes the pose
+ `[qw, qx, qy, qz, tx, ty, tz]` (source units) to `pose` and the passes
+ run to `passes_run` on success.
+
+ # Safety
+ As `pcrnet_register`; `pose` must point to 7 writable floats and
+ `passes_run` to a writable `uint32_t` (or be null).
+ */
+PcrnetStatus pcrnet_network_pose(const PcrnetModel *model,
+                                 const float *points,
+                                 size_t n_points,
+                                 uint32_t passes,
+                                 float tolerance,
+                                 int8_t *scratch,
+                                 size_t scratch_len,
+                                 float *pose,
+                                 uint32_t *passes_run);
+
+/*
+ What a status means and what to do, as a NUL-terminated string in
+ static memory; an unknown value gives "unknown status".
+ */
+const char *pcrnet_status_message(int32_t status);
+
+#ifdef __cplusplus
+}  // extern "C"
+#endif  // __cplusplus
+
+#endif  /* PCRNET_H */

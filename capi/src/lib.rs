@@ -1,0 +1,604 @@
+//! C API of `pcrnet-core`: load a model blob, register a point cloud, read
+//! the result and its confidence, with every byte of memory owned by the
+//! caller. The header is `capi/include/pcrnet.h`, generated from this crate
+//! by `cargo xtask c-header` (CI fails when it is stale).
+//!
+//! ```c
+//! static PcrnetModel model;                  // handle storage, caller-owned
+//! static int8_t scratch[64 * 1024];          // >= pcrnet_model_scratch_len(&model, 1)
+//! if (pcrnet_model_load(blob, blob_len, &model) != PCRNET_OK) { ... }
+//! PcrnetOptions options;
+//! pcrnet_options_default(&options);
+//! PcrnetRegistration r;
+//! int32_t status = pcrnet_register(&model, points, n_points, &options,
+//!                                  scratch, sizeof scratch, &r);
+//! if (status != PCRNET_OK) puts(pcrnet_status_message(status));
+//! else if (r.reliable) act_on(r.rotation, r.translation);
+//! ```
+//!
+//! # Ownership, lifetimes, alignment
+//! - The **blob** stays where it is (flash, usually) and must outlive the
+//!   model handle: the handle points into it. Any alignment.
+//! - The **model handle** (`PcrnetModel`) is plain storage the caller
+//!   declares (static, stack); `pcrnet_model_load` fills it. It is
+//!   read-only afterwards and may be shared between calls.
+//! - **Points** are `n_points x 3` floats (`x0 y0 z0 x1 ...`) in the
+//!   template's units, 4-byte aligned (any `float` array is).
+//! - **Scratch** is the working memory of one call, any alignment; it must
+//!   not overlap the blob, the points or the outputs. A bigger scratch
+//!   (up to `pcrnet_model_scratch_len` with tile `PCRNET_MAX_TILE`)
+//!   runs faster; the results are identical for every size.
+//!
+//! # Errors
+//! Every function that can fail returns a status (`PcrnetStatus`);
+//! outputs are written only on [`PCRNET_OK`].
+//! `pcrnet_status_message` gives each status's explanation. A null or
+//! misaligned pointer is a status, not a crash. No function allocates or
+//! panics.
+//!
+//! Results are bit-identical to `pcrnet-core`'s Rust API on every target:
+//! this layer only converts types.
+#![cfg_attr(target_os = "none", no_std)]
+// The boundary takes raw pointers from C; every dereference below is
+// preceded by the checks its safety comment names.
+#![allow(unsafe_code)]
+
+use core::ffi::c_char;
+use core::mem::{align_of, size_of};
+
+use pcrnet_core::{Degeneracy, Error, Int8Model, MAX_TILE, Metric, Options, Registration};
+
+/// Most points per encoder pass (`pcrnet_core::MAX_TILE`); a scratch
+/// sized for it is the fastest.
+pub const PCRNET_MAX_TILE: usize = 8;
+
+const _: () = assert!(PCRNET_MAX_TILE == MAX_TILE);
+
+/// Storage words of a `PcrnetModel` (8 bytes each; 2,560 bytes, the
+/// same on every target: the Rust model takes 1,944 on 64-bit hosts and
+/// less on 32-bit cores, checked at compile time).
+pub const PCRNET_MODEL_WORDS: usize = 320;
+
+/// A loaded model: storage the caller owns, filled by `pcrnet_model_load`.
+/// Its contents are private; its size and 8-byte alignment are fixed on
+/// every target.
+#[repr(C)]
+pub struct PcrnetModel {
+    storage: [u64; PCRNET_MODEL_WORDS],
+}
+
+// The handle must hold the Rust model on every target.
+const _: () = assert!(size_of::<Int8Model<'static>>() <= size_of::<PcrnetModel>());
+const _: () = assert!(align_of::<Int8Model<'static>>() <= align_of::<PcrnetModel>());
+
+/// Status of a call: `PCRNET_OK` (0) or what went wrong (negative).
+#[repr(i32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[allow(non_camel_case_types, clippy::upper_case_acronyms)]
+pub enum PcrnetStatus {
+    /// Success; outputs were written.
+    PCRNET_OK = 0,
+    /// A required pointer is null.
+    PCRNET_ERROR_NULL_POINTER = -1,
+    /// The point array is not 4-byte aligned.
+    PCRNET_ERROR_MISALIGNED = -2,
+    /// The model handle was not filled by a successful `pcrnet_model_load`.
+    PCRNET_ERROR_NOT_LOADED = -3,
+    /// The blob does not start with the magic bytes `PCRN`.
+    PCRNET_ERROR_BAD_MAGIC = -10,
+    /// The blob's format version is not one this build reads.
+    PCRNET_ERROR_UNSUPPORTED_VERSION = -11,
+    /// The blob holds another kind of model (the C API loads int8 blobs).
+    PCRNET_ERROR_WRONG_KIND = -12,
+    /// The blob is shorter than its header says.
+    PCRNET_ERROR_TRUNCATED = -13,
+    /// Bytes follow the blob's CRC.
+    PCRNET_ERROR_TRAILING_DATA = -14,
+    /// The blob's CRC does not match its contents.
+    PCRNET_ERROR_BAD_CRC = -15,
+    /// The payload does not decode.
+    PCRNET_ERROR_MALFORMED = -16,
+    /// Layer sizes disagree.
+    PCRNET_ERROR_INCONSISTENT_DIMENSIONS = -17,
+    /// A model parameter is outside its range.
+    PCRNET_ERROR_INVALID_PARAMETER = -18,
+    /// The scratch buffer is smaller than `pcrnet_model_scratch_len(model, 1)`.
+    PCRNET_ERROR_SCRATCH_TOO_SMALL = -20,
+    /// An output buffer is too small.
+    PCRNET_ERROR_BUFFER_TOO_SMALL = -21,
+    /// The cloud has no points.
+    PCRNET_ERROR_EMPTY_CLOUD = -30,
+    /// A coordinate is NaN or infinite.
+    PCRNET_ERROR_NON_FINITE_COORDINATE = -31,
+    /// A coordinate is outside the model's input range.
+    PCRNET_ERROR_COORDINATE_OUT_OF_RANGE = -32,
+    /// The network produced a zero quaternion.
+    PCRNET_ERROR_DEGENERATE_POSE = -33,
+    /// The pose or a residual came out non-finite.
+    PCRNET_ERROR_NON_FINITE_RESULT = -34,
+    /// A registration option is out of range.
+    PCRNET_ERROR_INVALID_OPTION = -40,
+    /// An error this version of the C API has no code for (a newer core).
+    PCRNET_ERROR_OTHER = -99,
+}
+
+use PcrnetStatus::*;
+
+impl From<Error> for PcrnetStatus {
+    fn from(e: Error) -> Self {
+        match e {
+            Error::BadMagic => PCRNET_ERROR_BAD_MAGIC,
+            Error::UnsupportedVersion { .. } => PCRNET_ERROR_UNSUPPORTED_VERSION,
+            Error::WrongKind { .. } => PCRNET_ERROR_WRONG_KIND,
+            Error::Truncated { .. } => PCRNET_ERROR_TRUNCATED,
+            Error::TrailingData { .. } => PCRNET_ERROR_TRAILING_DATA,
+            Error::BadCrc { .. } => PCRNET_ERROR_BAD_CRC,
+            Error::Malformed => PCRNET_ERROR_MALFORMED,
+            Error::InconsistentDimensions { .. } => PCRNET_ERROR_INCONSISTENT_DIMENSIONS,
+            Error::InvalidParameter { .. } => PCRNET_ERROR_INVALID_PARAMETER,
+            Error::ScratchTooSmall { .. } => PCRNET_ERROR_SCRATCH_TOO_SMALL,
+            Error::BufferTooSmall { .. } => PCRNET_ERROR_BUFFER_TOO_SMALL,
+            Error::EmptyCloud => PCRNET_ERROR_EMPTY_CLOUD,
+            Error::NonFiniteCoordinate { .. } => PCRNET_ERROR_NON_FINITE_COORDINATE,
+            Error::CoordinateOutOfRange { .. } => PCRNET_ERROR_COORDINATE_OUT_OF_RANGE,
+            Error::DegeneratePose => PCRNET_ERROR_DEGENERATE_POSE,
+            Error::NonFiniteResult => PCRNET_ERROR_NON_FINITE_RESULT,
+            Error::InvalidOption { .. } => PCRNET_ERROR_INVALID_OPTION,
+            _ => PCRNET_ERROR_OTHER,
+        }
+    }
+}
+
+/// `PcrnetOptions::metric`: point-to-point ICP.
+pub const PCRNET_METRIC_POINT_TO_POINT: u32 = 0;
+/// `PcrnetOptions::metric`: point-to-plane ICP (the default).
+pub const PCRNET_METRIC_POINT_TO_PLANE: u32 = 1;
+
+/// How to register (`pcrnet_core::Options`; distances in model units,
+/// i.e. shares of the template's size). Start from
+/// `pcrnet_options_default` and change what you need.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PcrnetOptions {
+    /// Network passes (1: PCRNet; more: i-PCRNet).
+    pub passes: u32,
+    /// i-PCRNet stops once a pass moves the pose by less than this (0: never).
+    pub tolerance: f32,
+    /// Starting poses of flip resolution, 1 up to 1 + the blob's turns.
+    pub hypotheses: u32,
+    /// ICP iterations every start gets before the two best continue.
+    pub screen_iterations: u32,
+    /// Most ICP iterations in all (0: no refinement).
+    pub icp_iterations: u32,
+    /// `PCRNET_METRIC_POINT_TO_PLANE` or `PCRNET_METRIC_POINT_TO_POINT`.
+    pub metric: u32,
+    /// ICP stops once an update moves the pose by less than this.
+    pub icp_tolerance: f32,
+    /// ICP leaves out pairs farther apart than this.
+    pub icp_distance: f32,
+    /// Residuals count a point at most this far; fitness counts points within it.
+    pub inlier_distance: f32,
+    /// Most source points scored and refined (every k-th point is used).
+    pub max_points: u32,
+    /// `reliable` when the relative plane residual is at most this.
+    pub max_residual: f32,
+}
+
+impl From<Options> for PcrnetOptions {
+    fn from(o: Options) -> Self {
+        let count = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        PcrnetOptions {
+            passes: count(o.passes),
+            tolerance: o.tolerance,
+            hypotheses: count(o.hypotheses),
+            screen_iterations: count(o.screen_iterations),
+            icp_iterations: count(o.icp_iterations),
+            metric: match o.metric {
+                Metric::PointToPoint => PCRNET_METRIC_POINT_TO_POINT,
+                Metric::PointToPlane => PCRNET_METRIC_POINT_TO_PLANE,
+            },
+            icp_tolerance: o.icp_tolerance,
+            icp_distance: o.icp_distance,
+            inlier_distance: o.inlier_distance,
+            max_points: count(o.max_points),
+            max_residual: o.max_residual,
+        }
+    }
+}
+
+impl TryFrom<&PcrnetOptions> for Options {
+    type Error = PcrnetStatus;
+
+    fn try_from(o: &PcrnetOptions) -> Result<Self, PcrnetStatus> {
+        let metric = match o.metric {
+            PCRNET_METRIC_POINT_TO_POINT => Metric::PointToPoint,
+            PCRNET_METRIC_POINT_TO_PLANE => Metric::PointToPlane,
+            _ => return Err(PCRNET_ERROR_INVALID_OPTION),
+        };
+        Ok(Options {
+            passes: o.passes as usize,
+            tolerance: o.tolerance,
+            hypotheses: o.hypotheses as usize,
+            screen_iterations: o.screen_iterations as usize,
+            icp_iterations: o.icp_iterations as usize,
+            metric,
+            icp_tolerance: o.icp_tolerance,
+            icp_distance: o.icp_distance,
+            inlier_distance: o.inlier_distance,
+            max_points: o.max_points as usize,
+            max_residual: o.max_residual,
+        })
+    }
+}
+
+/// `PcrnetRegistration::degenerate`: the source determines a pose.
+pub const PCRNET_DEGENERATE_NONE: u32 = 0;
+/// `PcrnetRegistration::degenerate`: all points (nearly) coincide.
+pub const PCRNET_DEGENERATE_POINT: u32 = 1;
+/// `PcrnetRegistration::degenerate`: the points (nearly) lie on a line.
+pub const PCRNET_DEGENERATE_LINE: u32 = 2;
+
+/// What a registration found and how far to trust it
+/// (`pcrnet_core::Registration`): `p_template = R p_source + t`, in the
+/// source's units.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PcrnetRegistration {
+    /// Unit quaternion `[w, x, y, z]`, `w >= 0`.
+    pub rotation: [f32; 4],
+    /// Translation `[x, y, z]`, source units.
+    pub translation: [f32; 3],
+    /// Mean distance to the nearest template point (capped), source units.
+    pub residual: f32,
+    /// The same as a share of the template's size.
+    pub relative_residual: f32,
+    /// Mean distance to the tangent plane at the nearest template point (capped), source units.
+    pub plane_residual: f32,
+    /// The same as a share of the template's size: what `reliable` is judged on.
+    pub relative_plane_residual: f32,
+    /// Share of used source points within the inlier distance.
+    pub fitness: f32,
+    /// RMS distance of those inliers, source units.
+    pub inlier_rmse: f32,
+    /// Winning start: 0 the network's pose, `k` it followed by turn `k - 1`.
+    pub hypothesis: u32,
+    /// Network passes run.
+    pub passes: u32,
+    /// ICP iterations from the winning start.
+    pub icp_iterations: u32,
+    /// int8 values that reached the top of their range.
+    pub saturated: u32,
+    /// `PCRNET_DEGENERATE_NONE`, `_POINT` or `_LINE`.
+    pub degenerate: u32,
+    /// Not degenerate and the relative plane residual within `max_residual`.
+    pub reliable: bool,
+}
+
+impl From<&Registration> for PcrnetRegistration {
+    fn from(r: &Registration) -> Self {
+        let count = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        PcrnetRegistration {
+            rotation: r.pose.rotation,
+            translation: r.pose.translation,
+            residual: r.residual,
+            relative_residual: r.relative_residual,
+            plane_residual: r.plane_residual,
+            relative_plane_residual: r.relative_plane_residual,
+            fitness: r.fitness,
+            inlier_rmse: r.inlier_rmse,
+            hypothesis: count(r.hypothesis),
+            passes: count(r.passes),
+            icp_iterations: count(r.icp_iterations),
+            saturated: r.saturated,
+            degenerate: match r.degenerate {
+                None => PCRNET_DEGENERATE_NONE,
+                Some(Degeneracy::Point) => PCRNET_DEGENERATE_POINT,
+                Some(Degeneracy::Line) => PCRNET_DEGENERATE_LINE,
+            },
+            reliable: r.reliable,
+        }
+    }
+}
+
+/// Marks a handle filled by `pcrnet_model_load` (first storage word).
+const LOADED: u64 = 0x5043_524e_4c4f_4144; // "PCRNLOAD"
+
+/// Byte offset of the Rust model inside the handle's storage: after the marker.
+const MODEL_AT: usize = 8;
+
+const _: () = assert!(MODEL_AT + size_of::<Int8Model<'static>>() <= size_of::<PcrnetModel>());
+
+/// The model a loaded handle holds, or a status.
+fn model(handle: *const PcrnetModel) -> Result<&'static Int8Model<'static>, PcrnetStatus> {
+    if handle.is_null() {
+        return Err(PCRNET_ERROR_NULL_POINTER);
+    }
+    // SAFETY: non-null, and a PcrnetModel is always readable as its u64
+    // words (the C type has the same size and alignment).
+    let marker = unsafe { (*handle).storage[0] };
+    if marker != LOADED {
+        return Err(PCRNET_ERROR_NOT_LOADED);
+    }
+    // SAFETY: the marker is written only by pcrnet_model_load right after
+    // it stored a valid Int8Model at MODEL_AT (in bounds and aligned: 8
+    // bytes in, checked by the const asserts above). The blob it borrows
+    // outlives the handle by the API's contract ("'static" stands for that).
+    Ok(unsafe { &*((handle as *const u8).add(MODEL_AT) as *const Int8Model<'static>) })
+}
+
+/// `len` elements at `ptr` as a slice; null with `len > 0` is an error,
+/// and so is a pointer not aligned for `T`.
+///
+/// # Safety
+/// If non-null, `ptr` must point to `len` readable `T` that stay valid and
+/// unaliased by writes for the returned lifetime.
+unsafe fn slice<'a, T>(ptr: *const T, len: usize) -> Result<&'a [T], PcrnetStatus> {
+    if len == 0 {
+        return Ok(&[]);
+    }
+    if ptr.is_null() {
+        return Err(PCRNET_ERROR_NULL_POINTER);
+    }
+    if !(ptr as usize).is_multiple_of(align_of::<T>()) {
+        return Err(PCRNET_ERROR_MISALIGNED);
+    }
+    // SAFETY: non-null, aligned, and the caller's contract above.
+    Ok(unsafe { core::slice::from_raw_parts(ptr, len) })
+}
+
+/// Validates `blob` (magic, version, CRC, sizes, every parameter) and fills
+/// `model`. The blob must stay valid and unchanged while `model` is used.
+/// On failure `model` is marked not loaded.
+///
+/// # Safety
+/// `blob` must point to `blob_len` readable bytes (or be null), and
+/// `model` to writable storage of a `PcrnetModel` (or be null).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_model_load(
+    blob: *const u8,
+    blob_len: usize,
+    model: *mut PcrnetModel,
+) -> PcrnetStatus {
+    if model.is_null() {
+        return PCRNET_ERROR_NULL_POINTER;
+    }
+    // SAFETY: non-null and the caller's contract: the storage is writable.
+    unsafe { (*model).storage[0] = 0 };
+    // SAFETY: the caller's contract for `blob`; it outlives the handle.
+    let bytes: &'static [u8] = match unsafe { slice(blob, blob_len) } {
+        Ok(b) => b,
+        Err(s) => return s,
+    };
+    match Int8Model::from_bytes(bytes) {
+        Ok(m) => {
+            // SAFETY: in bounds and aligned (const asserts above); the
+            // storage is plain words, so overwriting needs no drop.
+            unsafe {
+                core::ptr::write(
+                    (model as *mut u8).add(MODEL_AT) as *mut Int8Model<'static>,
+                    m,
+                );
+                (*model).storage[0] = LOADED;
+            }
+            PCRNET_OK
+        }
+        Err(e) => e.into(),
+    }
+}
+
+/// Bytes of scratch a call needs with `tile` points per encoder pass
+/// (1..=`PCRNET_MAX_TILE`; the largest is the fastest); 0 for a handle
+/// that is not loaded or a tile out of range.
+///
+/// # Safety
+/// `model` must be null or point to a `PcrnetModel`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_model_scratch_len(model: *const PcrnetModel, tile: usize) -> usize {
+    match self::model(model) {
+        Ok(m) if (1..=MAX_TILE).contains(&tile) => m.scratch_len(tile),
+        _ => 0,
+    }
+}
+
+/// Network passes the model was trained for (1: PCRNet; more: i-PCRNet),
+/// the `passes` to register with; 0 for a handle that is not loaded.
+///
+/// # Safety
+/// `model` must be null or point to a `PcrnetModel`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_model_trained_passes(model: *const PcrnetModel) -> u32 {
+    self::model(model).map_or(0, |m| u32::try_from(m.trained_passes()).unwrap_or(u32::MAX))
+}
+
+/// Writes the recommended options (`pcrnet_core::Options::default()`:
+/// one pass, 10 starts, point-to-plane ICP). Does nothing if `out` is null.
+///
+/// # Safety
+/// `out` must be null or point to a writable `PcrnetOptions`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_options_default(out: *mut PcrnetOptions) {
+    if !out.is_null() {
+        // SAFETY: non-null and the caller's contract.
+        unsafe { out.write(Options::default().into()) };
+    }
+}
+
+/// Writes the options of the network alone, scored: one start, no ICP.
+/// Does nothing if `out` is null.
+///
+/// # Safety
+/// `out` must be null or point to a writable `PcrnetOptions`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_options_network_only(out: *mut PcrnetOptions) {
+    if !out.is_null() {
+        // SAFETY: non-null and the caller's contract.
+        unsafe { out.write(Options::network_only().into()) };
+    }
+}
+
+/// Registers `n_points` source points (`x y z` each, source units) to the
+/// model's template: network, flip resolution, ICP and residuals, as
+/// `options` say. Writes `out` on success.
+///
+/// # Safety
+/// `model` must be null or point to a `PcrnetModel`; `points` to
+/// `3 * n_points` readable floats (or null); `options` to a
+/// `PcrnetOptions` (or null); `scratch` to `scratch_len` writable bytes
+/// (or null) overlapping none of the others; `out` to a writable
+/// `PcrnetRegistration` (or null).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_register(
+    model: *const PcrnetModel,
+    points: *const f32,
+    n_points: usize,
+    options: *const PcrnetOptions,
+    scratch: *mut i8,
+    scratch_len: usize,
+    out: *mut PcrnetRegistration,
+) -> PcrnetStatus {
+    let run = || -> Result<PcrnetRegistration, PcrnetStatus> {
+        let m = self::model(model)?;
+        if options.is_null() || out.is_null() {
+            return Err(PCRNET_ERROR_NULL_POINTER);
+        }
+        // SAFETY: non-null and the caller's contract.
+        let options = Options::try_from(unsafe { &*options })?;
+        // SAFETY: the caller's contract for `points` and `scratch`.
+        let (source, scratch) =
+            unsafe { (cloud(points, n_points)?, scratch_mut(scratch, scratch_len)?) };
+        let r = m.register(source, &options, scratch)?;
+        Ok((&r).into())
+    };
+    match run() {
+        Ok(r) => {
+            // SAFETY: checked non-null above; the caller's contract.
+            unsafe { out.write(r) };
+            PCRNET_OK
+        }
+        Err(s) => s,
+    }
+}
+
+/// The network alone (no check, no refinement): up to `passes` passes
+/// (1: PCRNet; more: i-PCRNet, composing the estimates, stopping once a
+/// pass moves the pose by less than `tolerance`). Writes the pose
+/// `[qw, qx, qy, qz, tx, ty, tz]` (source units) to `pose` and the passes
+/// run to `passes_run` on success.
+///
+/// # Safety
+/// As `pcrnet_register`; `pose` must point to 7 writable floats and
+/// `passes_run` to a writable `uint32_t` (or be null).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_network_pose(
+    model: *const PcrnetModel,
+    points: *const f32,
+    n_points: usize,
+    passes: u32,
+    tolerance: f32,
+    scratch: *mut i8,
+    scratch_len: usize,
+    pose: *mut f32,
+    passes_run: *mut u32,
+) -> PcrnetStatus {
+    let run = || -> Result<([f32; 7], u32), PcrnetStatus> {
+        let m = self::model(model)?;
+        if pose.is_null() || passes_run.is_null() {
+            return Err(PCRNET_ERROR_NULL_POINTER);
+        }
+        if !(pose as usize).is_multiple_of(align_of::<f32>()) {
+            return Err(PCRNET_ERROR_MISALIGNED);
+        }
+        // SAFETY: the caller's contract for `points` and `scratch`.
+        let (source, scratch) =
+            unsafe { (cloud(points, n_points)?, scratch_mut(scratch, scratch_len)?) };
+        let (p, n) = m.network_pose(source, passes as usize, tolerance, scratch)?;
+        let mut out = [0f32; 7];
+        out[..4].copy_from_slice(&p.rotation);
+        out[4..].copy_from_slice(&p.translation);
+        Ok((out, u32::try_from(n).unwrap_or(u32::MAX)))
+    };
+    match run() {
+        Ok((p, n)) => {
+            // SAFETY: checked non-null and aligned above; the caller's contract.
+            unsafe {
+                core::ptr::copy_nonoverlapping(p.as_ptr(), pose, 7);
+                passes_run.write(n);
+            }
+            PCRNET_OK
+        }
+        Err(s) => s,
+    }
+}
+
+/// `n_points` points of 3 floats at `points`.
+///
+/// # Safety
+/// As [`slice`] for `3 * n_points` floats.
+unsafe fn cloud<'a>(points: *const f32, n_points: usize) -> Result<&'a [[f32; 3]], PcrnetStatus> {
+    if n_points
+        .checked_mul(size_of::<[f32; 3]>())
+        .is_none_or(|b| b > isize::MAX as usize)
+    {
+        return Err(PCRNET_ERROR_INVALID_OPTION);
+    }
+    // SAFETY: [f32; 3] has the alignment of f32; the caller's contract.
+    unsafe { slice(points as *const [f32; 3], n_points) }
+}
+
+/// The scratch buffer; null with a non-zero length is an error.
+///
+/// # Safety
+/// If non-null, `scratch` must point to `len` writable bytes nothing else
+/// uses during the call.
+unsafe fn scratch_mut<'a>(scratch: *mut i8, len: usize) -> Result<&'a mut [i8], PcrnetStatus> {
+    if len == 0 {
+        return Ok(&mut []);
+    }
+    if scratch.is_null() {
+        return Err(PCRNET_ERROR_NULL_POINTER);
+    }
+    // SAFETY: non-null, i8 has alignment 1, and the caller's contract.
+    Ok(unsafe { core::slice::from_raw_parts_mut(scratch, len) })
+}
+
+/// What a status means and what to do, as a NUL-terminated string in
+/// static memory; an unknown value gives "unknown status".
+#[unsafe(no_mangle)]
+pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
+    let text: &'static core::ffi::CStr = match status {
+        0 => c"success",
+        -1 => c"a required pointer is null",
+        -2 => c"the point array is not 4-byte aligned",
+        -3 => c"the model handle is not loaded: call pcrnet_model_load and check its status",
+        -10 => c"not a model blob: magic bytes PCRN missing",
+        -11 => c"unsupported model format version: re-export the model with `pcrnet export` (or `pcrnet upgrade` a version-2 f32 blob)",
+        -12 => c"the blob holds another kind of model: the C API loads int8 blobs (`pcrnet export` writes one)",
+        -13 => c"model blob truncated: flash the whole file",
+        -14 => c"unexpected bytes after the model blob's CRC: pass the blob's exact length",
+        -15 => c"model blob CRC mismatch: the blob is damaged; flash it again",
+        -16 => c"model payload does not decode",
+        -17 => c"inconsistent model dimensions",
+        -18 => c"a model parameter is outside its documented range",
+        -20 => c"scratch too small: give at least pcrnet_model_scratch_len(model, 1) bytes",
+        -21 => c"output buffer too small",
+        -30 => c"the point cloud is empty",
+        -31 => c"a point has a NaN or infinite coordinate",
+        -32 => c"a point lies outside the model's input range: a stray point far from the object, or a cloud in other units than the template; remove outliers or crop the cloud to the object",
+        -33 => c"the network's output has a zero quaternion",
+        -34 => c"the pose or residual is not finite: the coordinates are too large once moved into the model's frame",
+        -40 => c"a registration option is out of range (zero passes, hypotheses or max_points, a negative or non-finite tolerance or distance, an unknown metric, or too many points)",
+        -99 => c"an error this version of the C API has no code for: update the library",
+        _ => c"unknown status",
+    };
+    text.as_ptr()
+}
+
+#[cfg(target_os = "none")]
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
+    // Not reachable from any input (the core crate's promise); a firmware
+    // that links its own handler builds this crate without `--crate-type staticlib`.
+    loop {
+        core::hint::spin_loop();
+    }
+}
