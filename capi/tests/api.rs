@@ -1,0 +1,344 @@
+//! The C API called as C calls it: every pointer check gives its status,
+//! nothing is written on failure, and a registration through the C API is
+//! bit-identical to `pcrnet_core`'s.
+#![allow(unsafe_code)]
+
+use core::ffi::CStr;
+use std::mem::MaybeUninit;
+use std::path::PathBuf;
+
+use pcrnet::*;
+use pcrnet_core::{Int8Model, Options};
+
+fn models() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models")
+}
+
+fn shipped_blob() -> Vec<u8> {
+    std::fs::read(models().join("embedded-default-int8.pcrn")).expect("shipped int8 model")
+}
+
+fn shipped_source() -> Vec<[f32; 3]> {
+    let text = std::fs::read_to_string(models().join("embedded-default-source.xyz"))
+        .expect("shipped source");
+    text.lines()
+        .map(|l| {
+            let v: Vec<f32> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect()
+}
+
+/// A handle in a box (the C caller's static storage), loaded from `blob`.
+fn loaded(blob: &[u8]) -> Box<PcrnetModel> {
+    let mut model: Box<MaybeUninit<PcrnetModel>> = Box::new(MaybeUninit::zeroed());
+    let status = unsafe { pcrnet_model_load(blob.as_ptr(), blob.len(), model.as_mut_ptr()) };
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    unsafe { model.assume_init() }
+}
+
+fn zeroed_model() -> Box<PcrnetModel> {
+    unsafe { Box::<MaybeUninit<PcrnetModel>>::new(MaybeUninit::zeroed()).assume_init() }
+}
+
+fn options_default() -> PcrnetOptions {
+    let mut o = MaybeUninit::uninit();
+    unsafe {
+        pcrnet_options_default(o.as_mut_ptr());
+        o.assume_init()
+    }
+}
+
+/// A registration filled with a pattern, to see whether a call wrote it.
+fn sentinel() -> PcrnetRegistration {
+    PcrnetRegistration {
+        rotation: [7.0; 4],
+        translation: [7.0; 3],
+        residual: 7.0,
+        relative_residual: 7.0,
+        plane_residual: 7.0,
+        relative_plane_residual: 7.0,
+        fitness: 7.0,
+        inlier_rmse: 7.0,
+        hypothesis: 7,
+        passes: 7,
+        icp_iterations: 7,
+        saturated: 7,
+        degenerate: 7,
+        reliable: true,
+    }
+}
+
+fn register(
+    model: &PcrnetModel,
+    points: &[[f32; 3]],
+    options: &PcrnetOptions,
+    scratch: &mut [i8],
+) -> (PcrnetStatus, PcrnetRegistration) {
+    let mut out = sentinel();
+    let status = unsafe {
+        pcrnet_register(
+            model,
+            points.as_ptr() as *const f32,
+            points.len(),
+            options,
+            scratch.as_mut_ptr(),
+            scratch.len(),
+            &mut out,
+        )
+    };
+    (status, out)
+}
+
+#[test]
+fn registration_through_the_c_api_is_bit_identical_to_the_rust_api() {
+    let blob = shipped_blob();
+    let model = loaded(&blob);
+    let source = shipped_source();
+    let rust = Int8Model::from_bytes(&blob).unwrap();
+    let scratch_len = unsafe { pcrnet_model_scratch_len(&*model, PCRNET_MAX_TILE) };
+    assert_eq!(scratch_len, rust.scratch_len(PCRNET_MAX_TILE));
+    assert_eq!(
+        unsafe { pcrnet_model_trained_passes(&*model) } as usize,
+        rust.trained_passes()
+    );
+    let mut scratch = vec![0i8; scratch_len];
+    for options in [Options::default(), Options::network_only()] {
+        let c_options = PcrnetOptions::from(options);
+        let (status, c) = register(&model, &source, &c_options, &mut scratch);
+        assert_eq!(status, PcrnetStatus::PCRNET_OK);
+        let r = rust.register(&source, &options, &mut scratch).unwrap();
+        // Field by field, as bits: the C layer only converts types.
+        assert_eq!(c, PcrnetRegistration::from(&r));
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&c.rotation), bits(&r.pose.rotation));
+        assert_eq!(bits(&c.translation), bits(&r.pose.translation));
+        assert_eq!(c.plane_residual.to_bits(), r.plane_residual.to_bits());
+    }
+    // Network alone, iterated.
+    let mut pose = [0f32; 7];
+    let mut passes = 0u32;
+    let status = unsafe {
+        pcrnet_network_pose(
+            &*model,
+            source.as_ptr() as *const f32,
+            source.len(),
+            3,
+            0.0,
+            scratch.as_mut_ptr(),
+            scratch.len(),
+            pose.as_mut_ptr(),
+            &mut passes,
+        )
+    };
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    let (p, n) = rust.network_pose(&source, 3, 0.0, &mut scratch).unwrap();
+    assert_eq!(passes as usize, n);
+    assert_eq!(pose[..4], p.rotation);
+    assert_eq!(pose[4..], p.translation);
+}
+
+#[test]
+fn the_smallest_scratch_gives_the_same_registration() {
+    let blob = shipped_blob();
+    let model = loaded(&blob);
+    let source = shipped_source();
+    let options = options_default();
+    let mut small = vec![0i8; unsafe { pcrnet_model_scratch_len(&*model, 1) }];
+    let mut big = vec![0i8; unsafe { pcrnet_model_scratch_len(&*model, PCRNET_MAX_TILE) }];
+    assert!(small.len() < big.len());
+    let (s1, r1) = register(&model, &source, &options, &mut small);
+    let (s2, r2) = register(&model, &source, &options, &mut big);
+    assert_eq!((s1, s2), (PcrnetStatus::PCRNET_OK, PcrnetStatus::PCRNET_OK));
+    assert_eq!(r1, r2);
+    // One byte short of the minimum is refused, and nothing is written.
+    let (s, out) = register(&model, &source, &options, &mut small[1..]);
+    assert_eq!(s, PcrnetStatus::PCRNET_ERROR_SCRATCH_TOO_SMALL);
+    assert_eq!(out, sentinel());
+}
+
+#[test]
+fn null_pointers_and_unloaded_handles_are_statuses_and_write_nothing() {
+    use PcrnetStatus::*;
+    let blob = shipped_blob();
+    let model = loaded(&blob);
+    let source = shipped_source();
+    let options = options_default();
+    let mut scratch = vec![0i8; unsafe { pcrnet_model_scratch_len(&*model, 1) }];
+    let points = source.as_ptr() as *const f32;
+    let call = |model: *const PcrnetModel,
+                points: *const f32,
+                n: usize,
+                options: *const PcrnetOptions,
+                scratch: *mut i8,
+                len: usize,
+                out: *mut PcrnetRegistration| unsafe {
+        pcrnet_register(model, points, n, options, scratch, len, out)
+    };
+    let s = scratch.as_mut_ptr();
+    let len = scratch.len();
+    let mut out = sentinel();
+    let o = &mut out as *mut PcrnetRegistration;
+    let m = &*model as *const PcrnetModel;
+    let null_f = std::ptr::null::<f32>();
+    assert_eq!(
+        call(std::ptr::null(), points, 512, &options, s, len, o),
+        PCRNET_ERROR_NULL_POINTER
+    );
+    assert_eq!(
+        call(m, null_f, 512, &options, s, len, o),
+        PCRNET_ERROR_NULL_POINTER
+    );
+    assert_eq!(
+        call(m, points, 512, std::ptr::null(), s, len, o),
+        PCRNET_ERROR_NULL_POINTER
+    );
+    assert_eq!(
+        call(m, points, 512, &options, std::ptr::null_mut(), len, o),
+        PCRNET_ERROR_NULL_POINTER
+    );
+    assert_eq!(
+        call(m, points, 512, &options, s, len, std::ptr::null_mut()),
+        PCRNET_ERROR_NULL_POINTER
+    );
+    // A null point array with no points is an empty cloud, not a crash.
+    assert_eq!(
+        call(m, null_f, 0, &options, s, len, o),
+        PCRNET_ERROR_EMPTY_CLOUD
+    );
+    // Points one byte off their alignment.
+    let bytes: Vec<u8> = vec![0; 13];
+    let odd = bytes
+        .as_ptr()
+        .wrapping_add(1 + bytes.as_ptr().align_offset(4)) as *const f32;
+    assert_eq!(
+        call(m, odd, 1, &options, s, len, o),
+        PCRNET_ERROR_MISALIGNED
+    );
+    // A point count whose byte size overflows.
+    assert_eq!(
+        call(m, points, usize::MAX / 4, &options, s, len, o),
+        PCRNET_ERROR_INVALID_OPTION
+    );
+    // A handle never loaded, and one whose load failed.
+    let blank = zeroed_model();
+    assert_eq!(
+        call(&*blank, points, 512, &options, s, len, o),
+        PCRNET_ERROR_NOT_LOADED
+    );
+    let mut failed = loaded(&blob);
+    let status = unsafe { pcrnet_model_load(blob.as_ptr(), 3, &mut *failed) };
+    assert_eq!(status, PCRNET_ERROR_TRUNCATED);
+    assert_eq!(
+        call(&*failed, points, 512, &options, s, len, o),
+        PCRNET_ERROR_NOT_LOADED
+    );
+    assert_eq!(unsafe { pcrnet_model_scratch_len(&*failed, 1) }, 0);
+    assert_eq!(unsafe { pcrnet_model_scratch_len(m, 0) }, 0);
+    assert_eq!(
+        unsafe { pcrnet_model_scratch_len(m, PCRNET_MAX_TILE + 1) },
+        0
+    );
+    assert_eq!(unsafe { pcrnet_model_trained_passes(std::ptr::null()) }, 0);
+    assert_eq!(
+        unsafe { pcrnet_model_load(blob.as_ptr(), blob.len(), std::ptr::null_mut()) },
+        PCRNET_ERROR_NULL_POINTER
+    );
+    assert_eq!(out, sentinel(), "a failed call wrote its output");
+    unsafe {
+        pcrnet_options_default(std::ptr::null_mut());
+        pcrnet_options_network_only(std::ptr::null_mut());
+    }
+}
+
+#[test]
+fn bad_blobs_bad_clouds_and_bad_options_get_their_own_status() {
+    use PcrnetStatus::*;
+    let blob = shipped_blob();
+    let mut handle = zeroed_model();
+    let load = |bytes: &[u8], handle: &mut PcrnetModel| unsafe {
+        pcrnet_model_load(bytes.as_ptr(), bytes.len(), handle)
+    };
+    let mut wrong_magic = blob.clone();
+    wrong_magic[0] ^= 0xff;
+    assert_eq!(load(&wrong_magic, &mut handle), PCRNET_ERROR_BAD_MAGIC);
+    let mut flipped = blob.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 1;
+    assert_eq!(load(&flipped, &mut handle), PCRNET_ERROR_BAD_CRC);
+    let mut longer = blob.clone();
+    longer.push(0);
+    assert_eq!(load(&longer, &mut handle), PCRNET_ERROR_TRAILING_DATA);
+    assert_eq!(load(&[], &mut handle), PCRNET_ERROR_TRUNCATED);
+    let f32_blob = std::fs::read(models().join("embedded-default-f32.pcrn")).unwrap();
+    assert_eq!(load(&f32_blob, &mut handle), PCRNET_ERROR_WRONG_KIND);
+
+    let model = loaded(&blob);
+    let mut scratch = vec![0i8; unsafe { pcrnet_model_scratch_len(&*model, 1) }];
+    let options = options_default();
+    let mut cloud = shipped_source();
+    cloud[3][1] = f32::NAN;
+    let (s, _) = register(&model, &cloud, &options, &mut scratch);
+    assert_eq!(s, PCRNET_ERROR_NON_FINITE_COORDINATE);
+    cloud[3][1] = 1e9;
+    let (s, _) = register(&model, &cloud, &options, &mut scratch);
+    assert_eq!(s, PCRNET_ERROR_COORDINATE_OUT_OF_RANGE);
+
+    let source = shipped_source();
+    for bad in [
+        PcrnetOptions {
+            metric: 2,
+            ..options
+        },
+        PcrnetOptions {
+            passes: 0,
+            ..options
+        },
+        PcrnetOptions {
+            icp_distance: f32::NAN,
+            ..options
+        },
+    ] {
+        let (s, out) = register(&model, &source, &bad, &mut scratch);
+        assert_eq!(s, PCRNET_ERROR_INVALID_OPTION, "{bad:?}");
+        assert_eq!(out, sentinel());
+    }
+}
+
+#[test]
+fn every_status_has_a_message_naming_what_to_do() {
+    use PcrnetStatus::*;
+    let all = [
+        PCRNET_OK,
+        PCRNET_ERROR_NULL_POINTER,
+        PCRNET_ERROR_MISALIGNED,
+        PCRNET_ERROR_NOT_LOADED,
+        PCRNET_ERROR_BAD_MAGIC,
+        PCRNET_ERROR_UNSUPPORTED_VERSION,
+        PCRNET_ERROR_WRONG_KIND,
+        PCRNET_ERROR_TRUNCATED,
+        PCRNET_ERROR_TRAILING_DATA,
+        PCRNET_ERROR_BAD_CRC,
+        PCRNET_ERROR_MALFORMED,
+        PCRNET_ERROR_INCONSISTENT_DIMENSIONS,
+        PCRNET_ERROR_INVALID_PARAMETER,
+        PCRNET_ERROR_SCRATCH_TOO_SMALL,
+        PCRNET_ERROR_BUFFER_TOO_SMALL,
+        PCRNET_ERROR_EMPTY_CLOUD,
+        PCRNET_ERROR_NON_FINITE_COORDINATE,
+        PCRNET_ERROR_COORDINATE_OUT_OF_RANGE,
+        PCRNET_ERROR_DEGENERATE_POSE,
+        PCRNET_ERROR_NON_FINITE_RESULT,
+        PCRNET_ERROR_INVALID_OPTION,
+        PCRNET_ERROR_OTHER,
+    ];
+    let message = |s: i32| unsafe { CStr::from_ptr(pcrnet_status_message(s)) }.to_str();
+    let unknown = message(12345).unwrap();
+    assert_eq!(unknown, "unknown status");
+    let mut seen = std::collections::HashSet::new();
+    for s in all {
+        let text = message(s as i32).unwrap();
+        assert_ne!(text, unknown, "{s:?} has no message");
+        assert!(seen.insert(text), "{s:?} shares its message");
+    }
+}
