@@ -9,8 +9,11 @@
 //!    with a timeout;
 //! 3. [`compare`] parses the device's lines and compares every value with
 //!    the host's, naming the first that differs;
-//! 4. [`elf`] reads flash and RAM sizes from the firmware images.
+//! 4. [`elf`] reads flash and RAM sizes from the firmware images;
+//! 5. [`c_example`] does the same for the C firmware example, through the
+//!    C API.
 
+pub mod c_example;
 pub mod compare;
 pub mod elf;
 pub mod qemu;

@@ -4,6 +4,7 @@
 //! ```text
 //! qemu-harness run [--mutate-device-rounding] [--timeout SECS]
 //! qemu-harness size
+//! qemu-harness c-example
 //! ```
 //! Every case compares the inference (int8 feature, head, pose), and as
 //! the case asks, the iterative network pass and `Int8Model::register`
@@ -26,7 +27,7 @@ use pcrnet_qemu_tests::vectors::{
     Case, TestModel, clouds_for, container, describe, doubled, expected, expected_iterative,
     expected_registrations, random_model, random_model_with, read_cloud,
 };
-use pcrnet_qemu_tests::{elf, qemu};
+use pcrnet_qemu_tests::{c_example, elf, qemu};
 
 /// The shipped model that gets the realistic sources.
 const SHIPPED_DEFAULT: &str = "embedded-default-int8.pcrn";
@@ -523,7 +524,8 @@ fn main() -> ExitCode {
     let result = parse_args().and_then(|(command, args)| match command.as_str() {
         "run" => run(args),
         "size" => size().map(|()| true),
-        other => anyhow::bail!("unknown command {other} (run | size)"),
+        "c-example" => c_example::run(args.timeout).map(|()| true),
+        other => anyhow::bail!("unknown command {other} (run | size | c-example)"),
     });
     match result {
         Ok(true) => ExitCode::SUCCESS,

@@ -24,6 +24,9 @@ cargo xtask <command>
                 the device is caught
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
+  c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
+                linking libpcrnet.a), run it under QEMU and compare every
+                result with the host bit for bit
   c-header [--check]
                 write capi/include/pcrnet.h from the C API crate (cbindgen);
                 --check fails if the committed header differs
@@ -33,8 +36,8 @@ cargo xtask <command>
                 target/experiments) and regenerate RESULTS.md
   help          this text
 
-Missing tools are installed: the thumbv7em-none-eabihf target (rustup) and
-qemu-system-arm (apt-get).
+Missing tools are installed: the thumbv7em-none-eabihf target (rustup),
+qemu-system-arm, gcc-arm-none-eabi and libnewlib-arm-none-eabi (apt-get).
 ";
 
 fn main() -> ExitCode {
@@ -46,6 +49,7 @@ fn main() -> ExitCode {
         Some("qemu-test") => qemu_test(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
         Some("firmware-run") => firmware_run(),
+        Some("c-example") => c_example(),
         Some("c-header") => c_header(args.get(1).map(String::as_str) == Some("--check")),
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
         Some("help") | None => {
@@ -97,9 +101,9 @@ fn ensure_target() -> Result<(), String> {
 /// The crates built for the device, outside the host workspace.
 const FIRMWARE_CRATES: [&str; 2] = ["firmware-example", "tests/firmware"];
 
-/// Installs qemu-system-arm through apt-get if it is not on the PATH.
-fn ensure_qemu() -> Result<(), String> {
-    let found = Command::new("qemu-system-arm")
+/// Installs Debian `packages` through apt-get unless `probe` runs.
+fn ensure_apt(probe: &str, packages: &[&str]) -> Result<(), String> {
+    let found = Command::new(probe)
         .arg("--version")
         .output()
         .is_ok_and(|o| o.status.success());
@@ -107,15 +111,24 @@ fn ensure_qemu() -> Result<(), String> {
         return Ok(());
     }
     run("apt-get", &["update"])?;
-    run(
-        "apt-get",
-        &[
-            "install",
-            "-y",
-            "--no-install-recommends",
-            "qemu-system-arm",
-        ],
-    )
+    let mut args = vec!["install", "-y", "--no-install-recommends"];
+    args.extend_from_slice(packages);
+    run("apt-get", &args)
+}
+
+fn ensure_qemu() -> Result<(), String> {
+    ensure_apt("qemu-system-arm", &["qemu-system-arm"])
+}
+
+/// The C example's toolchain: GCC for Arm, newlib, make.
+fn c_example() -> Result<(), String> {
+    ensure_target()?;
+    ensure_qemu()?;
+    ensure_apt(
+        "arm-none-eabi-gcc",
+        &["gcc-arm-none-eabi", "libnewlib-arm-none-eabi", "make"],
+    )?;
+    harness(&["c-example"])
 }
 
 /// Runs the harness binary (tests/) in release mode.
@@ -169,7 +182,14 @@ fn ci() -> Result<(), String> {
     )?;
     cargo(&["build", "-p", "pcrnet-core", "--target", TARGET])?;
     c_header(true)?;
-    cargo(&["build", "-p", "pcrnet-capi", "--release", "--target", TARGET])?;
+    cargo(&[
+        "build",
+        "-p",
+        "pcrnet-capi",
+        "--release",
+        "--target",
+        TARGET,
+    ])?;
     cargo(&[
         "clippy",
         "-p",
@@ -186,6 +206,7 @@ fn ci() -> Result<(), String> {
         &[("RUSTDOCFLAGS", "-D warnings")],
     )?;
     qemu_test()?;
+    c_example()?;
     cargo(&["test", "--workspace"])
 }
 

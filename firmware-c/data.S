@@ -1,0 +1,17 @@
+/* The model blob and a stored source cloud, linked into flash from the
+ * files the Makefile names (MODEL_BLOB, SOURCE_POINTS: quoted paths).
+ * The blob may sit at any alignment; the points are floats, so 4-aligned. */
+    .section .rodata.pcrnet_data, "a"
+    .balign 4
+    .global model_blob
+model_blob:
+    .incbin MODEL_BLOB
+    .global model_blob_end
+model_blob_end:
+
+    .balign 4
+    .global source_points
+source_points:
+    .incbin SOURCE_POINTS
+    .global source_points_end
+source_points_end:

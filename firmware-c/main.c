@@ -1,0 +1,154 @@
+/* pcrnet C example: a C firmware that links libpcrnet.a (the C API of
+ * pcrnet-core), loads the model blob in place from flash, and registers a
+ * stored source cloud against the model's template, with all working
+ * memory in statics. Prints each result and its instruction count over
+ * semihosting, and acts on the confidence: a pose that is not reliable is
+ * retried from every starting pose the blob stores.
+ *
+ * Lines starting with "@ " repeat every result as the bits of each value,
+ * for the QEMU harness to compare with the host (`cargo xtask c-example`). */
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "board.h"
+#include "pcrnet.h"
+
+/* data.S: the blob and the source (x, y, z floats per point). */
+extern const uint8_t model_blob[], model_blob_end[];
+extern const float source_points[];
+extern const uint8_t source_points_end[];
+
+/* Working memory, all static: the model handle, the encoder's scratch, and
+ * a RAM copy of the cloud (a sensor driver would fill it on a device). */
+#define MAX_POINTS 4096
+#define SCRATCH_BYTES 16384
+static PcrnetModel model;
+static int8_t scratch[SCRATCH_BYTES];
+static float cloud[3 * MAX_POINTS];
+
+/* A 64-bit count in decimal (nano printf has no %llu). */
+static void print_count(uint64_t v) {
+    if (v >= 1000000000u) {
+        printf("%lu%09lu", (unsigned long)(v / 1000000000u), (unsigned long)(v % 1000000000u));
+    } else {
+        printf("%lu", (unsigned long)v);
+    }
+}
+
+static uint32_t bits(float v) {
+    uint32_t u;
+    memcpy(&u, &v, sizeof u);
+    return u;
+}
+
+static void print_bits(const float *v, size_t n) {
+    for (size_t i = 0; i < n; i++) {
+        printf(" %08lx", (unsigned long)bits(v[i]));
+    }
+}
+
+/* The readable report of one registration, then its "@ reg" line. */
+static void report(const char *label, int32_t status, const PcrnetRegistration *r, uint64_t instructions) {
+    printf("register %s: %s, ", label, pcrnet_status_message(status));
+    print_count(instructions);
+    printf(" instructions\n");
+    if (status != PCRNET_OK) {
+        printf("@ reg %s %ld\n", label, (long)status);
+        return;
+    }
+    printf("  rotation (w x y z): %.6f %.6f %.6f %.6f\n", (double)r->rotation[0], (double)r->rotation[1],
+           (double)r->rotation[2], (double)r->rotation[3]);
+    printf("  translation: %.6f %.6f %.6f\n", (double)r->translation[0], (double)r->translation[1],
+           (double)r->translation[2]);
+    printf("  plane residual %.6f (%.4f of the template's size), fitness %.3f, hypothesis %lu, ICP iterations %lu, saturated %lu\n",
+           (double)r->plane_residual, (double)r->relative_plane_residual, (double)r->fitness,
+           (unsigned long)r->hypothesis, (unsigned long)r->icp_iterations, (unsigned long)r->saturated);
+    printf("  reliable: %s\n", r->reliable ? "yes" : "no");
+    printf("@ reg %s 0", label);
+    print_bits(r->rotation, 4);
+    print_bits(r->translation, 3);
+    const float scores[6] = {r->residual, r->relative_residual, r->plane_residual,
+                             r->relative_plane_residual, r->fitness, r->inlier_rmse};
+    print_bits(scores, 6);
+    printf(" %lu %lu %lu %lu %lu %d\n", (unsigned long)r->hypothesis, (unsigned long)r->passes,
+           (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->degenerate,
+           r->reliable ? 1 : 0);
+}
+
+static int32_t run(const char *label, const float *points, size_t n, const PcrnetOptions *options,
+                   PcrnetRegistration *r) {
+    uint64_t start = instructions_now();
+    int32_t status = pcrnet_register(&model, points, n, options, scratch, sizeof scratch, r);
+    report(label, status, r, instructions_now() - start);
+    return status;
+}
+
+int main(void) {
+    instructions_start();
+    size_t blob_len = (size_t)(model_blob_end - model_blob);
+    size_t n = (size_t)(source_points_end - (const uint8_t *)source_points) / (3 * sizeof(float));
+    printf("pcrnet C example\n");
+
+    int32_t status = pcrnet_model_load(model_blob, blob_len, &model);
+    if (status != PCRNET_OK) {
+        printf("model rejected: %s\n", pcrnet_status_message(status));
+        return 1;
+    }
+    size_t tile = PCRNET_MAX_TILE;
+    while (tile > 1 && pcrnet_model_scratch_len(&model, tile) > sizeof scratch) {
+        tile--;
+    }
+    printf("model: %lu bytes, trained passes %lu, scratch %lu of %lu bytes (tile %lu)\n",
+           (unsigned long)blob_len, (unsigned long)pcrnet_model_trained_passes(&model),
+           (unsigned long)pcrnet_model_scratch_len(&model, tile), (unsigned long)sizeof scratch,
+           (unsigned long)tile);
+    if (n == 0 || n > MAX_POINTS) {
+        printf("the stored source has %lu points; this example takes 1 to %d\n", (unsigned long)n,
+               MAX_POINTS);
+        return 1;
+    }
+    printf("points: %lu\n", (unsigned long)n);
+
+    /* The recommended pipeline: network, flip resolution, ICP, residual. */
+    PcrnetOptions options;
+    pcrnet_options_default(&options);
+    PcrnetRegistration r;
+    status = run("default", source_points, n, &options, &r);
+    if (status == PCRNET_OK && !r.reliable) {
+        printf("not reliable: retrying from every starting pose\n");
+        PcrnetOptions every = options;
+        every.hypotheses = UINT32_MAX;
+        status = run("every-start", source_points, n, &every, &r);
+    }
+    if (status == PCRNET_OK) {
+        printf(r.reliable ? "pose reliable: acting on it\n" : "no reliable pose: keeping the last good one\n");
+    }
+
+    /* The network alone, scored; then three i-PCRNet passes, unscored. */
+    PcrnetOptions network;
+    pcrnet_options_network_only(&network);
+    PcrnetRegistration rn;
+    run("network", source_points, n, &network, &rn);
+    float pose[7];
+    uint32_t passes = 0;
+    uint64_t start = instructions_now();
+    status = pcrnet_network_pose(&model, source_points, n, 3, 0.0f, scratch, sizeof scratch, pose, &passes);
+    uint64_t used = instructions_now() - start;
+    printf("network pose, 3 passes: %s, ", pcrnet_status_message(status));
+    print_count(used);
+    printf(" instructions\n");
+    printf("@ pose iterated %ld", (long)status);
+    if (status == PCRNET_OK) {
+        printf(" %lu", (unsigned long)passes);
+        print_bits(pose, 7);
+    }
+    printf("\n");
+
+    /* Bad input is a status with a message, never a crash. */
+    memcpy(cloud, source_points, 3 * n * sizeof(float));
+    cloud[0] = 0.0f / 0.0f;
+    run("nan", cloud, n, &options, &r);
+    printf("@ done\n");
+    return 0;
+}

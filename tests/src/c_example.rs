@@ -1,0 +1,281 @@
+//! The C firmware example (`firmware-c/`): built with Debian's
+//! `arm-none-eabi-gcc` against `libpcrnet.a`, run under QEMU, and every
+//! result it prints compared bit for bit with `pcrnet-core` on the host.
+//!
+//! The example prints each result twice: readable, and as an `@` line
+//! with the bits of every value (`@ reg LABEL STATUS ...`,
+//! `@ pose LABEL STATUS ...`, `@ done`). The host recomputes each labelled
+//! call and formats it the same way through the C API's own conversions,
+//! so a difference names the call and the field.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use anyhow::{Context, bail, ensure};
+use pcrnet::{PcrnetRegistration, PcrnetStatus};
+use pcrnet_core::{Int8Model, Options};
+
+use crate::qemu;
+
+/// Calls the example always makes; `every-start` follows only an
+/// unreliable `default`.
+const REQUIRED: [&str; 4] = ["reg default", "reg network", "pose iterated", "reg nan"];
+
+/// Names of the values of an `@ reg` line after its status.
+const REG_FIELDS: [&str; 19] = [
+    "rotation w",
+    "rotation x",
+    "rotation y",
+    "rotation z",
+    "translation x",
+    "translation y",
+    "translation z",
+    "residual",
+    "relative_residual",
+    "plane_residual",
+    "relative_plane_residual",
+    "fitness",
+    "inlier_rmse",
+    "hypothesis",
+    "passes",
+    "icp_iterations",
+    "saturated",
+    "degenerate",
+    "reliable",
+];
+
+fn hex(values: &[f32]) -> String {
+    values
+        .iter()
+        .map(|v| format!(" {:08x}", v.to_bits()))
+        .collect()
+}
+
+/// The `@ reg` line the example prints for this result.
+fn reg_line(label: &str, result: Result<PcrnetRegistration, PcrnetStatus>) -> String {
+    match result {
+        Err(s) => format!("@ reg {label} {}", s as i32),
+        Ok(r) => format!(
+            "@ reg {label} 0{}{}{} {} {} {} {} {} {}",
+            hex(&r.rotation),
+            hex(&r.translation),
+            hex(&[
+                r.residual,
+                r.relative_residual,
+                r.plane_residual,
+                r.relative_plane_residual,
+                r.fitness,
+                r.inlier_rmse,
+            ]),
+            r.hypothesis,
+            r.passes,
+            r.icp_iterations,
+            r.saturated,
+            r.degenerate,
+            u8::from(r.reliable)
+        ),
+    }
+}
+
+/// What the host computes for the call an `@` line reports, as that line.
+fn expected_line(
+    model: &Int8Model<'_>,
+    source: &[[f32; 3]],
+    kind: &str,
+    label: &str,
+    scratch: &mut [i8],
+) -> anyhow::Result<String> {
+    let register = |cloud: &[[f32; 3]], options: Options, scratch: &mut [i8]| {
+        model
+            .register(cloud, &options, scratch)
+            .map(|r| PcrnetRegistration::from(&r))
+            .map_err(PcrnetStatus::from)
+    };
+    Ok(match (kind, label) {
+        ("reg", "default") => reg_line(label, register(source, Options::default(), scratch)),
+        ("reg", "every-start") => {
+            let every = Options {
+                hypotheses: u32::MAX as usize,
+                ..Options::default()
+            };
+            reg_line(label, register(source, every, scratch))
+        }
+        ("reg", "network") => reg_line(label, register(source, Options::network_only(), scratch)),
+        ("reg", "nan") => {
+            let mut cloud = source.to_vec();
+            cloud[0][0] = f32::NAN;
+            reg_line(label, register(&cloud, Options::default(), scratch))
+        }
+        ("pose", "iterated") => match model.network_pose(source, 3, 0.0, scratch) {
+            Ok((p, n)) => format!(
+                "@ pose {label} 0 {n}{}{}",
+                hex(&p.rotation),
+                hex(&p.translation)
+            ),
+            Err(e) => format!("@ pose {label} {}", PcrnetStatus::from(e) as i32),
+        },
+        _ => bail!("the C example printed an unknown call `@ {kind} {label}`"),
+    })
+}
+
+/// The first field where two `@` lines differ, named.
+fn difference(kind: &str, device: &str, host: &str) -> String {
+    let d: Vec<&str> = device.split_whitespace().skip(4).collect();
+    let h: Vec<&str> = host.split_whitespace().skip(4).collect();
+    let status = |line: &str| line.split_whitespace().nth(3).unwrap_or("").to_string();
+    if status(device) != status(host) {
+        return format!(
+            "status {} on the device, {} on the host",
+            status(device),
+            status(host)
+        );
+    }
+    for (i, (a, b)) in d.iter().zip(&h).enumerate() {
+        if a != b {
+            let name = match kind {
+                "reg" => REG_FIELDS.get(i).copied().unwrap_or("extra value"),
+                _ if i == 0 => "passes",
+                _ => ["qw", "qx", "qy", "qz", "tx", "ty", "tz"]
+                    .get(i - 1)
+                    .copied()
+                    .unwrap_or("extra value"),
+            };
+            return format!("{name}: {a} on the device, {b} on the host");
+        }
+    }
+    format!("{} values on the device, {} on the host", d.len(), h.len())
+}
+
+/// Compares every `@` line of the example's output with the host.
+/// Returns the number of calls compared; fails naming each difference.
+pub fn check(output: &str, blob: &[u8], source: &[[f32; 3]]) -> anyhow::Result<usize> {
+    let model = Int8Model::from_bytes(blob).context("the host rejects the example's model")?;
+    let mut scratch = vec![0i8; model.scratch_len(pcrnet_core::MAX_TILE)];
+    let mut seen = Vec::new();
+    let mut failures = Vec::new();
+    let mut done = false;
+    for line in output.lines().filter(|l| l.starts_with("@ ")) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["@", "done"] => done = true,
+            ["@", kind, label, ..] => {
+                let host = expected_line(&model, source, kind, label, &mut scratch)?;
+                if host != line {
+                    failures.push(format!("{kind} {label}: {}", difference(kind, line, &host)));
+                }
+                seen.push(format!("{kind} {label}"));
+            }
+            _ => bail!("malformed line from the C example: {line}"),
+        }
+    }
+    for call in REQUIRED {
+        ensure!(
+            seen.iter().any(|s| s == call),
+            "the C example did not report `{call}`"
+        );
+    }
+    ensure!(done, "the C example did not finish (no `@ done`)");
+    ensure!(failures.is_empty(), "{}", failures.join("\n"));
+    Ok(seen.len())
+}
+
+/// Builds the example with its Makefile (which builds `libpcrnet.a` with
+/// cargo) into `target/firmware-c`, and returns the ELF.
+pub fn build(root: &Path) -> anyhow::Result<std::path::PathBuf> {
+    let build = root.join("target").join("firmware-c");
+    let status = Command::new("make")
+        .arg("-C")
+        .arg(root.join("firmware-c"))
+        .arg(format!("BUILD={}", build.display()))
+        .arg(format!(
+            "CARGO={}",
+            std::env::var("CARGO").unwrap_or_else(|_| "cargo".into())
+        ))
+        .env_remove("CARGO_TARGET_DIR")
+        .status()
+        .context("running make (Debian package `make`)")?;
+    ensure!(
+        status.success(),
+        "building firmware-c failed ({status}); it needs Debian's gcc-arm-none-eabi and \
+         libnewlib-arm-none-eabi (`cargo xtask c-example` installs them)"
+    );
+    Ok(build.join("pcrnet-c-example.elf"))
+}
+
+/// Builds and runs the example under QEMU and compares it with the host.
+pub fn run(timeout: Duration) -> anyhow::Result<()> {
+    let root = qemu::workspace_root();
+    let elf = build(&root)?;
+    let output = qemu::run_with_timeout(qemu::qemu_command(&elf, None), timeout)?;
+    print!("{output}");
+    let blob = std::fs::read(root.join("models/embedded-default-int8.pcrn"))?;
+    let source = crate::vectors::read_cloud(&root.join("models/embedded-default-source.f32"))?;
+    let n = check(&output, &blob, &source)?;
+    println!("C example: {n} calls bit-identical with the host");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What the example prints, as the host computes it.
+    fn host_output(blob: &[u8], source: &[[f32; 3]]) -> String {
+        let model = Int8Model::from_bytes(blob).unwrap();
+        let mut scratch = vec![0i8; model.scratch_len(1)];
+        let mut out = String::from("pcrnet C example\n");
+        for call in REQUIRED {
+            let (kind, label) = call.split_once(' ').unwrap();
+            out += &expected_line(&model, source, kind, label, &mut scratch).unwrap();
+            out.push('\n');
+        }
+        out + "@ done\n"
+    }
+
+    #[test]
+    fn the_check_passes_the_hosts_own_output_and_names_a_changed_field() {
+        let root = qemu::workspace_root();
+        let blob = std::fs::read(root.join("models/embedded-default-int8.pcrn")).unwrap();
+        let source =
+            crate::vectors::read_cloud(&root.join("models/embedded-default-source.f32")).unwrap();
+        let source = &source[..64];
+        let good = host_output(&blob, source);
+        assert_eq!(check(&good, &blob, source).unwrap(), REQUIRED.len());
+
+        // One bit of the default registration's plane residual, flipped.
+        let line = good
+            .lines()
+            .find(|l| l.starts_with("@ reg default"))
+            .unwrap();
+        let mut words: Vec<String> = line.split_whitespace().map(String::from).collect();
+        let at = 4 + REG_FIELDS
+            .iter()
+            .position(|f| *f == "plane_residual")
+            .unwrap();
+        let value = u32::from_str_radix(&words[at], 16).unwrap() ^ 1;
+        words[at] = format!("{value:08x}");
+        let bad = good.replace(line, &words.join(" "));
+        let err = check(&bad, &blob, source).unwrap_err().to_string();
+        assert!(err.contains("reg default: plane_residual"), "{err}");
+
+        // A status the host does not give; a missing call; no end marker.
+        let bad = good.replace("@ reg nan -31", "@ reg nan -32");
+        let err = check(&bad, &blob, source).unwrap_err().to_string();
+        assert!(
+            err.contains("status -32 on the device, -31 on the host"),
+            "{err}"
+        );
+        let bad: String = good
+            .lines()
+            .filter(|l| !l.starts_with("@ pose"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let err = check(&bad, &blob, source).unwrap_err().to_string();
+        assert!(err.contains("did not report `pose iterated`"), "{err}");
+        let err = check(&good.replace("@ done", ""), &blob, source)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("did not finish"), "{err}");
+    }
+}
