@@ -1,11 +1,20 @@
-//! Puts `memory.x` where cortex-m-rt's `link.x` finds it.
+//! Puts the board's `memory.x` where cortex-m-rt's `link.x` finds it.
 use std::{env, fs, path::PathBuf};
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR is set by cargo"));
-    fs::write(out.join("memory.x"), include_bytes!("memory.x")).expect("write memory.x");
+    // The AN505 (Cortex-M33) boots secure from 0x1000_0000; the other
+    // MPS2 boards share one map. (Neither file is named memory.x: the
+    // linker would find it in the package directory before OUT_DIR.)
+    let memory: &[u8] = if env::var_os("CARGO_FEATURE_MPS2_AN505").is_some() {
+        include_bytes!("memory-an505.x")
+    } else {
+        include_bytes!("memory-mps2.x")
+    };
+    fs::write(out.join("memory.x"), memory).expect("write memory.x");
     println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=memory-mps2.x");
+    println!("cargo:rerun-if-changed=memory-an505.x");
     // defmt's linker script, only when the `defmt` feature is on.
     if env::var_os("CARGO_FEATURE_DEFMT").is_some() {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");

@@ -207,7 +207,7 @@ pub fn build(root: &Path) -> anyhow::Result<std::path::PathBuf> {
 pub fn run(timeout: Duration) -> anyhow::Result<()> {
     let root = qemu::workspace_root();
     let elf = build(&root)?;
-    let output = qemu::run_with_timeout(qemu::qemu_command(&elf, None), timeout)?;
+    let output = qemu::run_with_timeout(qemu::qemu_command(&qemu::BOARDS[0], &elf, None), timeout)?;
     print!("{output}");
     let blob = std::fs::read(root.join("models/embedded-default-int8.pcrn"))?;
     let source = crate::vectors::read_cloud(&root.join("models/embedded-default-source.f32"))?;

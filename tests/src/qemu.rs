@@ -7,10 +7,85 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 
-use crate::vectors::PSRAM_BASE;
+/// An emulated board the device runner runs on: a QEMU machine, its core,
+/// the Rust target built for it and the runner's board feature (see
+/// `firmware-example/src/board.rs` for the memory maps).
+#[derive(Debug)]
+pub struct Board {
+    /// QEMU machine (`-machine`).
+    pub machine: &'static str,
+    /// QEMU CPU (`-cpu`).
+    pub cpu: &'static str,
+    /// The core, as the README's table names it.
+    pub core: &'static str,
+    /// Rust target.
+    pub target: &'static str,
+    /// Cargo feature of the device crates selecting the board, if not the default.
+    pub feature: Option<&'static str>,
+    /// Where QEMU loads the test vectors (the board's PSRAM).
+    pub psram_base: u32,
+    /// Which int8 kernel `pcrnet-core` compiles for the target.
+    pub kernel: &'static str,
+}
 
-/// The Cortex-M target.
-pub const TARGET: &str = "thumbv7em-none-eabihf";
+/// Every board the harness supports; the first is the default, where the
+/// full case set and the mutation check run.
+pub const BOARDS: [Board; 4] = [
+    Board {
+        machine: "mps2-an386",
+        cpu: "cortex-m4",
+        core: "Cortex-M4F",
+        target: "thumbv7em-none-eabihf",
+        feature: None,
+        psram_base: 0x2100_0000,
+        kernel: "DSP (SMLAD)",
+    },
+    Board {
+        machine: "mps2-an385",
+        cpu: "cortex-m3",
+        core: "Cortex-M3",
+        target: "thumbv7m-none-eabi",
+        feature: None,
+        psram_base: 0x2100_0000,
+        kernel: "portable, soft float",
+    },
+    Board {
+        machine: "mps2-an500",
+        cpu: "cortex-m7",
+        core: "Cortex-M7",
+        target: "thumbv7em-none-eabihf",
+        feature: Some("mps2-an500"),
+        psram_base: 0x6000_0000,
+        kernel: "DSP (SMLAD)",
+    },
+    Board {
+        machine: "mps2-an505",
+        cpu: "cortex-m33",
+        core: "Cortex-M33",
+        target: "thumbv8m.main-none-eabihf",
+        feature: Some("mps2-an505"),
+        psram_base: 0x8000_0000,
+        kernel: "portable",
+    },
+];
+
+/// The board QEMU calls `machine`.
+pub fn board(machine: &str) -> anyhow::Result<&'static Board> {
+    BOARDS
+        .iter()
+        .find(|b| b.machine == machine)
+        .with_context(|| {
+            let names: Vec<&str> = BOARDS.iter().map(|b| b.machine).collect();
+            format!("unknown board {machine} (one of {})", names.join(", "))
+        })
+}
+
+impl Board {
+    /// Whether this is the default board (full case set, mutation check).
+    pub fn is_default(&self) -> bool {
+        std::ptr::eq(self, &BOARDS[0])
+    }
+}
 
 /// The workspace root (parent of `tests/`).
 pub fn workspace_root() -> PathBuf {
@@ -20,10 +95,25 @@ pub fn workspace_root() -> PathBuf {
         .unwrap_or_default()
 }
 
-/// Builds a firmware crate (release) and returns its ELF.
-pub fn build_firmware(dir: &Path, bin: &str, features: &[&str]) -> anyhow::Result<PathBuf> {
+/// Builds a firmware crate (release) for `board` and returns its ELF. The
+/// default board builds into the crate's `target/`; the others into
+/// `target/<machine>/`, so switching boards does not rebuild.
+pub fn build_firmware(
+    dir: &Path,
+    bin: &str,
+    board: &Board,
+    features: &[&str],
+) -> anyhow::Result<PathBuf> {
     let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    cmd.current_dir(dir).args(["build", "--release"]);
+    let mut target_dir = dir.join("target");
+    if !board.is_default() {
+        target_dir = target_dir.join(board.machine);
+    }
+    cmd.current_dir(dir)
+        .args(["build", "--release", "--target", board.target])
+        .arg("--target-dir")
+        .arg(&target_dir);
+    let features: Vec<&str> = features.iter().copied().chain(board.feature).collect();
     if !features.is_empty() {
         cmd.args(["--features", &features.join(",")]);
     }
@@ -35,17 +125,18 @@ pub fn build_firmware(dir: &Path, bin: &str, features: &[&str]) -> anyhow::Resul
     if !status.success() {
         bail!("building {} failed ({status})", dir.display());
     }
-    Ok(dir.join("target").join(TARGET).join("release").join(bin))
+    Ok(target_dir.join(board.target).join("release").join(bin))
 }
 
-/// The QEMU command line for an ELF, optionally with a file loaded into PSRAM.
-pub fn qemu_command(elf: &Path, psram_file: Option<&Path>) -> Command {
+/// The QEMU command line for an ELF on `board`, optionally with a file
+/// loaded into its PSRAM.
+pub fn qemu_command(board: &Board, elf: &Path, psram_file: Option<&Path>) -> Command {
     let mut cmd = Command::new("qemu-system-arm");
     cmd.args([
         "-machine",
-        "mps2-an386",
+        board.machine,
         "-cpu",
-        "cortex-m4",
+        board.cpu,
         "-nographic",
         "-monitor",
         "none",
@@ -60,8 +151,9 @@ pub fn qemu_command(elf: &Path, psram_file: Option<&Path>) -> Command {
     cmd.arg(elf);
     if let Some(f) = psram_file {
         cmd.arg("-device").arg(format!(
-            "loader,file={},addr={PSRAM_BASE:#x},force-raw=on",
-            f.display()
+            "loader,file={},addr={:#x},force-raw=on",
+            f.display(),
+            board.psram_base
         ));
     }
     cmd

@@ -3,8 +3,6 @@
 use pcrnet_core::testing::{SplitMix64, random_int8_blob_with};
 use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options, POSE_DIM, Registration};
 
-/// Where the container goes in the MPS2 PSRAM.
-pub const PSRAM_BASE: u32 = 0x2100_0000;
 /// PSRAM size.
 pub const PSRAM_LEN: usize = 16 << 20;
 /// Container format version (the device checks it).

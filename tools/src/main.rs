@@ -14,7 +14,8 @@ cargo xtask <command>
 
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
-                the QEMU harness, then the host tests
+                the C header, the QEMU harness on every core, the C
+                example, then the host tests
   demo          the main job: register the shipped source with the trained
                 embedded default (int8) through the device pipeline, and say
                 whether the pose is reliable; extra arguments go to
@@ -22,6 +23,9 @@ cargo xtask <command>
   qemu-test     run core on an emulated Cortex-M4F and compare every output
                 with the host bit for bit; then prove a changed rounding on
                 the device is caught
+  cores         the QEMU harness on the other cores (Cortex-M3 mps2-an385,
+                M7 mps2-an500, M33 mps2-an505; cases up to 1,024 points,
+                no paper-size model), each bit-exact with the host
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
   c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
@@ -36,7 +40,7 @@ cargo xtask <command>
                 target/experiments) and regenerate RESULTS.md
   help          this text
 
-Missing tools are installed: the thumbv7em-none-eabihf target (rustup),
+Missing tools are installed: the Rust targets of the cores (rustup),
 qemu-system-arm, gcc-arm-none-eabi and libnewlib-arm-none-eabi (apt-get).
 ";
 
@@ -47,6 +51,7 @@ fn main() -> ExitCode {
         Some("demo") => demo(&args[1..]),
         Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "-p", "pcrnet-train"]),
         Some("qemu-test") => qemu_test(),
+        Some("cores") => cores(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
         Some("firmware-run") => firmware_run(),
         Some("c-example") => c_example(),
@@ -83,19 +88,49 @@ fn cargo(args: &[&str]) -> Result<(), String> {
     run(env!("CARGO"), args)
 }
 
-/// Installs the Cortex-M target if rustup does not list it yet.
+/// Installs the Cortex-M4F target if rustup does not list it yet.
 fn ensure_target() -> Result<(), String> {
+    ensure_targets(&[TARGET])
+}
+
+/// Installs the Rust targets rustup does not list yet.
+fn ensure_targets(targets: &[&str]) -> Result<(), String> {
     let out = Command::new("rustup")
         .args(["target", "list", "--installed"])
         .output()
         .map_err(|e| format!("cannot run rustup: {e}"))?;
-    if String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .any(|l| l.trim() == TARGET)
-    {
+    let installed = String::from_utf8_lossy(&out.stdout);
+    let missing: Vec<&str> = targets
+        .iter()
+        .copied()
+        .filter(|t| !installed.lines().any(|l| l.trim() == *t))
+        .collect();
+    if missing.is_empty() {
         return Ok(());
     }
-    run("rustup", &["target", "add", TARGET])
+    let mut args = vec!["target", "add"];
+    args.extend(missing);
+    run("rustup", &args)
+}
+
+/// The boards `cores` runs besides the default mps2-an386, with their
+/// Rust targets (the harness's `qemu::BOARDS` describes each).
+const OTHER_BOARDS: [(&str, &str); 3] = [
+    ("mps2-an385", "thumbv7m-none-eabi"),
+    ("mps2-an500", "thumbv7em-none-eabihf"),
+    ("mps2-an505", "thumbv8m.main-none-eabihf"),
+];
+
+/// The QEMU harness on every other core (a subset of the cases: no
+/// paper-size model, clouds up to 1,024 points), each bit-exact with the host.
+fn cores() -> Result<(), String> {
+    let targets: Vec<&str> = OTHER_BOARDS.iter().map(|(_, t)| *t).collect();
+    ensure_targets(&targets)?;
+    ensure_qemu()?;
+    for (board, _) in OTHER_BOARDS {
+        harness(&["run", "--board", board])?;
+    }
+    Ok(())
 }
 
 /// The crates built for the device, outside the host workspace.
@@ -206,6 +241,7 @@ fn ci() -> Result<(), String> {
         &[("RUSTDOCFLAGS", "-D warnings")],
     )?;
     qemu_test()?;
+    cores()?;
     c_example()?;
     cargo(&["test", "--workspace"])
 }

@@ -1,7 +1,8 @@
 //! Device side of the QEMU harness.
 //!
 //! QEMU's generic loader puts a test-vector container at the start of the
-//! MPS2 PSRAM (0x2100_0000, 16 MiB; big enough for the paper-size model).
+//! MPS2 PSRAM (16 MiB, big enough for the paper-size model; its address
+//! per board is in `pcrnet_firmware_example::board`).
 //! For every model in it, this program parses the model in place, then for
 //! every case of that model measures the encoder alone and the whole
 //! inference with the SysTick instruction counter, runs the iterative
@@ -43,8 +44,7 @@ use panic_semihosting as _;
 use pcrnet_core::{Int8Model, Metric, Options};
 use pcrnet_firmware_example::{icount::Counter, stack};
 
-const BASE: usize = 0x2100_0000;
-const PSRAM_LEN: usize = 16 << 20;
+use pcrnet_firmware_example::board::{PSRAM_BASE as BASE, PSRAM_LEN};
 const SCRATCH: usize = 64 * 1024;
 /// Container version this runner reads.
 const VERSION: u32 = 4;
@@ -54,7 +54,7 @@ const CASE_WORDS: usize = 7;
 const OPTIONS_WORDS: usize = 11;
 
 fn word(index: usize) -> u32 {
-    // SAFETY: PSRAM is always mapped on mps2-an386; reads stay inside it.
+    // SAFETY: PSRAM is always mapped on the MPS2 boards; reads stay inside it.
     unsafe { core::ptr::read_volatile((BASE + 4 * index.min(PSRAM_LEN / 4 - 1)) as *const u32) }
 }
 
