@@ -1,8 +1,9 @@
 //! Instruction counting with SysTick.
 //!
 //! QEMU run with `-icount shift=0,align=off,sleep=off` advances virtual time
-//! by one nanosecond per instruction, and the MPS2 SysTick runs at 25 MHz
-//! (20 MHz on the AN505): one tick every 40 (50) instructions, deterministically and whatever the host's
+//! by one nanosecond per instruction, and SysTick runs on the board's clock
+//! (25 MHz on most MPS2 boards: one tick every 40 instructions; see
+//! [`crate::board`]), deterministically and whatever the host's
 //! load. The 24-bit counter wraps every 2^24 ticks; the SysTick exception
 //! counts the wraps so long measurements stay exact (to one tick).
 
@@ -11,7 +12,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::{SCB, SYST, syst::SystClkSource};
 use cortex_m_rt::exception;
 
-pub use crate::board::INSTRUCTIONS_PER_TICK;
+use crate::board::INSTRUCTIONS_PER_1000_TICKS;
 const RELOAD: u32 = 0x00FF_FFFF;
 
 static WRAPS: AtomicU32 = AtomicU32::new(0);
@@ -60,11 +61,16 @@ impl Counter {
 
     /// Instructions executed since [`Counter::start`].
     pub fn instructions(&self) -> u64 {
-        self.ticks() * INSTRUCTIONS_PER_TICK
+        self.ticks() * INSTRUCTIONS_PER_1000_TICKS / 1000
     }
 }
 
 #[exception]
 fn SysTick() {
-    WRAPS.fetch_add(1, Ordering::SeqCst);
+    // Load and store, not fetch_add: the Cortex-M0 has no atomic
+    // read-modify-write, and this handler is the only writer.
+    WRAPS.store(
+        WRAPS.load(Ordering::SeqCst).wrapping_add(1),
+        Ordering::SeqCst,
+    );
 }

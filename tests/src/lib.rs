@@ -3,7 +3,8 @@
 //! compared bit for bit.
 //!
 //! 1. [`vectors`] builds models and clouds (seeded), the `register` option
-//!    sets of each case and the container QEMU loads into PSRAM, with the
+//!    sets of each case and the container QEMU loads into the board's data
+//!    region (PSRAM on the MPS2 boards), with the
 //!    host's expected outputs;
 //! 2. [`qemu`] cross-compiles the device runner (`tests/firmware`) and runs it
 //!    with a timeout;

@@ -23,6 +23,7 @@ use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options};
 use pcrnet_qemu_tests::compare::{
     DeviceRun, first_difference, iterative_difference, parse, registration_difference,
 };
+use pcrnet_qemu_tests::qemu::CaseSet;
 use pcrnet_qemu_tests::vectors::{
     Case, TestModel, clouds_for, container, describe, doubled, expected, expected_iterative,
     expected_registrations, random_model, random_model_with, read_cloud,
@@ -95,11 +96,8 @@ const CM_FRAME: Frame = Frame {
 /// centimetres far from the origin, every int8 blob shipped in `models/`
 /// (the embedded default also with its demo source at 512 and 1024
 /// points), and the paper-size PCRNet (its 4.2 MB of weights go to PSRAM).
-///
-/// Without `full` (the boards other than the default), the paper-size
-/// model and clouds over 1,024 points are left out: the rest covers every
-/// code path in a fraction of the time.
-fn models(full: bool) -> anyhow::Result<Vec<Plan>> {
+/// Boards other than the default run a subset (see [`CaseSet`]).
+fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
     let plan = |model, sizes: &[usize]| Plan {
         model,
         sizes: sizes.to_vec(),
@@ -187,11 +185,15 @@ fn models(full: bool) -> anyhow::Result<Vec<Plan>> {
         ),
         &[1, 9, 1024],
     ));
-    if !full {
-        out.retain(|p| !p.model.name.starts_with("paper"));
-        for p in &mut out {
-            p.sizes.retain(|&n| n <= 1024);
-        }
+    let (random_only, largest) = match set {
+        CaseSet::Full => (false, usize::MAX),
+        CaseSet::Subset => (false, 1024),
+        CaseSet::Small => (true, 300),
+    };
+    out.retain(|p| set == CaseSet::Full || !p.model.name.starts_with("paper"));
+    out.retain(|p| !random_only || p.model.name.starts_with("random"));
+    for p in &mut out {
+        p.sizes.retain(|&n| n <= largest);
     }
     Ok(out)
 }
@@ -257,7 +259,7 @@ struct Args {
 fn run(args: Args) -> anyhow::Result<bool> {
     let root = qemu::workspace_root();
     let board = args.board;
-    let (models, cases) = build_cases(&models(board.is_default())?);
+    let (models, cases) = build_cases(&models(board.cases)?);
     let expect: Vec<_> = cases
         .iter()
         .map(|c| {
@@ -272,7 +274,7 @@ fn run(args: Args) -> anyhow::Result<bool> {
     let dir = root.join("target/qemu");
     std::fs::create_dir_all(&dir)?;
     let vectors = dir.join("vectors.bin");
-    std::fs::write(&vectors, container(&models, &cases)?)?;
+    std::fs::write(&vectors, container(&models, &cases, board.data_len)?)?;
 
     let features: &[&str] = if args.mutate {
         &["mutate-rounding"]
@@ -389,7 +391,7 @@ fn report(
     }
     let sizes = elf::sizes(elf)?;
     println!(
-        "runner image: flash {} B (text {} + rodata {} + data {}), static RAM {} B (of which 65,536 scratch)",
+        "runner image: flash {} B (text {} + rodata {} + data {}), static RAM {} B (the scratch included)",
         sizes.flash(),
         sizes.text,
         sizes.rodata,

@@ -22,22 +22,29 @@ pub struct Board {
     pub target: &'static str,
     /// Cargo feature of the device crates selecting the board, if not the default.
     pub feature: Option<&'static str>,
-    /// Where QEMU loads the test vectors (the board's PSRAM).
-    pub psram_base: u32,
+    /// Where QEMU loads the test vectors (the board's data region: PSRAM
+    /// on the MPS2 boards, the end of flash on the micro:bit).
+    pub data_base: u32,
+    /// Size of that region.
+    pub data_len: usize,
+    /// Which cases run on it.
+    pub cases: CaseSet,
     /// Which int8 kernel `pcrnet-core` compiles for the target.
     pub kernel: &'static str,
 }
 
 /// Every board the harness supports; the first is the default, where the
 /// full case set and the mutation check run.
-pub const BOARDS: [Board; 4] = [
+pub const BOARDS: [Board; 5] = [
     Board {
         machine: "mps2-an386",
         cpu: "cortex-m4",
         core: "Cortex-M4F",
         target: "thumbv7em-none-eabihf",
         feature: None,
-        psram_base: 0x2100_0000,
+        data_base: 0x2100_0000,
+        data_len: 16 << 20,
+        cases: CaseSet::Full,
         kernel: "DSP (SMLAD)",
     },
     Board {
@@ -46,7 +53,9 @@ pub const BOARDS: [Board; 4] = [
         core: "Cortex-M3",
         target: "thumbv7m-none-eabi",
         feature: None,
-        psram_base: 0x2100_0000,
+        data_base: 0x2100_0000,
+        data_len: 16 << 20,
+        cases: CaseSet::Subset,
         kernel: "portable, soft float",
     },
     Board {
@@ -55,7 +64,9 @@ pub const BOARDS: [Board; 4] = [
         core: "Cortex-M7",
         target: "thumbv7em-none-eabihf",
         feature: Some("mps2-an500"),
-        psram_base: 0x6000_0000,
+        data_base: 0x6000_0000,
+        data_len: 16 << 20,
+        cases: CaseSet::Subset,
         kernel: "DSP (SMLAD)",
     },
     Board {
@@ -64,10 +75,36 @@ pub const BOARDS: [Board; 4] = [
         core: "Cortex-M33",
         target: "thumbv8m.main-none-eabihf",
         feature: Some("mps2-an505"),
-        psram_base: 0x8000_0000,
+        data_base: 0x8000_0000,
+        data_len: 16 << 20,
+        cases: CaseSet::Subset,
         kernel: "portable",
     },
+    Board {
+        machine: "microbit",
+        cpu: "cortex-m0",
+        core: "Cortex-M0",
+        target: "thumbv6m-none-eabi",
+        feature: Some("microbit"),
+        data_base: 0x0002_0000,
+        data_len: 128 << 10,
+        cases: CaseSet::Small,
+        kernel: "portable, soft float",
+    },
 ];
+
+/// The cases a board runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CaseSet {
+    /// Every model and cloud (the default board).
+    Full,
+    /// No paper-size model, clouds up to 1,024 points: every code path in
+    /// a fraction of the time.
+    Subset,
+    /// The random models on clouds up to 300 points: what fits 128 KiB of
+    /// data and 16 KiB of RAM.
+    Small,
+}
 
 /// The board QEMU calls `machine`.
 pub fn board(machine: &str) -> anyhow::Result<&'static Board> {
@@ -129,7 +166,7 @@ pub fn build_firmware(
 }
 
 /// The QEMU command line for an ELF on `board`, optionally with a file
-/// loaded into its PSRAM.
+/// loaded into its data region.
 pub fn qemu_command(board: &Board, elf: &Path, psram_file: Option<&Path>) -> Command {
     let mut cmd = Command::new("qemu-system-arm");
     cmd.args([
@@ -153,7 +190,7 @@ pub fn qemu_command(board: &Board, elf: &Path, psram_file: Option<&Path>) -> Com
         cmd.arg("-device").arg(format!(
             "loader,file={},addr={:#x},force-raw=on",
             f.display(),
-            board.psram_base
+            board.data_base
         ));
     }
     cmd

@@ -3,8 +3,6 @@
 use pcrnet_core::testing::{SplitMix64, random_int8_blob_with};
 use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options, POSE_DIM, Registration};
 
-/// PSRAM size.
-pub const PSRAM_LEN: usize = 16 << 20;
 /// Container format version (the device checks it).
 pub const CONTAINER_VERSION: u32 = 4;
 /// Scratch bytes on the device (and lent to the host's `register`, so both
@@ -404,8 +402,9 @@ fn push_options(buf: &mut Vec<u8>, o: &Options) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Lays out the container the device runner reads (see `tests/firmware`).
-pub fn container(models: &[TestModel], cases: &[Case]) -> anyhow::Result<Vec<u8>> {
+/// Lays out the container the device runner reads (see `tests/firmware`),
+/// failing if it takes more than `capacity` bytes (the board's data region).
+pub fn container(models: &[TestModel], cases: &[Case], capacity: usize) -> anyhow::Result<Vec<u8>> {
     let header = 16 + 8 * models.len() + 4 * CASE_WORDS * cases.len();
     let mut data = vec![0u8; header];
     let mut table = Vec::with_capacity(header);
@@ -438,8 +437,8 @@ pub fn container(models: &[TestModel], cases: &[Case]) -> anyhow::Result<Vec<u8>
     debug_assert_eq!(table.len(), header);
     data[..header].copy_from_slice(&table);
     anyhow::ensure!(
-        data.len() <= PSRAM_LEN,
-        "test vectors take {} bytes, PSRAM has {PSRAM_LEN}",
+        data.len() <= capacity,
+        "test vectors take {} bytes, the board's data region has {capacity}",
         data.len()
     );
     Ok(data)

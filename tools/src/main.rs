@@ -24,8 +24,9 @@ cargo xtask <command>
                 with the host bit for bit; then prove a changed rounding on
                 the device is caught
   cores         the QEMU harness on the other cores (Cortex-M3 mps2-an385,
-                M7 mps2-an500, M33 mps2-an505; cases up to 1,024 points,
-                no paper-size model), each bit-exact with the host
+                M7 mps2-an500, M33 mps2-an505: cases up to 1,024 points,
+                no paper-size model; M0 microbit: the small random models),
+                each bit-exact with the host
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
   c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
@@ -115,14 +116,16 @@ fn ensure_targets(targets: &[&str]) -> Result<(), String> {
 
 /// The boards `cores` runs besides the default mps2-an386, with their
 /// Rust targets (the harness's `qemu::BOARDS` describes each).
-const OTHER_BOARDS: [(&str, &str); 3] = [
+const OTHER_BOARDS: [(&str, &str); 4] = [
     ("mps2-an385", "thumbv7m-none-eabi"),
     ("mps2-an500", "thumbv7em-none-eabihf"),
     ("mps2-an505", "thumbv8m.main-none-eabihf"),
+    ("microbit", "thumbv6m-none-eabi"),
 ];
 
 /// The QEMU harness on every other core (a subset of the cases: no
-/// paper-size model, clouds up to 1,024 points), each bit-exact with the host.
+/// paper-size model, clouds up to 1,024 points; the micro:bit's 16 KiB of
+/// RAM takes the random models up to 300 points), each bit-exact with the host.
 fn cores() -> Result<(), String> {
     let targets: Vec<&str> = OTHER_BOARDS.iter().map(|(_, t)| *t).collect();
     ensure_targets(&targets)?;

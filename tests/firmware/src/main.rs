@@ -1,8 +1,9 @@
 //! Device side of the QEMU harness.
 //!
 //! QEMU's generic loader puts a test-vector container at the start of the
-//! MPS2 PSRAM (16 MiB, big enough for the paper-size model; its address
-//! per board is in `pcrnet_firmware_example::board`).
+//! board's data region (the MPS2 PSRAM, 16 MiB, big enough for the
+//! paper-size model; 128 KiB of the micro:bit's flash; see
+//! `pcrnet_firmware_example::board`).
 //! For every model in it, this program parses the model in place, then for
 //! every case of that model measures the encoder alone and the whole
 //! inference with the SysTick instruction counter, runs the iterative
@@ -44,8 +45,18 @@ use panic_semihosting as _;
 use pcrnet_core::{Int8Model, Metric, Options};
 use pcrnet_firmware_example::{icount::Counter, stack};
 
-use pcrnet_firmware_example::board::{PSRAM_BASE as BASE, PSRAM_LEN};
+use pcrnet_firmware_example::board::{DATA_BASE as BASE, DATA_LEN};
+/// Scratch for every model of the case set (the micro:bit's 16 KiB of RAM
+/// takes its small models only).
+#[cfg(not(feature = "microbit"))]
 const SCRATCH: usize = 64 * 1024;
+#[cfg(feature = "microbit")]
+const SCRATCH: usize = 4 * 1024;
+/// Longest output line (a paper-size feature is 2,048 hex digits).
+#[cfg(not(feature = "microbit"))]
+const LINE: usize = 8192;
+#[cfg(feature = "microbit")]
+const LINE: usize = 1024;
 /// Container version this runner reads.
 const VERSION: u32 = 4;
 /// u32 words per case in the container's table.
@@ -54,23 +65,23 @@ const CASE_WORDS: usize = 7;
 const OPTIONS_WORDS: usize = 11;
 
 fn word(index: usize) -> u32 {
-    // SAFETY: PSRAM is always mapped on the MPS2 boards; reads stay inside it.
-    unsafe { core::ptr::read_volatile((BASE + 4 * index.min(PSRAM_LEN / 4 - 1)) as *const u32) }
+    // SAFETY: the data region is always mapped; reads stay inside it.
+    unsafe { core::ptr::read_volatile((BASE + 4 * index.min(DATA_LEN / 4 - 1)) as *const u32) }
 }
 
 fn bytes(offset: u32, len: u32) -> &'static [u8] {
     let (o, l) = (offset as usize, len as usize);
-    let l = l.min(PSRAM_LEN.saturating_sub(o));
-    // SAFETY: inside PSRAM, which nothing else writes while we run.
-    unsafe { core::slice::from_raw_parts((BASE + o.min(PSRAM_LEN)) as *const u8, l) }
+    let l = l.min(DATA_LEN.saturating_sub(o));
+    // SAFETY: inside the data region, which nothing else writes while we run.
+    unsafe { core::slice::from_raw_parts((BASE + o.min(DATA_LEN)) as *const u8, l) }
 }
 
 fn points(offset: u32, n: u32) -> &'static [[f32; 3]] {
     let (o, n) = (offset as usize, n as usize);
-    let n = n.min(PSRAM_LEN.saturating_sub(o) / 12);
-    // SAFETY: the host aligns clouds to 4 bytes inside PSRAM; [f32; 3] has
+    let n = n.min(DATA_LEN.saturating_sub(o) / 12);
+    // SAFETY: the host aligns clouds to 4 bytes inside the data region; [f32; 3] has
     // alignment 4 and every bit pattern is a valid f32.
-    unsafe { core::slice::from_raw_parts((BASE + o.min(PSRAM_LEN)) as *const [f32; 3], n) }
+    unsafe { core::slice::from_raw_parts((BASE + o.min(DATA_LEN)) as *const [f32; 3], n) }
 }
 
 /// The option set at word `index` (see the container layout above; the
@@ -123,7 +134,7 @@ fn main() -> ! {
     let (n_models, n_cases) = (word(2) as usize, word(3) as usize);
     hprintln!("static_ram {}", stack::static_ram());
     let cases = 4 + 2 * n_models;
-    let mut line: String<8192> = String::new();
+    let mut line: String<LINE> = String::new();
     for m in 0..n_models {
         let blob = bytes(word(4 + 2 * m), word(5 + 2 * m));
         let model = match Int8Model::from_bytes(blob) {
