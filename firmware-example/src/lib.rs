@@ -1,7 +1,8 @@
-//! Board support for the pcrnet firmware example on QEMU's MPS2 machines
-//! (Cortex-M4F `mps2-an386` by default; M3, M7 and M33 boards in
-//! [`board`]): the board's memory map, an instruction counter and stack
-//! measurement. The application itself is `src/main.rs`.
+//! Board support for the pcrnet firmware example and the QEMU harness's
+//! device runner, on QEMU's machines (Cortex-M4F `mps2-an386` by default;
+//! the M3, M7, M33, M0 and RISC-V boards in [`board`]): the memory map,
+//! semihosting output, an instruction counter and stack measurement. The
+//! application itself (Cortex-M) is `src/main.rs`.
 #![no_std]
 
 pub mod board;

@@ -4,9 +4,10 @@
 const PAINT: u32 = 0xC0DE_C0DE;
 
 unsafe extern "C" {
-    /// End of `.bss`/`.uninit`: the lowest address the stack may grow to (cortex-m-rt).
+    /// End of `.bss`/`.uninit`: the lowest address the stack may grow to
+    /// (cortex-m-rt and riscv-rt both define it).
     static mut __sheap: u32;
-    /// Initial stack pointer (top of RAM, cortex-m-rt).
+    /// Initial stack pointer (top of RAM; both runtimes).
     static _stack_start: u32;
 }
 
@@ -23,7 +24,7 @@ fn bounds() -> (usize, usize) {
 /// [`used_below`].
 pub fn paint() -> usize {
     let (low, _) = bounds();
-    let sp = cortex_m::register::msp::read() as usize;
+    let sp = crate::board::stack_pointer();
     let mut p = low;
     while p + 4 <= sp.saturating_sub(256) {
         // SAFETY: [low, sp - 256) is RAM that nothing uses (no heap; the
@@ -60,5 +61,5 @@ pub fn used_below(baseline: usize) -> usize {
 /// Bytes of statically allocated RAM (`.data` + `.bss` + `.uninit`).
 pub fn static_ram() -> usize {
     let (low, _) = bounds();
-    low - 0x2000_0000
+    low - crate::board::RAM_BASE
 }

@@ -12,6 +12,8 @@ use anyhow::{Context, bail};
 /// `firmware-example/src/board.rs` for the memory maps).
 #[derive(Debug)]
 pub struct Board {
+    /// QEMU system emulator.
+    pub qemu: &'static str,
     /// QEMU machine (`-machine`).
     pub machine: &'static str,
     /// QEMU CPU (`-cpu`).
@@ -35,8 +37,9 @@ pub struct Board {
 
 /// Every board the harness supports; the first is the default, where the
 /// full case set and the mutation check run.
-pub const BOARDS: [Board; 5] = [
+pub const BOARDS: [Board; 6] = [
     Board {
+        qemu: "qemu-system-arm",
         machine: "mps2-an386",
         cpu: "cortex-m4",
         core: "Cortex-M4F",
@@ -48,6 +51,7 @@ pub const BOARDS: [Board; 5] = [
         kernel: "DSP (SMLAD)",
     },
     Board {
+        qemu: "qemu-system-arm",
         machine: "mps2-an385",
         cpu: "cortex-m3",
         core: "Cortex-M3",
@@ -59,6 +63,7 @@ pub const BOARDS: [Board; 5] = [
         kernel: "portable, soft float",
     },
     Board {
+        qemu: "qemu-system-arm",
         machine: "mps2-an500",
         cpu: "cortex-m7",
         core: "Cortex-M7",
@@ -70,6 +75,7 @@ pub const BOARDS: [Board; 5] = [
         kernel: "DSP (SMLAD)",
     },
     Board {
+        qemu: "qemu-system-arm",
         machine: "mps2-an505",
         cpu: "cortex-m33",
         core: "Cortex-M33",
@@ -81,6 +87,7 @@ pub const BOARDS: [Board; 5] = [
         kernel: "portable",
     },
     Board {
+        qemu: "qemu-system-arm",
         machine: "microbit",
         cpu: "cortex-m0",
         core: "Cortex-M0",
@@ -89,6 +96,18 @@ pub const BOARDS: [Board; 5] = [
         data_base: 0x0002_0000,
         data_len: 128 << 10,
         cases: CaseSet::Small,
+        kernel: "portable, soft float",
+    },
+    Board {
+        qemu: "qemu-system-riscv32",
+        machine: "virt",
+        cpu: "rv32",
+        core: "RISC-V rv32imac",
+        target: "riscv32imac-unknown-none-elf",
+        feature: None,
+        data_base: 0x8100_0000,
+        data_len: 16 << 20,
+        cases: CaseSet::Subset,
         kernel: "portable, soft float",
     },
 ];
@@ -168,7 +187,11 @@ pub fn build_firmware(
 /// The QEMU command line for an ELF on `board`, optionally with a file
 /// loaded into its data region.
 pub fn qemu_command(board: &Board, elf: &Path, psram_file: Option<&Path>) -> Command {
-    let mut cmd = Command::new("qemu-system-arm");
+    let mut cmd = Command::new(board.qemu);
+    if board.qemu == "qemu-system-riscv32" {
+        // No firmware: QEMU jumps straight to the ELF's entry.
+        cmd.args(["-bios", "none"]);
+    }
     cmd.args([
         "-machine",
         board.machine,
@@ -203,9 +226,12 @@ pub fn run_with_timeout(mut cmd: Command, timeout: Duration) -> anyhow::Result<S
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .context(
-            "starting qemu-system-arm (is it installed? `cargo xtask qemu-test` installs it)",
-        )?;
+        .with_context(|| {
+            format!(
+                "starting {:?} (is it installed? `cargo xtask qemu-test` and `cargo xtask cores` install it)",
+                cmd.get_program()
+            )
+        })?;
     let mut stdout = child.stdout.take().context("qemu stdout")?;
     let mut stderr = child.stderr.take().context("qemu stderr")?;
     let out_reader = std::thread::spawn(move || {

@@ -24,9 +24,9 @@ cargo xtask <command>
                 with the host bit for bit; then prove a changed rounding on
                 the device is caught
   cores         the QEMU harness on the other cores (Cortex-M3 mps2-an385,
-                M7 mps2-an500, M33 mps2-an505: cases up to 1,024 points,
-                no paper-size model; M0 microbit: the small random models),
-                each bit-exact with the host
+                M7 mps2-an500, M33 mps2-an505, RISC-V rv32imac virt: cases
+                up to 1,024 points, no paper-size model; M0 microbit: the
+                small random models), each bit-exact with the host
   firmware-run  build firmware-example and run it under QEMU
   size          flash and static RAM of firmware-example
   c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
@@ -42,7 +42,8 @@ cargo xtask <command>
   help          this text
 
 Missing tools are installed: the Rust targets of the cores (rustup),
-qemu-system-arm, gcc-arm-none-eabi and libnewlib-arm-none-eabi (apt-get).
+qemu-system-arm, qemu-system-misc (RISC-V), gcc-arm-none-eabi and
+libnewlib-arm-none-eabi (apt-get).
 ";
 
 fn main() -> ExitCode {
@@ -116,11 +117,12 @@ fn ensure_targets(targets: &[&str]) -> Result<(), String> {
 
 /// The boards `cores` runs besides the default mps2-an386, with their
 /// Rust targets (the harness's `qemu::BOARDS` describes each).
-const OTHER_BOARDS: [(&str, &str); 4] = [
+const OTHER_BOARDS: [(&str, &str); 5] = [
     ("mps2-an385", "thumbv7m-none-eabi"),
     ("mps2-an500", "thumbv7em-none-eabihf"),
     ("mps2-an505", "thumbv8m.main-none-eabihf"),
     ("microbit", "thumbv6m-none-eabi"),
+    ("virt", "riscv32imac-unknown-none-elf"),
 ];
 
 /// The QEMU harness on every other core (a subset of the cases: no
@@ -130,6 +132,7 @@ fn cores() -> Result<(), String> {
     let targets: Vec<&str> = OTHER_BOARDS.iter().map(|(_, t)| *t).collect();
     ensure_targets(&targets)?;
     ensure_qemu()?;
+    ensure_apt("qemu-system-riscv32", &["qemu-system-misc"])?;
     for (board, _) in OTHER_BOARDS {
         harness(&["run", "--board", board])?;
     }

@@ -38,12 +38,12 @@
 
 use core::fmt::Write;
 
-use cortex_m_rt::entry;
-use cortex_m_semihosting::{debug, hprintln};
 use heapless::String;
+#[cfg(target_arch = "arm")]
 use panic_semihosting as _;
 use pcrnet_core::{Int8Model, Metric, Options};
-use pcrnet_firmware_example::{icount::Counter, stack};
+use pcrnet_firmware_example::board::{exit, print};
+use pcrnet_firmware_example::{icount, stack};
 
 use pcrnet_firmware_example::board::{DATA_BASE as BASE, DATA_LEN};
 /// Scratch for every model of the case set (the micro:bit's 16 KiB of RAM
@@ -109,30 +109,44 @@ fn read_options(index: usize) -> Options {
 
 /// Prints one line (semihosting is slow per call: build the line first).
 fn emit(line: &str) {
-    hprintln!("{}", line);
+    print(line);
 }
 
-#[entry]
+/// Prints a formatted line.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        let mut l: String<256> = String::new();
+        let _ = write!(l, $($t)*);
+        emit(&l);
+    }};
+}
+
+/// Working memory of every call; only `main` names it.
+static mut SCRATCH_BUF: [i8; SCRATCH] = [0; SCRATCH];
+
+#[cfg_attr(target_arch = "arm", cortex_m_rt::entry)]
+#[cfg_attr(target_arch = "riscv32", riscv_rt::entry)]
 fn main() -> ! {
-    static mut SCRATCH_BUF: [i8; SCRATCH] = [0; SCRATCH];
-    let core = cortex_m::Peripherals::take().unwrap();
-    let counter = Counter::start(core.SYST);
+    // SAFETY: main runs once and is the only code that names SCRATCH_BUF,
+    // so this is the only reference to it.
+    let scratch: &'static mut [i8; SCRATCH] = unsafe { &mut *core::ptr::addr_of_mut!(SCRATCH_BUF) };
+    let Some(counter) = icount::counter() else {
+        say!("error instruction counter unavailable");
+        exit(false);
+    };
 
     // Calibration: 2 instructions per iteration, 1,000,000 iterations.
     let t0 = counter.instructions();
-    let mut n: u32 = 1_000_000;
-    // SAFETY: a register-only countdown loop.
-    unsafe { core::arch::asm!("2:", "subs {0}, #1", "bne 2b", inout(reg) n) };
+    icount::calibration_loop(1_000_000);
     let t1 = counter.instructions();
-    hprintln!("calibration {} {}", 2 * 1_000_000u64, t1 - t0);
-    let _ = n;
+    say!("calibration {} {}", 2 * 1_000_000u64, t1 - t0);
 
     if &word(0).to_le_bytes() != b"PCRV" || word(1) != VERSION {
-        hprintln!("error no test vectors at {:#x}", BASE);
-        debug::exit(debug::EXIT_FAILURE);
+        say!("error no test vectors at {:#x}", BASE);
+        exit(false);
     }
     let (n_models, n_cases) = (word(2) as usize, word(3) as usize);
-    hprintln!("static_ram {}", stack::static_ram());
+    say!("static_ram {}", stack::static_ram());
     let cases = 4 + 2 * n_models;
     let mut line: String<LINE> = String::new();
     for m in 0..n_models {
@@ -140,7 +154,7 @@ fn main() -> ! {
         let model = match Int8Model::from_bytes(blob) {
             Ok(model) => model,
             Err(e) => {
-                hprintln!("model {} error {:?}", m, e);
+                say!("model {} error {:?}", m, e);
                 continue;
             }
         };
@@ -149,9 +163,9 @@ fn main() -> ! {
             let (cloud, tile) = (points(entry(1), entry(2)), entry(3) as usize);
             let baseline = stack::paint();
             let e0 = counter.instructions();
-            let encoded = model.encode_tiled(cloud, tile, SCRATCH_BUF).is_ok();
+            let encoded = model.encode_tiled(cloud, tile, scratch).is_ok();
             let e1 = counter.instructions();
-            let result = model.infer_tiled(cloud, tile, SCRATCH_BUF).map(|r| {
+            let result = model.infer_tiled(cloud, tile, scratch).map(|r| {
                 let pose = model.pose(&r.head);
                 (r, pose)
             });
@@ -188,7 +202,7 @@ fn main() -> ! {
             let iterations = entry(4) as usize;
             if iterations > 0 {
                 line.clear();
-                match model.network_pose(cloud, iterations, 0.0, SCRATCH_BUF) {
+                match model.network_pose(cloud, iterations, 0.0, scratch) {
                     Ok((p, n)) => {
                         let _ = write!(line, "case {c} iter ok {n}");
                         for v in p.rotation.iter().chain(&p.translation) {
@@ -206,7 +220,7 @@ fn main() -> ! {
                 let options = read_options(options_at + OPTIONS_WORDS * k);
                 let baseline = stack::paint();
                 let r0 = counter.instructions();
-                let result = model.register(cloud, &options, SCRATCH_BUF);
+                let result = model.register(cloud, &options, scratch);
                 let r1 = counter.instructions();
                 let peak = stack::used_below(baseline);
                 line.clear();
@@ -245,10 +259,6 @@ fn main() -> ! {
             }
         }
     }
-    hprintln!("done");
-    debug::exit(debug::EXIT_SUCCESS);
-    // Not reached under QEMU (semihosting exit ends the emulator).
-    loop {
-        cortex_m::asm::wfi();
-    }
+    say!("done");
+    exit(true)
 }
