@@ -215,20 +215,36 @@ const fn max_of(widths: &[u16], skip_last: bool) -> usize {
 /// ```
 /// const SCRATCH: usize = pcrnet_core::int8_scratch_len(&[32, 64, 256], &[128, 64], 4);
 /// static mut BUF: [i8; SCRATCH] = [0; SCRATCH];
-/// # assert_eq!(SCRATCH, 256 + 2 * 4 * 64);
+/// # assert_eq!(SCRATCH, 256 + 2 * 4 * 64 + 2 * 4 * 64 + 3);
 /// ```
 ///
 /// Layout: the source feature (F bytes), then an area used first by the
-/// encoder (two ping-pong tiles of `tile` x widest hidden encoder layer; the
-/// last encoder layer feeds the max-pool directly and needs no buffer) and
-/// then by the head (two ping-pong vectors of the widest hidden head layer;
-/// the head's first layer reads the template feature from the blob and the
-/// source feature in place, so the `2F` input is never copied).
+/// encoder (two ping-pong tiles of `tile` x widest hidden encoder layer `H`;
+/// the last encoder layer feeds the max-pool directly and needs no buffer;
+/// with `tile >= 4`, also the int16 copy of the activations of every full
+/// group of four points that the Cortex-M4/M7 kernel reads, `2 x (tile / 4
+/// x 4) x H` bytes plus 3 for alignment; the same on every target, so one
+/// figure sizes a buffer for any core) and then by the head (two ping-pong
+/// vectors of the widest hidden head layer; the head's first layer reads
+/// the template feature from the blob and the source feature in place, so
+/// the `2F` input is never copied).
 pub const fn int8_scratch_len(encoder: &[u16], head: &[u16], tile: usize) -> usize {
     let feature = last_or_zero(encoder);
-    let enc = 2 * tile * max_of(encoder, true);
+    let hidden = max_of(encoder, true);
+    let enc = 2 * tile * hidden + expanded_len(hidden, tile);
     let hd = 2 * max_of(head, false);
     feature + if enc > hd { enc } else { hd }
+}
+
+/// Bytes of the encoder's int16 activation copy for `tile` points of width
+/// `hidden` (see [`int8_scratch_len`]).
+pub(crate) const fn expanded_len(hidden: usize, tile: usize) -> usize {
+    let quads = tile / 4;
+    if quads == 0 || hidden == 0 {
+        0
+    } else {
+        2 * quads * 4 * hidden + 3
+    }
 }
 
 /// Elements of f32 scratch needed by an architecture (the f32 path runs one
@@ -256,7 +272,8 @@ mod tests {
         assert_eq!(a.encoder_macs_per_point(), 192 + 8192 + 8192 + 131072);
         let head: usize = 2048 * 1024 + 1024 * 1024 + 1024 * 512 + 512 * 512 + 512 * 256 + 256 * 7;
         assert_eq!(a.head_macs(), head);
-        assert_eq!(a.int8_scratch_len(8), 1024 + 2048);
+        // Ping-pong tiles of 8 x 128, and their int16 copy for the DSP kernel.
+        assert_eq!(a.int8_scratch_len(8), 1024 + 2048 + (2 * 8 * 128 + 3));
     }
 
     #[test]

@@ -23,7 +23,7 @@ use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong};
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
-use crate::kernel::{QValue, Requant, dense_tile, dot};
+use crate::kernel::{QValue, Requant, Sink, as_words, dense_tile, dense_tile_i8, dot};
 use crate::pose::{self, PointMap, Pose};
 use crate::registration::{self, Options, Registration};
 use crate::template::Template;
@@ -337,7 +337,10 @@ impl<'a> Int8Model<'a> {
         feature.fill(i8::MIN);
         let widths = &self.p.arch.encoder;
         let last = widths.len() - 1;
-        let (mut a, mut b) = ping_pong(work, tile * self.p.arch.widest_hidden_encoder())?;
+        let half = tile * self.p.arch.widest_hidden_encoder();
+        let (pairs, spare) = work.split_at_mut((2 * half).min(work.len()));
+        let (mut a, mut b) = ping_pong(pairs, half)?;
+        let expanded = as_words(spare);
         for (chunk_index, chunk) in source.chunks(tile).enumerate() {
             let mut q = [[0i16; INPUT_DIM]; MAX_TILE];
             for (i, (q, p)) in q.iter_mut().zip(chunk).enumerate() {
@@ -348,30 +351,21 @@ impl<'a> Int8Model<'a> {
             for (l, layer) in self.p.encoder.iter().enumerate() {
                 let outputs = widths[l] as usize;
                 let rq = requant(layer, true);
-                if l == last {
-                    let pool = |_t: usize, o: usize, v: i8| {
-                        if let Some(f) = feature.get_mut(o) {
-                            if v > *f {
-                                *f = v;
-                            }
-                        }
-                    };
-                    if l == 0 {
-                        dense_tile(layer.weights, inputs, rq, x0, pool);
-                    } else {
-                        dense_tile(layer.weights, inputs, rq, &a[..chunk.len() * inputs], pool);
-                    }
+                let mut sink = if l == last {
+                    Sink::Pool(&mut *feature)
                 } else {
-                    let store = |t: usize, o: usize, v: i8| {
-                        if let Some(y) = b.get_mut(t * outputs + o) {
-                            *y = v;
-                        }
-                    };
-                    if l == 0 {
-                        dense_tile(layer.weights, inputs, rq, x0, store);
-                    } else {
-                        dense_tile(layer.weights, inputs, rq, &a[..chunk.len() * inputs], store);
+                    Sink::Store {
+                        out: &mut *b,
+                        outputs,
                     }
+                };
+                if l == 0 {
+                    dense_tile(layer.weights, inputs, rq, x0, &mut sink);
+                } else {
+                    let x = &a[..chunk.len() * inputs];
+                    dense_tile_i8(layer.weights, inputs, rq, x, expanded, &mut sink);
+                }
+                if l != last {
                     core::mem::swap(&mut a, &mut b);
                 }
                 inputs = outputs;
@@ -407,15 +401,19 @@ impl<'a> Int8Model<'a> {
         let mut len = 0usize;
         for (layer, &width) in self.p.head.iter().zip(self.p.arch.head.iter()) {
             let rq = requant(layer, true);
-            let store = |_t: usize, o: usize, v: i8| {
-                if let Some(y) = b.get_mut(o) {
-                    *y = v;
-                }
-            };
             if len == 0 {
+                let store = |o: usize, v: i8| {
+                    if let Some(y) = b.get_mut(o) {
+                        *y = v;
+                    }
+                };
                 head_first_layer(layer.weights, f, rq, template, source_feature, store);
             } else {
-                dense_tile(layer.weights, len, rq, &a[..len], store);
+                let mut sink = Sink::Store {
+                    out: &mut *b,
+                    outputs: width as usize,
+                };
+                dense_tile(layer.weights, len, rq, &a[..len], &mut sink);
             }
             len = width as usize;
             saturated += count_saturated(&b[..len]);
@@ -493,7 +491,7 @@ fn head_first_layer(
     q: Requant<'_>,
     template: &[u8],
     source: &[i8],
-    mut emit: impl FnMut(usize, usize, i8),
+    mut emit: impl FnMut(usize, i8),
 ) {
     let rows = weights
         .chunks_exact(2 * f)
@@ -507,7 +505,7 @@ fn head_first_layer(
             q.zero_point,
             q.act_min,
         );
-        emit(0, o, v);
+        emit(o, v);
     }
 }
 

@@ -1,6 +1,6 @@
 //! The int8 dense kernel, used by every quantized layer.
 
-use crate::fixed::{requantize, to_activation};
+use crate::fixed::OutputStep;
 use crate::format::le_i32s;
 
 /// A stored quantized value that widens to `i32` for accumulation.
@@ -138,6 +138,9 @@ fn int8_dot<X: QValue>(w: &[u8], x: &[X], byte: impl Fn(X) -> u8) -> i32 {
 mod dsp {
     use core::arch::asm;
 
+    /// Rows per group of the encoder kernel ([`dot4`]).
+    pub const QUAD: usize = 4;
+
     /// Sign-extends bytes 0 and 2 into two 16-bit halves.
     #[inline(always)]
     pub fn sxtb16(x: u32) -> u32 {
@@ -171,6 +174,188 @@ mod dsp {
         };
         r
     }
+
+    /// Expands four rows of `inputs` int8 activations (`inputs % 4 == 0`)
+    /// into int16 pairs in the order [`dot4`] reads them: for every group
+    /// of four inputs `x[4g..4g+4]`, for each row in turn, the word
+    /// `(x[4g], x[4g+2])` then `(x[4g+1], x[4g+3])` (low half first), the
+    /// same pairing `SXTB16` and `SXTB16 ror #8` make of a weight word.
+    #[inline(always)]
+    pub fn expand_quad(rows: &[i8], inputs: usize, out: &mut [u32]) {
+        let groups = inputs / 4;
+        for (r, row) in rows.chunks_exact(inputs).take(QUAD).enumerate() {
+            for (g, x) in row.chunks_exact(4).take(groups).enumerate() {
+                let v = u32::from_le_bytes([x[0] as u8, x[1] as u8, x[2] as u8, x[3] as u8]);
+                let at = 2 * (QUAD * g + r);
+                if let Some(pair) = out.get_mut(at..at + 2) {
+                    pair[0] = sxtb16(v);
+                    pair[1] = sxtb16_ror8(v);
+                }
+            }
+        }
+    }
+
+    /// `init` plus four dot products of one int8 weight row with four rows'
+    /// expanded activations ([`expand_quad`]), over `min(w.len() / 4,
+    /// acts.len() / 8)` groups of four inputs (the bias rides in as `init`).
+    ///
+    /// Register plan, per group (15 instructions for 16 MACs):
+    /// `LDR` the weight word (post-increment), `SXTB16` it into the even
+    /// pair `we` and, rotated, the odd pair `w`; `LDM` the first two rows'
+    /// four activation words into r8-r11 (LDM fills ascending registers from
+    /// ascending addresses, so the list is fixed), two `SMLAD` per row into
+    /// `c0`, `c1`; the same for rows 3 and 4 into `c2`, `c3`; `SUBS`/`BNE`.
+    /// Eleven registers besides r8-r11: the allocator has r0-r6, r12 and lr.
+    #[inline(always)]
+    pub fn dot4(w: &[u8], acts: &[u32], init: i32) -> [i32; 4] {
+        let groups = (w.len() / 4).min(acts.len() / (2 * QUAD));
+        let (mut c0, mut c1, mut c2, mut c3) = (init, init, init, init);
+        if groups == 0 {
+            return [init; 4];
+        }
+        // SAFETY: the loop runs `groups >= 1` times; each turn reads 4
+        // bytes at `wp` and 32 bytes at `ap`, and both slices hold at least
+        // `groups` such blocks (checked above). `acts` is a `u32` slice, so
+        // `ap` is 4-byte aligned as LDM requires; `LDR` allows any alignment
+        // on ARMv7E-M. Nothing is written; the flags are clobbered (SUBS).
+        unsafe {
+            asm!(
+                "2:",
+                "ldr {w}, [{wp}], #4",
+                "sxtb16 {we}, {w}",
+                "sxtb16 {w}, {w}, ror #8",
+                "ldm {ap}!, {{r8, r9, r10, r11}}",
+                "smlad {c0}, {we}, r8, {c0}",
+                "smlad {c0}, {w}, r9, {c0}",
+                "smlad {c1}, {we}, r10, {c1}",
+                "smlad {c1}, {w}, r11, {c1}",
+                "ldm {ap}!, {{r8, r9, r10, r11}}",
+                "smlad {c2}, {we}, r8, {c2}",
+                "smlad {c2}, {w}, r9, {c2}",
+                "smlad {c3}, {we}, r10, {c3}",
+                "smlad {c3}, {w}, r11, {c3}",
+                "subs {n}, {n}, #1",
+                "bne 2b",
+                wp = inout(reg) w.as_ptr() => _,
+                ap = inout(reg) acts.as_ptr() => _,
+                n = inout(reg) groups => _,
+                w = out(reg) _,
+                we = out(reg) _,
+                c0 = inout(reg) c0,
+                c1 = inout(reg) c1,
+                c2 = inout(reg) c2,
+                c3 = inout(reg) c3,
+                out("r8") _,
+                out("r9") _,
+                out("r10") _,
+                out("r11") _,
+                options(nostack, readonly),
+            );
+        }
+        [c0, c1, c2, c3]
+    }
+}
+
+/// Views the scratch bytes left for expanded activations as aligned `u32`
+/// words (the DSP kernel loads them with `LDM`, which needs alignment).
+pub(crate) fn as_words(bytes: &mut [i8]) -> &mut [u32] {
+    // SAFETY: every bit pattern is a valid u32 and a valid i8, and
+    // `align_to_mut` only hands out the correctly aligned middle part.
+    #[allow(unsafe_code)]
+    let (_, words, _) = unsafe { bytes.align_to_mut::<u32>() };
+    words
+}
+
+/// One dense layer with int8 inputs over a tile of rows: [`dense_tile`]'s
+/// contract and results (bit for bit). On thumbv7em, rows go through the
+/// DSP kernel four at a time (`dsp::dot4`) when `inputs` is a multiple of
+/// 4 and `expanded` holds their int16 activations (`2 x inputs` words per
+/// group of four rows, see `arch::expanded_len`); the other rows, and every
+/// row elsewhere, take [`dense_tile`]'s path.
+#[inline(always)]
+pub(crate) fn dense_tile_i8(
+    weights: &[u8],
+    inputs: usize,
+    q: Requant<'_>,
+    x: &[i8],
+    expanded: &mut [u32],
+    sink: &mut Sink<'_>,
+) {
+    #[cfg(pcrnet_arm_dsp)]
+    {
+        use dsp::QUAD;
+        let per_quad = QUAD * inputs / 2;
+        let rows = x.len().checked_div(inputs).unwrap_or(0);
+        let quads = (rows / QUAD).min(expanded.len() / per_quad.max(1));
+        if inputs.is_multiple_of(4) && inputs > 0 && quads > 0 {
+            let (head, rest) = x.split_at(quads * QUAD * inputs);
+            for (quad, out) in head
+                .chunks_exact(QUAD * inputs)
+                .zip(expanded.chunks_exact_mut(per_quad))
+            {
+                dsp::expand_quad(quad, inputs, out);
+            }
+            let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
+            for (o, (row, ((bias, m), &s))) in weights.chunks_exact(inputs).zip(params).enumerate()
+            {
+                let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
+                for (k, quad) in expanded[..quads * per_quad]
+                    .chunks_exact(per_quad)
+                    .enumerate()
+                {
+                    sink.take(o, QUAD * k, &dsp::dot4(row, quad, bias), &step);
+                }
+            }
+            dense_tile_from(weights, inputs, q, rest, quads * QUAD, sink);
+            return;
+        }
+    }
+    let _ = expanded;
+    dense_tile(weights, inputs, q, x, sink)
+}
+
+/// Where a layer's int8 activations go.
+pub(crate) enum Sink<'a> {
+    /// Row `t`'s activation of output `o` is stored at `out[t * outputs + o]`.
+    Store {
+        /// The next layer's input tile.
+        out: &'a mut [i8],
+        /// Values per row.
+        outputs: usize,
+    },
+    /// Max-pool over rows: `feature[o] = max(feature[o], activation)`.
+    ///
+    /// The output step is non-decreasing in the accumulator (model loading
+    /// rejects negative multipliers, and rounding, the zero point and the
+    /// clamp all preserve order), so the largest activation over rows is
+    /// the activation of the largest accumulator: one output step per
+    /// output and group of rows instead of one per row, same bits.
+    Pool(&'a mut [i8]),
+}
+
+impl Sink<'_> {
+    /// Takes the accumulators of output `o` for rows `first..first +
+    /// accs.len()`.
+    #[inline(always)]
+    fn take(&mut self, o: usize, first: usize, accs: &[i32], step: &OutputStep) {
+        match self {
+            Sink::Store { out, outputs } => {
+                for (j, &acc) in accs.iter().enumerate() {
+                    if let Some(y) = out.get_mut((first + j) * *outputs + o) {
+                        *y = step.apply(acc);
+                    }
+                }
+            }
+            Sink::Pool(feature) => {
+                if let (Some(&acc), Some(f)) = (accs.iter().max(), feature.get_mut(o)) {
+                    let v = step.apply(acc);
+                    if v > *f {
+                        *f = v;
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Requantization parameters of one layer's output.
@@ -188,38 +373,51 @@ pub(crate) struct Requant<'a> {
 ///
 /// `x` holds `rows` rows of `inputs` values; `weights` holds `outputs` rows of
 /// `inputs` bytes. For every output channel `o` (outer loop, so a weight row
-/// is read once per tile) and row `t`, `emit(t, o, y)` receives the int8
-/// activation. Only the first `x.len() / inputs` rows are processed.
+/// is read once per tile) and row `t`, the int8 activation goes to `sink`.
+/// Only the first `x.len() / inputs` rows are processed.
 #[inline(always)]
 pub(crate) fn dense_tile<X: QValue>(
     weights: &[u8],
     inputs: usize,
     q: Requant<'_>,
     x: &[X],
-    mut emit: impl FnMut(usize, usize, i8),
+    sink: &mut Sink<'_>,
 ) {
+    dense_tile_from(weights, inputs, q, x, 0, sink)
+}
+
+/// [`dense_tile`] for rows numbered from `first`.
+#[inline(always)]
+fn dense_tile_from<X: QValue>(
+    weights: &[u8],
+    inputs: usize,
+    q: Requant<'_>,
+    x: &[X],
+    first: usize,
+    sink: &mut Sink<'_>,
+) {
+    if x.len() < inputs.max(1) {
+        return;
+    }
     let rows = weights
         .chunks_exact(inputs)
         .zip(le_i32s(q.bias))
         .zip(le_i32s(q.multiplier))
         .zip(q.shift);
-    let out = |acc: i32, m: i32, s: u8| {
-        to_activation(requantize(acc, m, s as i8), q.zero_point, q.act_min)
-    };
     for (o, (((row, bias), m), &s)) in rows.enumerate() {
+        let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
         // Two rows at a time share each weight load (see `dot2`).
         let mut pairs = x.chunks_exact(2 * inputs);
-        let mut t = 0;
+        let mut t = first;
         for pair in pairs.by_ref() {
             let (a, b) = pair.split_at(inputs);
             let (da, db) = X::dot2(row, a, b);
-            emit(t, o, out(bias.wrapping_add(da), m, s));
-            emit(t + 1, o, out(bias.wrapping_add(db), m, s));
+            sink.take(o, t, &[bias.wrapping_add(da), bias.wrapping_add(db)], &step);
             t += 2;
         }
         let rest = pairs.remainder();
         if rest.len() == inputs {
-            emit(t, o, out(bias.wrapping_add(dot(row, rest)), m, s));
+            sink.take(o, t, &[bias.wrapping_add(dot(row, rest))], &step);
         }
     }
 }
