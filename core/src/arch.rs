@@ -215,7 +215,8 @@ const fn max_of(widths: &[u16], skip_last: bool) -> usize {
 /// ```
 /// const SCRATCH: usize = pcrnet_core::int8_scratch_len(&[32, 64, 256], &[128, 64], 4);
 /// static mut BUF: [i8; SCRATCH] = [0; SCRATCH];
-/// # assert_eq!(SCRATCH, 256 + 2 * 4 * 64 + 2 * 4 * 64 + 3);
+/// // The feature, then the head's area (larger than the encoder's 1,027 B).
+/// # assert_eq!(SCRATCH, 256 + 2 * 128 + (2 * 512 + 3));
 /// ```
 ///
 /// Layout: the source feature (F bytes), then an area used first by the
@@ -225,14 +226,21 @@ const fn max_of(widths: &[u16], skip_last: bool) -> usize {
 /// group of four points that the Cortex-M4/M7 kernel reads, `2 x (tile / 4
 /// x 4) x H` bytes plus 3 for alignment; the same on every target, so one
 /// figure sizes a buffer for any core) and then by the head (two ping-pong
-/// vectors of the widest hidden head layer; the head's first layer reads
-/// the template feature from the blob and the source feature in place, so
-/// the `2F` input is never copied).
+/// vectors of the widest hidden head layer `W`, and the int16 copy of a
+/// layer's input vector for the Cortex-M4/M7 kernel, `2 x max(2F, W)`
+/// bytes plus 3; the first layer's input is the template feature, read
+/// from the blob, and the source feature).
 pub const fn int8_scratch_len(encoder: &[u16], head: &[u16], tile: usize) -> usize {
     let feature = last_or_zero(encoder);
     let hidden = max_of(encoder, true);
     let enc = 2 * tile * hidden + expanded_len(hidden, tile);
-    let hd = 2 * max_of(head, false);
+    let head_hidden = max_of(head, false);
+    let head_input = if 2 * feature > head_hidden {
+        2 * feature
+    } else {
+        head_hidden
+    };
+    let hd = 2 * head_hidden + 2 * head_input + 3;
     feature + if enc > hd { enc } else { hd }
 }
 
@@ -272,8 +280,9 @@ mod tests {
         assert_eq!(a.encoder_macs_per_point(), 192 + 8192 + 8192 + 131072);
         let head: usize = 2048 * 1024 + 1024 * 1024 + 1024 * 512 + 512 * 512 + 512 * 256 + 256 * 7;
         assert_eq!(a.head_macs(), head);
-        // Ping-pong tiles of 8 x 128, and their int16 copy for the DSP kernel.
-        assert_eq!(a.int8_scratch_len(8), 1024 + 2048 + (2 * 8 * 128 + 3));
+        // The head's area (ping-pong of 1024, int16 copy of the 2048
+        // inputs) is larger than the encoder's (4,099 B).
+        assert_eq!(a.int8_scratch_len(8), 1024 + 2 * 1024 + (2 * 2048 + 3));
     }
 
     #[test]
@@ -284,6 +293,7 @@ mod tests {
         let a = Arch::new(&[8], &[]).unwrap();
         assert_eq!(a.head_layers().count(), 1);
         assert_eq!(a.head_layers().next().unwrap().inputs, 16);
-        assert_eq!(a.int8_scratch_len(4), 8);
+        // The feature, then the int16 copy of the head's 16 inputs.
+        assert_eq!(a.int8_scratch_len(4), 8 + (2 * 16 + 3));
     }
 }

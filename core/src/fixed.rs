@@ -89,10 +89,16 @@ impl OutputStep {
     #[inline(always)]
     pub(crate) fn new(multiplier: i32, shift: i8, zero_point: i8, act_min: i8) -> Self {
         let shift = shift.clamp(MIN_SHIFT, MAX_SHIFT);
-        let r = (31 - shift as i32) as u32;
-        let high_shift = r.saturating_sub(32);
-        let offset = (r >= 33 && high_shift <= 21)
-            .then(|| (half(r) >> 32) as i32 + ((zero_point as i32) << high_shift));
+        // r - 32 = -1 - shift: the fast path needs 1 <= r - 32 <= 21.
+        let high_shift = (-1 - shift as i32).clamp(0, 31) as u32;
+        let offset = (-22..=-2).contains(&shift).then(|| {
+            let round = if ROUNDS_HALF_UP {
+                1i32 << (high_shift - 1)
+            } else {
+                0
+            };
+            round + ((zero_point as i32) << high_shift)
+        });
         OutputStep {
             multiplier,
             shift,
@@ -123,16 +129,16 @@ impl OutputStep {
     }
 }
 
+/// Whether requantization rounds half up (always, but for the QEMU
+/// harness's self-test: it proves it notices a changed rounding by building
+/// the device with the `mutate-rounding` feature, which truncates, i.e.
+/// rounds toward -infinity, instead).
+const ROUNDS_HALF_UP: bool = !cfg!(feature = "mutate-rounding");
+
 /// The rounding offset `2^(r-1)` (half toward +infinity).
 #[inline(always)]
 fn half(r: u32) -> i64 {
-    // The QEMU harness proves it notices a changed rounding by building the
-    // device with this feature: truncation (round toward -infinity) instead.
-    if cfg!(feature = "mutate-rounding") {
-        0
-    } else {
-        1i64 << (r - 1)
-    }
+    if ROUNDS_HALF_UP { 1i64 << (r - 1) } else { 0 }
 }
 
 /// Clamps an `i64` into the `i32` range.

@@ -21,9 +21,11 @@
 
 use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong};
 use crate::error::{Error, Result};
-use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, quantize_coordinate};
+use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, OutputStep, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
-use crate::kernel::{QValue, Requant, Sink, as_words, dense_tile, dense_tile_i8, dot};
+use crate::kernel::{
+    QValue, Requant, Sink, as_words, bytes_of, dense_tile, dense_tile_i8, dense_vector, dot,
+};
 use crate::pose::{self, PointMap, Pose};
 use crate::registration::{self, Options, Registration};
 use crate::template::Template;
@@ -394,25 +396,32 @@ impl<'a> Int8Model<'a> {
                 what: "source feature length",
             });
         }
-        let (mut a, mut b) = ping_pong(work, self.p.arch.widest_hidden_head())?;
+        let half = self.p.arch.widest_hidden_head();
+        let (pairs, spare) = work.split_at_mut((2 * half).min(work.len()));
+        let (mut a, mut b) = ping_pong(pairs, half)?;
+        let expanded = as_words(spare);
         let template = self.p.template_feature;
         // Current input: the concatenation (template, source) for the first
         // layer, then the previous layer's output in `a`.
         let mut len = 0usize;
         for (layer, &width) in self.p.head.iter().zip(self.p.arch.head.iter()) {
             let rq = requant(layer, true);
+            let mut sink = Sink::Store {
+                out: &mut *b,
+                outputs: width as usize,
+            };
             if len == 0 {
-                let store = |o: usize, v: i8| {
-                    if let Some(y) = b.get_mut(o) {
-                        *y = v;
-                    }
-                };
-                head_first_layer(layer.weights, f, rq, template, source_feature, store);
-            } else {
-                let mut sink = Sink::Store {
-                    out: &mut *b,
-                    outputs: width as usize,
-                };
+                let parts = [template, bytes_of(source_feature)];
+                if !dense_vector(layer.weights, &parts, rq, expanded, &mut sink) {
+                    head_first_layer(layer.weights, f, rq, template, source_feature, &mut sink);
+                }
+            } else if !dense_vector(
+                layer.weights,
+                &[bytes_of(&a[..len])],
+                rq,
+                expanded,
+                &mut sink,
+            ) {
                 dense_tile(layer.weights, len, rq, &a[..len], &mut sink);
             }
             len = width as usize;
@@ -491,7 +500,7 @@ fn head_first_layer(
     q: Requant<'_>,
     template: &[u8],
     source: &[i8],
-    mut emit: impl FnMut(usize, i8),
+    sink: &mut Sink<'_>,
 ) {
     let rows = weights
         .chunks_exact(2 * f)
@@ -500,12 +509,8 @@ fn head_first_layer(
         .zip(q.shift);
     for (o, (((row, bias), m), &s)) in rows.enumerate() {
         let acc = bias.wrapping_add(split_dot(row, template, source));
-        let v = crate::fixed::to_activation(
-            crate::fixed::requantize(acc, m, s as i8),
-            q.zero_point,
-            q.act_min,
-        );
-        emit(o, v);
+        let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
+        sink.take(o, 0, &[acc], &step);
     }
 }
 

@@ -195,17 +195,68 @@ mod dsp {
         }
     }
 
+    /// One group of [`dot4`]: four inputs of four rows.
+    macro_rules! dot4_group {
+        () => {
+            concat!(
+                "ldr {w}, [{wp}], #4\n",
+                "sxtb16 {we}, {w}\n",
+                "sxtb16 {w}, {w}, ror #8\n",
+                "ldm {ap}!, {{r8, r9, r10, r11}}\n",
+                "smlad {c0}, {we}, r8, {c0}\n",
+                "smlad {c0}, {w}, r9, {c0}\n",
+                "smlad {c1}, {we}, r10, {c1}\n",
+                "smlad {c1}, {w}, r11, {c1}\n",
+                "ldm {ap}!, {{r8, r9, r10, r11}}\n",
+                "smlad {c2}, {we}, r8, {c2}\n",
+                "smlad {c2}, {w}, r9, {c2}\n",
+                "smlad {c3}, {we}, r10, {c3}\n",
+                "smlad {c3}, {w}, r11, {c3}\n",
+            )
+        };
+    }
+
+    /// One group of [`dot_rows4`]: four inputs of four rows.
+    macro_rules! rows4_group {
+        () => {
+            concat!(
+                "ldrd {ae}, {ao}, [{ap}], #8\n",
+                "ldr {w}, [{r0}, {s}]\n",
+                "sxtb16 {we}, {w}\n",
+                "sxtb16 {w}, {w}, ror #8\n",
+                "smlad {c1}, {we}, {ae}, {c1}\n",
+                "smlad {c1}, {w}, {ao}, {c1}\n",
+                "ldr {w}, [{r0}], #4\n",
+                "sxtb16 {we}, {w}\n",
+                "sxtb16 {w}, {w}, ror #8\n",
+                "smlad {c0}, {we}, {ae}, {c0}\n",
+                "smlad {c0}, {w}, {ao}, {c0}\n",
+                "ldr {w}, [{r2}, {s}]\n",
+                "sxtb16 {we}, {w}\n",
+                "sxtb16 {w}, {w}, ror #8\n",
+                "smlad {c3}, {we}, {ae}, {c3}\n",
+                "smlad {c3}, {w}, {ao}, {c3}\n",
+                "ldr {w}, [{r2}], #4\n",
+                "sxtb16 {we}, {w}\n",
+                "sxtb16 {w}, {w}, ror #8\n",
+                "smlad {c2}, {we}, {ae}, {c2}\n",
+                "smlad {c2}, {w}, {ao}, {c2}\n",
+            )
+        };
+    }
+
     /// `init` plus four dot products of one int8 weight row with four rows'
     /// expanded activations ([`expand_quad`]), over `min(w.len() / 4,
     /// acts.len() / 8)` groups of four inputs (the bias rides in as `init`).
     ///
-    /// Register plan, per group (15 instructions for 16 MACs):
+    /// Register plan, per group (13 instructions for 16 MACs, and a
+    /// `SUBS`/`BNE` every two groups: 0.875 instructions per MAC):
     /// `LDR` the weight word (post-increment), `SXTB16` it into the even
     /// pair `we` and, rotated, the odd pair `w`; `LDM` the first two rows'
     /// four activation words into r8-r11 (LDM fills ascending registers from
     /// ascending addresses, so the list is fixed), two `SMLAD` per row into
-    /// `c0`, `c1`; the same for rows 3 and 4 into `c2`, `c3`; `SUBS`/`BNE`.
-    /// Eleven registers besides r8-r11: the allocator has r0-r6, r12 and lr.
+    /// `c0`, `c1`; the same for rows 3 and 4 into `c2`, `c3`.
+    /// Nine registers besides r8-r11: the allocator has r0-r6, r12 and lr.
     #[inline(always)]
     pub fn dot4(w: &[u8], acts: &[u32], init: i32) -> [i32; 4] {
         let groups = (w.len() / 4).min(acts.len() / (2 * QUAD));
@@ -213,29 +264,26 @@ mod dsp {
         if groups == 0 {
             return [init; 4];
         }
-        // SAFETY: the loop runs `groups >= 1` times; each turn reads 4
-        // bytes at `wp` and 32 bytes at `ap`, and both slices hold at least
-        // `groups` such blocks (checked above). `acts` is a `u32` slice, so
+        // SAFETY: `groups >= 1` groups run (an odd one, then pairs); each
+        // reads 4 bytes at `wp` and 32 bytes at `ap`, and both slices hold
+        // at least `groups` such blocks (checked above). `acts` is a `u32` slice, so
         // `ap` is 4-byte aligned as LDM requires; `LDR` allows any alignment
         // on ARMv7E-M. Nothing is written; the flags are clobbered (SUBS).
         unsafe {
             asm!(
+                // An odd group first, then two groups a turn.
+                "tst {n}, #1",
+                "beq 2f",
+                dot4_group!(),
                 "2:",
-                "ldr {w}, [{wp}], #4",
-                "sxtb16 {we}, {w}",
-                "sxtb16 {w}, {w}, ror #8",
-                "ldm {ap}!, {{r8, r9, r10, r11}}",
-                "smlad {c0}, {we}, r8, {c0}",
-                "smlad {c0}, {w}, r9, {c0}",
-                "smlad {c1}, {we}, r10, {c1}",
-                "smlad {c1}, {w}, r11, {c1}",
-                "ldm {ap}!, {{r8, r9, r10, r11}}",
-                "smlad {c2}, {we}, r8, {c2}",
-                "smlad {c2}, {w}, r9, {c2}",
-                "smlad {c3}, {we}, r10, {c3}",
-                "smlad {c3}, {w}, r11, {c3}",
+                "lsrs {n}, {n}, #1",
+                "beq 4f",
+                "3:",
+                dot4_group!(),
+                dot4_group!(),
                 "subs {n}, {n}, #1",
-                "bne 2b",
+                "bne 3b",
+                "4:",
                 wp = inout(reg) w.as_ptr() => _,
                 ap = inout(reg) acts.as_ptr() => _,
                 n = inout(reg) groups => _,
@@ -253,6 +301,88 @@ mod dsp {
             );
         }
         [c0, c1, c2, c3]
+    }
+
+    /// Expands int8 values (as bytes, `len % 4 == 0`) to the int16 pairs
+    /// [`dot_rows4`] reads: per group of four, `(x0, x2)` then `(x1, x3)`.
+    #[inline(always)]
+    pub fn expand_vector(x: &[u8], out: &mut [u32]) {
+        for (x, pair) in x.chunks_exact(4).zip(out.chunks_exact_mut(2)) {
+            let v = u32::from_le_bytes([x[0], x[1], x[2], x[3]]);
+            pair[0] = sxtb16(v);
+            pair[1] = sxtb16_ror8(v);
+        }
+    }
+
+    /// `init[j]` plus the dot product of weight row `j` (rows `stride`
+    /// bytes apart in `w`) with the expanded vector `acts`
+    /// ([`expand_vector`]), for the four rows, over `min(stride, 2 x
+    /// acts.len()) / 4` groups of four inputs (none if `w` is shorter than
+    /// four rows).
+    ///
+    /// Register plan, per group (21 instructions for 16 MACs, and a
+    /// `SUBS`/`BNE` every two groups: 1.375 instructions per MAC): `LDRD` the
+    /// group's two activation words; for each row, `LDR` its weight word,
+    /// `SXTB16` it into the even pair `we` and, rotated, the odd pair `w`,
+    /// and two `SMLAD`; `SUBS`/`BNE`. Rows 0 and 2 are addressed by `r0`
+    /// and `r2`, which advance 4 bytes a group; rows 1 and 3 at `+stride`
+    /// from them. Thirteen registers: all the allocator has.
+    #[inline(always)]
+    pub fn dot_rows4(w: &[u8], stride: usize, acts: &[u32], init: [i32; 4]) -> [i32; 4] {
+        let groups = stride.min(2 * acts.len()) / 4;
+        let [mut c0, mut c1, mut c2, mut c3] = init;
+        if groups == 0 || w.len() < 4 * stride {
+            return init;
+        }
+        // SAFETY: `groups >= 1` groups run (an odd one, then pairs); group
+        // `g` reads the words at `4g` bytes into rows 0..4 (each `stride >= 4 * groups`
+        // bytes long, all inside `w`, checked above) and 8 bytes at `8g`
+        // into `acts` (`acts.len() >= 2 * groups` words). `acts` is a `u32`
+        // slice, so LDRD's address is 4-byte aligned as it requires; `LDR`
+        // allows any alignment on ARMv7E-M. Nothing is written; the flags
+        // are clobbered (SUBS).
+        unsafe {
+            asm!(
+                // An odd group first, then two groups a turn.
+                "tst {n}, #1",
+                "beq 2f",
+                rows4_group!(),
+                "2:",
+                "lsrs {n}, {n}, #1",
+                "beq 4f",
+                "3:",
+                rows4_group!(),
+                rows4_group!(),
+                "subs {n}, {n}, #1",
+                "bne 3b",
+                "4:",
+                r0 = inout(reg) w.as_ptr() => _,
+                r2 = inout(reg) w.as_ptr().wrapping_add(2 * stride) => _,
+                s = in(reg) stride,
+                ap = inout(reg) acts.as_ptr() => _,
+                n = inout(reg) groups => _,
+                ae = out(reg) _,
+                ao = out(reg) _,
+                w = out(reg) _,
+                we = out(reg) _,
+                c0 = inout(reg) c0,
+                c1 = inout(reg) c1,
+                c2 = inout(reg) c2,
+                c3 = inout(reg) c3,
+                options(nostack, readonly),
+            );
+        }
+        [c0, c1, c2, c3]
+    }
+}
+
+/// int8 values as the bytes they are stored in.
+pub(crate) fn bytes_of(x: &[i8]) -> &[u8] {
+    // SAFETY: i8 and u8 have the same size and alignment, and every bit
+    // pattern is valid for both; the slice keeps `x`'s lifetime.
+    #[allow(unsafe_code)]
+    unsafe {
+        core::slice::from_raw_parts(x.as_ptr() as *const u8, x.len())
     }
 }
 
@@ -314,6 +444,87 @@ pub(crate) fn dense_tile_i8(
     dense_tile(weights, inputs, q, x, sink)
 }
 
+/// A dense layer on one vector, the concatenation of `parts` (int8 values
+/// as bytes; the head's first layer reads the template feature from the
+/// blob and the source feature from scratch): `sink` gets row 0's
+/// activations, as [`dense_tile`] on the concatenated vector would give
+/// them (bit for bit). Returns `false`, having done nothing, where the
+/// kernel does not apply: on targets without the DSP kernel, with a part
+/// whose length is not a multiple of 4, or with `expanded` smaller than
+/// the vector's int16 copy (`inputs / 2` words).
+///
+/// On thumbv7em the vector is expanded to int16 pairs once and four weight
+/// rows share each pair of activation words (`dsp::dot_rows4`).
+#[inline(always)]
+pub(crate) fn dense_vector(
+    weights: &[u8],
+    parts: &[&[u8]],
+    q: Requant<'_>,
+    expanded: &mut [u32],
+    sink: &mut Sink<'_>,
+) -> bool {
+    #[cfg(pcrnet_arm_dsp)]
+    {
+        let inputs: usize = parts.iter().map(|p| p.len()).sum();
+        let words = inputs / 2;
+        if inputs == 0 || parts.iter().any(|p| !p.len().is_multiple_of(4)) || expanded.len() < words
+        {
+            return false;
+        }
+        let mut at = 0;
+        for part in parts {
+            dsp::expand_vector(part, &mut expanded[at..at + part.len() / 2]);
+            at += part.len() / 2;
+        }
+        let acts = &expanded[..words];
+        let word = |b: &[u8]| i32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        let groups = weights
+            .chunks_exact(4 * inputs)
+            .zip(q.bias.chunks_exact(16))
+            .zip(q.multiplier.chunks_exact(16))
+            .zip(q.shift.chunks_exact(4));
+        let mut o = 0;
+        for (((rows, bias), m), shift) in groups {
+            let init = [
+                word(bias),
+                word(&bias[4..]),
+                word(&bias[8..]),
+                word(&bias[12..]),
+            ];
+            let accs = dsp::dot_rows4(rows, inputs, acts, init);
+            for (j, acc) in accs.into_iter().enumerate() {
+                let step =
+                    OutputStep::new(word(&m[4 * j..]), shift[j] as i8, q.zero_point, q.act_min);
+                sink.take(o + j, 0, &[acc], &step);
+            }
+            o += 4;
+        }
+        // The last rows (fewer than four), one at a time.
+        let rest = weights
+            .chunks_exact(inputs)
+            .skip(o)
+            .zip(le_i32s(&q.bias[4 * o..]));
+        let rest = rest.zip(le_i32s(&q.multiplier[4 * o..])).zip(&q.shift[o..]);
+        for (((row, b), m), &s) in rest {
+            let mut acc = b;
+            let mut k = 0;
+            for part in parts {
+                acc = acc.wrapping_add(dot(&row[k..k + part.len()], part));
+                k += part.len();
+            }
+            let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
+            sink.take(o, 0, &[acc], &step);
+            o += 1;
+        }
+        true
+    }
+    #[cfg(not(pcrnet_arm_dsp))]
+    {
+        let _ = (weights, parts, q, expanded, sink);
+        false
+    }
+}
+
 /// Where a layer's int8 activations go.
 pub(crate) enum Sink<'a> {
     /// Row `t`'s activation of output `o` is stored at `out[t * outputs + o]`.
@@ -337,7 +548,7 @@ impl Sink<'_> {
     /// Takes the accumulators of output `o` for rows `first..first +
     /// accs.len()`.
     #[inline(always)]
-    fn take(&mut self, o: usize, first: usize, accs: &[i32], step: &OutputStep) {
+    pub(crate) fn take(&mut self, o: usize, first: usize, accs: &[i32], step: &OutputStep) {
         match self {
             Sink::Store { out, outputs } => {
                 for (j, &acc) in accs.iter().enumerate() {

@@ -240,8 +240,8 @@ fn paper_architecture_runs() {
         pcrnet_core::arch::PCRNET_HEAD,
     );
     let model = Int8Model::from_bytes(&b).unwrap();
-    // Feature, ping-pong tiles of 8 x 128, their int16 copy (see `int8_scratch_len`).
-    assert_eq!(model.scratch_len(8), 1024 + 2048 + (2 * 8 * 128 + 3));
+    // Feature, then the head's area (see `int8_scratch_len`).
+    assert_eq!(model.scratch_len(8), 1024 + 2 * 1024 + (2 * 2048 + 3));
     let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
     let pts = cloud(62, 40, 1.0);
     let got = model.infer(&pts, &mut s).unwrap();
