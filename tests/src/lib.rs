@@ -12,10 +12,12 @@
 //!    the host's, naming the first that differs;
 //! 4. [`elf`] reads flash and RAM sizes from the firmware images;
 //! 5. [`c_example`] does the same for the C firmware example, through the
-//!    C API.
+//!    C API;
+//! 6. [`layers`] measures instructions per MAC layer by layer.
 
 pub mod c_example;
 pub mod compare;
 pub mod elf;
+pub mod layers;
 pub mod qemu;
 pub mod vectors;

@@ -3,6 +3,7 @@
 //!
 //! ```text
 //! qemu-harness run [--board MACHINE] [--mutate-device-rounding] [--timeout SECS]
+//! qemu-harness layers [--board MACHINE]
 //! qemu-harness size
 //! qemu-harness c-example
 //! ```
@@ -28,7 +29,7 @@ use pcrnet_qemu_tests::vectors::{
     Case, TestModel, clouds_for, container, describe, doubled, expected, expected_iterative,
     expected_registrations, random_model, random_model_with, read_cloud,
 };
-use pcrnet_qemu_tests::{c_example, elf, qemu};
+use pcrnet_qemu_tests::{c_example, elf, layers, qemu};
 
 /// The shipped model that gets the realistic sources.
 const SHIPPED_DEFAULT: &str = "embedded-default-int8.pcrn";
@@ -257,9 +258,49 @@ struct Args {
 }
 
 fn run(args: Args) -> anyhow::Result<bool> {
+    let plans = models(args.board.cases)?;
+    Ok(run_plans(&args, &plans, false)?.0)
+}
+
+/// Per-layer instructions per MAC (see `layers`): the prefix models, each
+/// on one 1,024-point cloud (and the few invalid clouds every model gets),
+/// in batches that fit the data region, checked bit for bit like every run.
+fn run_layers(args: Args) -> anyhow::Result<bool> {
+    let prefixes = layers::prefixes();
+    let mut measurements = Vec::new();
+    let mut ok = true;
+    for batch in layers::batches(&prefixes) {
+        let plans: Vec<Plan> = prefixes[batch]
+            .iter()
+            .map(|p| Plan {
+                model: TestModel {
+                    name: p.model.name.clone(),
+                    blob: p.model.blob.clone(),
+                },
+                sizes: vec![layers::POINTS],
+                sources: Vec::new(),
+                options: Vec::new(),
+            })
+            .collect();
+        let (passed, mut m) = run_plans(&args, &plans, true)?;
+        ok &= passed;
+        measurements.append(&mut m);
+    }
+    layers::report(&prefixes, &measurements)?;
+    Ok(ok)
+}
+
+/// Runs `plans` on the device and compares; prints the usual report unless
+/// `quiet`. Returns whether everything agreed, and each model's `(encode,
+/// infer)` instructions on its 1,024-point uniform cloud.
+fn run_plans(
+    args: &Args,
+    plans: &[Plan],
+    quiet: bool,
+) -> anyhow::Result<(bool, Vec<layers::Measurement>)> {
     let root = qemu::workspace_root();
     let board = args.board;
-    let (models, cases) = build_cases(&models(board.cases)?);
+    let (models, cases) = build_cases(plans);
     let expect: Vec<_> = cases
         .iter()
         .map(|c| {
@@ -362,10 +403,15 @@ fn run(args: Args) -> anyhow::Result<bool> {
              and {registrations_differ} of {registrations} registrations (they must)",
             cases.len()
         );
-        return Ok(failed > 0 && registrations_differ > 0);
+        return Ok((failed > 0 && registrations_differ > 0, Vec::new()));
     }
 
-    report(&models, &cases, &device, &elf)?;
+    let measurements = (0..models.len())
+        .map(|m| layers::measured(&cases, &device, m))
+        .collect();
+    if !quiet {
+        report(&models, &cases, &device, &elf)?;
+    }
     if !complete {
         println!("device run incomplete (no `done`, or unparsed lines)");
     }
@@ -377,7 +423,7 @@ fn run(args: Args) -> anyhow::Result<bool> {
         "{} ({}): {passed} passed, {failed} failed",
         board.machine, board.core
     );
-    Ok(failed == 0 && complete)
+    Ok((failed == 0 && complete, measurements))
 }
 
 fn report(
@@ -560,8 +606,9 @@ fn main() -> ExitCode {
     let result = parse_args().and_then(|(command, args)| match command.as_str() {
         "run" => run(args),
         "size" => size().map(|()| true),
+        "layers" => run_layers(args),
         "c-example" => c_example::run(args.timeout).map(|()| true),
-        other => anyhow::bail!("unknown command {other} (run | size | c-example)"),
+        other => anyhow::bail!("unknown command {other} (run | layers | size | c-example)"),
     });
     match result {
         Ok(true) => ExitCode::SUCCESS,

@@ -22,7 +22,8 @@ cargo xtask <command>
                 `pcrnet register`
   qemu-test     run core on an emulated Cortex-M4F and compare every output
                 with the host bit for bit; then prove a changed rounding on
-                the device is caught
+                the device is caught; then instructions per MAC layer by
+                layer (M4F and M7)
   cores         the QEMU harness on the other cores (Cortex-M3 mps2-an385,
                 M7 mps2-an500, M33 mps2-an505, RISC-V rv32imac virt: cases
                 up to 1,024 points, no paper-size model; M0 microbit: the
@@ -183,7 +184,15 @@ fn qemu_test() -> Result<(), String> {
     ensure_target()?;
     ensure_qemu()?;
     harness(&["run"])?;
-    harness(&["run", "--mutate-device-rounding"])
+    harness(&["run", "--mutate-device-rounding"])?;
+    layers()
+}
+
+/// Instructions per MAC layer by layer on the Cortex-M4F and the M7 (the
+/// same binary: the counts agree), every prefix model bit-exact.
+fn layers() -> Result<(), String> {
+    harness(&["layers"])?;
+    harness(&["layers", "--board", "mps2-an500"])
 }
 
 fn firmware_run() -> Result<(), String> {
