@@ -24,7 +24,8 @@ use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, OutputStep, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
 use crate::kernel::{
-    QValue, Requant, Sink, as_words, bytes_of, dense_tile, dense_tile_i8, dense_vector, dot,
+    QValue, Requant, Sink, as_words, bytes_of, dense_points, dense_tile, dense_tile_i8,
+    dense_vector, dot,
 };
 use crate::pose::{self, PointMap, Pose};
 use crate::registration::{self, Options, Registration};
@@ -362,7 +363,7 @@ impl<'a> Int8Model<'a> {
                     }
                 };
                 if l == 0 {
-                    dense_tile(layer.weights, inputs, rq, x0, &mut sink);
+                    dense_points(layer.weights, rq, x0, &mut sink);
                 } else {
                     let x = &a[..chunk.len() * inputs];
                     dense_tile_i8(layer.weights, inputs, rq, x, expanded, &mut sink);

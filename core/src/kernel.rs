@@ -34,13 +34,6 @@ impl QValue for i8 {
     }
 }
 
-impl QValue for i16 {
-    #[inline(always)]
-    fn widen(self) -> i32 {
-        self as i32
-    }
-}
-
 /// An int8 value stored as a byte of a blob.
 impl QValue for u8 {
     #[inline(always)]
@@ -442,6 +435,36 @@ pub(crate) fn dense_tile_i8(
     }
     let _ = expanded;
     dense_tile(weights, inputs, q, x, sink)
+}
+
+/// The first encoder layer: `points` holds the tile's int16 coordinates,
+/// three per point (`x y z`). [`dense_tile`]'s contract and results (bit for
+/// bit) for three inputs, with the per-output work done once per output
+/// and tile: the three weights, the bias and the output step are read
+/// once, then each point costs three multiply-adds.
+#[inline(always)]
+pub(crate) fn dense_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink: &mut Sink<'_>) {
+    const DIM: usize = crate::arch::INPUT_DIM;
+    const MAX: usize = crate::arch::MAX_TILE;
+    let rows = weights
+        .chunks_exact(DIM)
+        .zip(le_i32s(q.bias))
+        .zip(le_i32s(q.multiplier))
+        .zip(q.shift);
+    for (o, (((row, bias), m), &s)) in rows.enumerate() {
+        let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
+        let w = [0, 1, 2].map(|k| row[k] as i8 as i32);
+        for (c, chunk) in points.chunks(DIM * MAX).enumerate() {
+            let mut accs = [0i32; MAX];
+            let mut n = 0;
+            for (acc, p) in accs.iter_mut().zip(chunk.chunks_exact(DIM)) {
+                let dot = w[0] * p[0] as i32 + w[1] * p[1] as i32 + w[2] * p[2] as i32;
+                *acc = bias.wrapping_add(dot);
+                n += 1;
+            }
+            sink.take(o, c * MAX, &accs[..n], &step);
+        }
+    }
 }
 
 /// A dense layer on one vector, the concatenation of `parts` (int8 values
