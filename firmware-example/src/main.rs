@@ -9,7 +9,7 @@
 //! keep its last good pose or ask for another view).
 //!
 //! Memory (embedded default architecture, tile 8): model blob in flash
-//! (~224 KB), scratch 2,304 B and the cloud 12 B/point in RAM; stack and
+//! (~230 KB), scratch 4,355 B and the cloud 12 B/point in RAM; stack and
 //! totals are measured by `cargo xtask size` / `cargo xtask qemu-test`.
 #![no_std]
 #![no_main]
