@@ -203,7 +203,10 @@ impl<P: Params> F32Network<P> {
             });
         }
         for (s, l) in shapes.zip(layers.iter()) {
-            if l.weights.len() != s.inputs * s.outputs || l.bias.len() != s.outputs {
+            // Checked: on a 32-bit core a head of 131,070 x 32,769 wraps
+            // to a small count and would pass an unchecked comparison.
+            if s.inputs.checked_mul(s.outputs) != Some(l.weights.len()) || l.bias.len() != s.outputs
+            {
                 return Err(Error::InconsistentDimensions {
                     what: "layer weights",
                 });
