@@ -4,6 +4,8 @@
 //! target through rustup, QEMU through apt-get), so a fresh machine needs
 //! only a Rust toolchain.
 
+mod profile;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
@@ -29,6 +31,8 @@ cargo xtask <command>
                 up to 1,024 points, no paper-size model; M0 microbit: the
                 small random models), each bit-exact with the host
   firmware-run  build firmware-example and run it under QEMU
+  profile       run firmware-example under QEMU with instruction tracing
+                and print the instructions per function and hottest blocks
   size          flash and static RAM of firmware-example
   c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
                 linking libpcrnet.a), run it under QEMU and compare every
@@ -57,6 +61,9 @@ fn main() -> ExitCode {
         Some("cores") => cores(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
         Some("firmware-run") => firmware_run(),
+        Some("profile") => ensure_target()
+            .and_then(|()| ensure_qemu())
+            .and_then(|()| profile::run(&root())),
         Some("c-example") => c_example(),
         Some("c-header") => c_header(args.get(1).map(String::as_str) == Some("--check")),
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
