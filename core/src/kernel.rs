@@ -188,6 +188,28 @@ mod dsp {
         }
     }
 
+    /// The loop both kernels run around their group body (a macro giving
+    /// the assembly of one group): an odd group first, then two groups a
+    /// turn, counting `{n}` groups down; `{n}` must be at least 1.
+    macro_rules! groups_unrolled_twice {
+        ($group:ident) => {
+            concat!(
+                "tst {n}, #1\n",
+                "beq 2f\n",
+                $group!(),
+                "2:\n",
+                "lsrs {n}, {n}, #1\n",
+                "beq 4f\n",
+                "3:\n",
+                $group!(),
+                $group!(),
+                "subs {n}, {n}, #1\n",
+                "bne 3b\n",
+                "4:\n",
+            )
+        };
+    }
+
     /// One group of [`dot4`]: four inputs of four rows.
     macro_rules! dot4_group {
         () => {
@@ -264,19 +286,7 @@ mod dsp {
         // on ARMv7E-M. Nothing is written; the flags are clobbered (SUBS).
         unsafe {
             asm!(
-                // An odd group first, then two groups a turn.
-                "tst {n}, #1",
-                "beq 2f",
-                dot4_group!(),
-                "2:",
-                "lsrs {n}, {n}, #1",
-                "beq 4f",
-                "3:",
-                dot4_group!(),
-                dot4_group!(),
-                "subs {n}, {n}, #1",
-                "bne 3b",
-                "4:",
+                groups_unrolled_twice!(dot4_group),
                 wp = inout(reg) w.as_ptr() => _,
                 ap = inout(reg) acts.as_ptr() => _,
                 n = inout(reg) groups => _,
@@ -336,19 +346,7 @@ mod dsp {
         // are clobbered (SUBS).
         unsafe {
             asm!(
-                // An odd group first, then two groups a turn.
-                "tst {n}, #1",
-                "beq 2f",
-                rows4_group!(),
-                "2:",
-                "lsrs {n}, {n}, #1",
-                "beq 4f",
-                "3:",
-                rows4_group!(),
-                rows4_group!(),
-                "subs {n}, {n}, #1",
-                "bne 3b",
-                "4:",
+                groups_unrolled_twice!(rows4_group),
                 r0 = inout(reg) w.as_ptr() => _,
                 r2 = inout(reg) w.as_ptr().wrapping_add(2 * stride) => _,
                 s = in(reg) stride,
