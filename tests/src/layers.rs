@@ -124,10 +124,8 @@ pub fn report(prefixes: &[Prefix], measurements: &[Measurement]) -> anyhow::Resu
                 .iter()
                 .position(|p| p.arch == a && p.encoder == e && p.head == h);
             let found = m.and_then(|m| {
-                let arch = Int8Model::from_bytes(&prefixes[m].model.blob)
-                    .ok()?
-                    .arch()
-                    .clone();
+                let model = Int8Model::from_bytes(&prefixes[m].model.blob).ok()?;
+                let arch = model.arch();
                 let (encode, infer) = (*measurements.get(m)?)?;
                 Some((
                     encode / n,

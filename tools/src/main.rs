@@ -9,7 +9,10 @@ mod profile;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
-const TARGET: &str = "thumbv7em-none-eabihf";
+use pcrnet_qemu_tests::qemu::BOARDS;
+
+/// The default board's target (Cortex-M4F).
+const TARGET: &str = BOARDS[0].target;
 
 const HELP: &str = "\
 cargo xtask <command>
@@ -123,26 +126,19 @@ fn ensure_targets(targets: &[&str]) -> Result<(), String> {
     run("rustup", &args)
 }
 
-/// The boards `cores` runs besides the default mps2-an386, with their
-/// Rust targets (the harness's `qemu::BOARDS` describes each).
-const OTHER_BOARDS: [(&str, &str); 5] = [
-    ("mps2-an385", "thumbv7m-none-eabi"),
-    ("mps2-an500", "thumbv7em-none-eabihf"),
-    ("mps2-an505", "thumbv8m.main-none-eabihf"),
-    ("microbit", "thumbv6m-none-eabi"),
-    ("virt", "riscv32imac-unknown-none-elf"),
-];
-
 /// The QEMU harness on every other core (a subset of the cases: no
 /// paper-size model, clouds up to 1,024 points; the micro:bit's 16 KiB of
 /// RAM takes the random models up to 300 points), each bit-exact with the host.
 fn cores() -> Result<(), String> {
-    let targets: Vec<&str> = OTHER_BOARDS.iter().map(|(_, t)| *t).collect();
+    let others = &BOARDS[1..];
+    let targets: Vec<&str> = others.iter().map(|b| b.target).collect();
     ensure_targets(&targets)?;
     ensure_qemu()?;
-    ensure_apt("qemu-system-riscv32", &["qemu-system-misc"])?;
-    for (board, _) in OTHER_BOARDS {
-        harness(&["run", "--board", board])?;
+    if others.iter().any(|b| b.qemu == "qemu-system-riscv32") {
+        ensure_apt("qemu-system-riscv32", &["qemu-system-misc"])?;
+    }
+    for board in others {
+        harness(&["run", "--board", board.machine])?;
     }
     Ok(())
 }
