@@ -67,6 +67,21 @@ pub struct PcrnetModel {
     storage: [u64; PCRNET_MODEL_WORDS],
 }
 
+impl PcrnetModel {
+    /// A handle that is not loaded yet (all zeros, as a C `static` is).
+    pub const fn new() -> Self {
+        PcrnetModel {
+            storage: [0; PCRNET_MODEL_WORDS],
+        }
+    }
+}
+
+impl Default for PcrnetModel {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 // The handle must hold the Rust model on every target.
 const _: () = assert!(size_of::<Int8Model<'static>>() <= size_of::<PcrnetModel>());
 const _: () = assert!(align_of::<Int8Model<'static>>() <= align_of::<PcrnetModel>());
@@ -593,11 +608,24 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
     text.as_ptr()
 }
 
+/// The static library's panic handler on bare-metal targets. No panic is
+/// reachable from any input: with the `prove-no-panic` feature the handler
+/// calls a function that exists nowhere, so linking a firmware that calls
+/// this API fails if a panic path survived optimisation (`cargo xtask
+/// no-panic` does this for every function here and in `pcrnet-core`).
 #[cfg(target_os = "none")]
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
-    // Not reachable from any input (the core crate's promise); a firmware
-    // that links its own handler builds this crate without `--crate-type staticlib`.
+    #[cfg(feature = "prove-no-panic")]
+    {
+        unsafe extern "C" {
+            /// Defined nowhere: referencing it fails the link.
+            fn pcrnet_core_can_panic() -> !;
+        }
+        // SAFETY: never runs; the link fails first if this is reachable.
+        unsafe { pcrnet_core_can_panic() }
+    }
+    #[cfg(not(feature = "prove-no-panic"))]
     loop {
         core::hint::spin_loop();
     }

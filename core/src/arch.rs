@@ -168,11 +168,23 @@ impl Arch {
 /// reports how much scratch was missing.
 pub(crate) fn ping_pong<T>(work: &mut [T], half: usize) -> Result<(&mut [T], &mut [T])> {
     let available = work.len();
-    let needed = 2 * half;
-    let work = work
-        .get_mut(..needed)
+    let needed = half.saturating_mul(2);
+    let (a, rest) = work
+        .split_at_mut_checked(half)
         .ok_or(Error::ScratchTooSmall { needed, available })?;
-    Ok(work.split_at_mut(half))
+    let b = rest
+        .get_mut(..half)
+        .ok_or(Error::ScratchTooSmall { needed, available })?;
+    Ok((a, b))
+}
+
+/// The first `n` elements of a working buffer. Buffers are sized from the
+/// validated architecture, so the error is unreachable; it stands where a
+/// slice index would leave a panic path for the compiler to keep.
+pub(crate) fn prefix<T>(s: &[T], n: usize) -> Result<&[T]> {
+    s.get(..n).ok_or(Error::InconsistentDimensions {
+        what: "layer input wider than its buffer",
+    })
 }
 
 fn chain_layers(
@@ -193,18 +205,17 @@ fn chain_layers(
 }
 
 const fn max_of(widths: &[u16], skip_last: bool) -> usize {
-    let n = if skip_last && !widths.is_empty() {
-        widths.len() - 1
-    } else {
-        widths.len()
+    // Slice patterns, not indices: no bounds check to leave behind.
+    let mut rest = match widths {
+        [init @ .., _] if skip_last => init,
+        _ => widths,
     };
-    let mut i = 0;
     let mut m = 0;
-    while i < n {
-        if widths[i] as usize > m {
-            m = widths[i] as usize;
+    while let [w, tail @ ..] = rest {
+        if *w as usize > m {
+            m = *w as usize;
         }
-        i += 1;
+        rest = tail;
     }
     m
 }

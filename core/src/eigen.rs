@@ -50,32 +50,26 @@ pub fn symmetric<const N: usize>(mut a: [[f32; N]; N]) -> ([f32; N], [[f32; N]; 
         }
     }
     let mut values = [0f32; N];
-    for (k, value) in values.iter_mut().enumerate() {
+    let mut vectors = [[0f32; N]; N];
+    for (k, (value, vector)) in values.iter_mut().zip(vectors.iter_mut()).enumerate() {
         *value = a[k][k];
+        for (x, row) in vector.iter_mut().zip(&v) {
+            *x = row[k];
+        }
     }
-    // Selection sort by descending value (stable: first index wins ties).
-    let mut order = [0usize; N];
-    for (k, o) in order.iter_mut().enumerate() {
-        *o = k;
-    }
+    // Selection sort by descending value (stable: first index wins ties),
+    // moving each vector with its value.
     for i in 0..N {
         let mut best = i;
         for j in i + 1..N {
-            if values[order[j]] > values[order[best]] {
+            if values[j] > values[best] {
                 best = j;
             }
         }
-        order.swap(i, best);
+        values.swap(i, best);
+        vectors.swap(i, best);
     }
-    let mut sorted = [0f32; N];
-    let mut vectors = [[0f32; N]; N];
-    for (k, &o) in order.iter().enumerate() {
-        sorted[k] = values[o];
-        for i in 0..N {
-            vectors[k][i] = v[i][o];
-        }
-    }
-    (sorted, vectors)
+    (values, vectors)
 }
 
 /// Solves `(A + lambda I) x = b` for a symmetric positive semi-definite `A`

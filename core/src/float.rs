@@ -8,7 +8,7 @@
 //! ascending order, one IEEE-754 operation at a time, so results are
 //! deterministic (but not bit-identical to the int8 path, of course).
 
-use crate::arch::{Arch, INPUT_DIM, POSE_DIM, ping_pong};
+use crate::arch::{Arch, INPUT_DIM, POSE_DIM, ping_pong, prefix};
 use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, expect_len};
 use crate::pose::{self, PointMap, Pose};
@@ -187,6 +187,10 @@ fn check_bytes(l: &F32Layer<'_>) -> Result<()> {
     Ok(())
 }
 
+const LAYER_COUNT: Error = Error::InconsistentDimensions {
+    what: "layer count differs from architecture",
+};
+
 impl<P: Params> F32Network<P> {
     /// Builds a network from its layers (encoder first, then head, output
     /// last) and the template feature, checking every size against `arch`.
@@ -198,9 +202,7 @@ impl<P: Params> F32Network<P> {
         arch.validate()?;
         let shapes = arch.encoder_layers().chain(arch.head_layers());
         if arch.encoder_layers().count() + arch.head_layers().count() != layers.len() {
-            return Err(Error::InconsistentDimensions {
-                what: "layer count differs from architecture",
-            });
+            return Err(LAYER_COUNT);
         }
         for (s, l) in shapes.zip(layers.iter()) {
             // Checked: on a 32-bit core a head of 131,070 x 32,769 wraps
@@ -331,7 +333,8 @@ impl<P: Params> F32Network<P> {
         let s = scratch
             .get_mut(..needed)
             .ok_or(Error::ScratchTooSmall { needed, available })?;
-        Ok(s.split_at_mut(self.arch.feature_dim()))
+        s.split_at_mut_checked(self.arch.feature_dim())
+            .ok_or(Error::ScratchTooSmall { needed, available })
     }
 
     /// Encodes `source`, each point first moved by `map`.
@@ -346,7 +349,7 @@ impl<P: Params> F32Network<P> {
             return Err(Error::EmptyCloud);
         }
         feature.fill(f32::NEG_INFINITY);
-        let n_enc = self.arch.encoder.len();
+        let encoder = self.encoder_layers()?;
         let (mut a, mut b) = ping_pong(work, self.arch.widest_hidden_encoder())?;
         for (index, p) in source.iter().enumerate() {
             if p.iter().any(|x| !x.is_finite()) {
@@ -354,18 +357,14 @@ impl<P: Params> F32Network<P> {
             }
             let p = map.apply(*p);
             let mut inputs = INPUT_DIM;
-            for (l, (layer, shape)) in self.layers[..n_enc]
-                .iter()
-                .zip(self.arch.encoder_layers())
-                .enumerate()
-            {
-                let x: &[f32] = if l == 0 { &p } else { &a[..inputs] };
-                if l + 1 == n_enc {
+            for (l, (layer, shape)) in encoder.iter().zip(self.arch.encoder_layers()).enumerate() {
+                let x: &[f32] = if l == 0 { &p } else { prefix(a, inputs)? };
+                if l + 1 == encoder.len() {
                     dense(layer, x, shape.outputs, true, |o, v| {
-                        if let Some(f) = feature.get_mut(o) {
-                            if v > *f {
-                                *f = v;
-                            }
+                        if let Some(f) = feature.get_mut(o)
+                            && v > *f
+                        {
+                            *f = v;
                         }
                     });
                 } else {
@@ -382,6 +381,14 @@ impl<P: Params> F32Network<P> {
         Ok(())
     }
 
+    /// The encoder's layers (validated at construction: the error is
+    /// unreachable, and no panic path is left to the compiler).
+    fn encoder_layers(&self) -> Result<&[Layer<P>]> {
+        self.layers
+            .get(..self.arch.encoder.len())
+            .ok_or(LAYER_COUNT)
+    }
+
     /// Runs the head on a source feature, returning the raw 7 outputs.
     pub fn head(&self, source_feature: &[f32], work: &mut [f32]) -> Result<[f32; POSE_DIM]> {
         let f = self.arch.feature_dim();
@@ -392,10 +399,13 @@ impl<P: Params> F32Network<P> {
         }
         let (mut a, mut b) = ping_pong(work, self.arch.widest_hidden_head())?;
         // The first layer reads (template, source) in place.
-        let n_enc = self.arch.encoder.len();
+        let head = self
+            .layers
+            .get(self.arch.encoder.len()..)
+            .ok_or(LAYER_COUNT)?;
         let mut raw = [0f32; POSE_DIM];
         let mut len = 0usize;
-        for (layer, shape) in self.layers[n_enc..].iter().zip(self.arch.head_layers()) {
+        for (layer, shape) in head.iter().zip(self.arch.head_layers()) {
             let relu = shape.relu;
             let mut emit = |o: usize, v: f32| {
                 let slot = if relu { b.get_mut(o) } else { raw.get_mut(o) };
@@ -413,7 +423,7 @@ impl<P: Params> F32Network<P> {
                     &mut emit,
                 );
             } else {
-                dense(layer, &a[..len], shape.outputs, relu, &mut emit);
+                dense(layer, prefix(a, len)?, shape.outputs, relu, &mut emit);
             }
             if relu {
                 len = shape.outputs;

@@ -308,15 +308,19 @@ pub fn write_blob<T: Serialize>(kind: ModelKind, payload: &T, out: &mut [u8]) ->
 /// Iterates over the little-endian i32 values of a blob array (biases, multipliers).
 pub fn le_i32s(bytes: &[u8]) -> impl Iterator<Item = i32> + '_ {
     bytes
-        .chunks_exact(4)
-        .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .as_chunks::<4>()
+        .0
+        .iter()
+        .map(|&c| i32::from_le_bytes(c))
 }
 
 /// Iterates over the little-endian f32 values of a blob array.
 pub fn le_f32s(bytes: &[u8]) -> impl Iterator<Item = f32> + '_ {
     bytes
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .as_chunks::<4>()
+        .0
+        .iter()
+        .map(|&c| f32::from_le_bytes(c))
 }
 
 /// Checks that a byte array holds `count` elements of `size` bytes.

@@ -19,13 +19,13 @@
 //! weight row is then read once per tile. The result does not depend on the
 //! tile size (bit for bit).
 
-use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong};
+use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong, prefix};
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, OutputStep, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
 use crate::kernel::{
     QValue, Requant, Sink, as_words, bytes_of, dense_points, dense_tile, dense_tile_i8,
-    dense_vector, dot,
+    dense_vector, dot, rows,
 };
 use crate::pose::{self, PointMap, Pose};
 use crate::registration::{self, Options, Registration};
@@ -306,7 +306,9 @@ impl<'a> Int8Model<'a> {
         let scratch = scratch
             .get_mut(..needed)
             .ok_or(Error::ScratchTooSmall { needed, available })?;
-        Ok(scratch.split_at_mut(self.p.arch.feature_dim()))
+        scratch
+            .split_at_mut_checked(self.p.arch.feature_dim())
+            .ok_or(Error::ScratchTooSmall { needed, available })
     }
 
     /// Quantizes point `index` to the model's int16 input grid, after
@@ -339,20 +341,20 @@ impl<'a> Int8Model<'a> {
         }
         feature.fill(i8::MIN);
         let widths = &self.p.arch.encoder;
-        let last = widths.len() - 1;
+        let last = widths.len().saturating_sub(1);
         let half = tile * self.p.arch.widest_hidden_encoder();
         let (pairs, spare) = work.split_at_mut((2 * half).min(work.len()));
         let (mut a, mut b) = ping_pong(pairs, half)?;
         let expanded = as_words(spare);
-        for (chunk_index, chunk) in source.chunks(tile).enumerate() {
+        for (chunk_index, chunk) in source.chunks(tile.max(1)).enumerate() {
             let mut q = [[0i16; INPUT_DIM]; MAX_TILE];
             for (i, (q, p)) in q.iter_mut().zip(chunk).enumerate() {
                 *q = self.quantize_point(chunk_index * tile + i, p, map)?;
             }
-            let x0 = q[..chunk.len()].as_flattened();
+            let x0 = prefix(q.as_flattened(), INPUT_DIM * chunk.len())?;
             let mut inputs = INPUT_DIM;
-            for (l, layer) in self.p.encoder.iter().enumerate() {
-                let outputs = widths[l] as usize;
+            for (l, (layer, &width)) in self.p.encoder.iter().zip(widths.iter()).enumerate() {
+                let outputs = width as usize;
                 let rq = requant(layer, true);
                 let mut sink = if l == last {
                     Sink::Pool(&mut *feature)
@@ -365,7 +367,7 @@ impl<'a> Int8Model<'a> {
                 if l == 0 {
                     dense_points(layer.weights, rq, x0, &mut sink);
                 } else {
-                    let x = &a[..chunk.len() * inputs];
+                    let x = prefix(a, chunk.len() * inputs)?;
                     dense_tile_i8(layer.weights, inputs, rq, x, expanded, &mut sink);
                 }
                 if l != last {
@@ -416,28 +418,26 @@ impl<'a> Int8Model<'a> {
                 if !dense_vector(layer.weights, &parts, rq, expanded, &mut sink) {
                     head_first_layer(layer.weights, f, rq, template, source_feature, &mut sink);
                 }
-            } else if !dense_vector(
-                layer.weights,
-                &[bytes_of(&a[..len])],
-                rq,
-                expanded,
-                &mut sink,
-            ) {
-                dense_tile(layer.weights, len, rq, &a[..len], &mut sink);
+            } else {
+                let x = prefix(a, len)?;
+                if !dense_vector(layer.weights, &[bytes_of(x)], rq, expanded, &mut sink) {
+                    dense_tile(layer.weights, len, rq, x, &mut sink);
+                }
             }
             len = width as usize;
-            saturated += count_saturated(&b[..len]);
+            saturated += count_saturated(prefix(b, len)?);
             core::mem::swap(&mut a, &mut b);
         }
         let out = &self.p.output;
         let mut raw = [0i32; POSE_DIM];
         let in_dim = if len == 0 { 2 * f } else { len };
-        let rows = out.weights.chunks_exact(in_dim).zip(le_i32s(out.bias));
+        let rows = rows(out.weights, in_dim).zip(le_i32s(out.bias));
+        let x = prefix(a, len)?;
         for (r, (row, bias)) in raw.iter_mut().zip(rows) {
             *r = if len == 0 {
                 bias.wrapping_add(split_dot(row, template, source_feature))
             } else {
-                bias.wrapping_add(dot(row, &a[..len]))
+                bias.wrapping_add(dot(row, x))
             };
         }
         Ok((raw, saturated))
@@ -503,8 +503,7 @@ fn head_first_layer(
     source: &[i8],
     sink: &mut Sink<'_>,
 ) {
-    let rows = weights
-        .chunks_exact(2 * f)
+    let rows = rows(weights, 2 * f)
         .zip(le_i32s(q.bias))
         .zip(le_i32s(q.multiplier))
         .zip(q.shift);
@@ -561,7 +560,7 @@ fn check_layer(layer: &Int8Layer<'_>, inputs: usize, outputs: usize, xmax: i64) 
 /// Proves that no accumulator can leave the i32 range:
 /// `|bias| + sum_i |w_i| * xmax <= i32::MAX` for every output row.
 fn check_accumulator(weights: &[u8], bias: &[u8], inputs: usize, xmax: i64) -> Result<()> {
-    for (row, b) in weights.chunks_exact(inputs).zip(le_i32s(bias)) {
+    for (row, b) in rows(weights, inputs).zip(le_i32s(bias)) {
         let sum: i64 = row.iter().map(|&w| (w as i8 as i64).abs()).sum();
         if (b as i64).abs() + sum * xmax > i32::MAX as i64 {
             return Err(Error::InvalidParameter {

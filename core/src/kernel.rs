@@ -176,9 +176,9 @@ mod dsp {
     #[inline(always)]
     pub fn expand_quad(rows: &[i8], inputs: usize, out: &mut [u32]) {
         let groups = inputs / 4;
-        for (r, row) in rows.chunks_exact(inputs).take(QUAD).enumerate() {
-            for (g, x) in row.chunks_exact(4).take(groups).enumerate() {
-                let v = u32::from_le_bytes([x[0] as u8, x[1] as u8, x[2] as u8, x[3] as u8]);
+        for (r, row) in super::rows(rows, inputs).take(QUAD).enumerate() {
+            for (g, x) in row.as_chunks::<4>().0.iter().take(groups).enumerate() {
+                let v = u32::from_le_bytes(x.map(|b| b as u8));
                 let at = 2 * (QUAD * g + r);
                 if let Some(pair) = out.get_mut(at..at + 2) {
                     pair[0] = sxtb16(v);
@@ -310,10 +310,9 @@ mod dsp {
     /// [`dot_rows4`] reads: per group of four, `(x0, x2)` then `(x1, x3)`.
     #[inline(always)]
     pub fn expand_vector(x: &[u8], out: &mut [u32]) {
-        for (x, pair) in x.chunks_exact(4).zip(out.chunks_exact_mut(2)) {
-            let v = u32::from_le_bytes([x[0], x[1], x[2], x[3]]);
-            pair[0] = sxtb16(v);
-            pair[1] = sxtb16_ror8(v);
+        for (x, pair) in x.as_chunks::<4>().0.iter().zip(out.as_chunks_mut::<2>().0) {
+            let v = u32::from_le_bytes(*x);
+            *pair = [sxtb16(v), sxtb16_ror8(v)];
         }
     }
 
@@ -387,6 +386,18 @@ pub(crate) fn as_words(bytes: &mut [i8]) -> &mut [u32] {
     words
 }
 
+/// The rows of a weight matrix (or of a tile) of `len` values each. A
+/// layer's lengths are validated at load and never 0; the branch shows
+/// the compiler that `chunks_exact` is never asked for empty chunks, so
+/// no panic path is left (`len.max(1)` is not enough for LLVM).
+#[inline(always)]
+pub(crate) fn rows<T>(values: &[T], len: usize) -> core::slice::ChunksExact<'_, T> {
+    match core::num::NonZeroUsize::new(len) {
+        Some(len) => values.chunks_exact(len.get()),
+        None => values.chunks_exact(1),
+    }
+}
+
 /// One dense layer with int8 inputs over a tile of rows: [`dense_tile`]'s
 /// contract and results (bit for bit). On thumbv7em, rows go through the
 /// DSP kernel four at a time (`dsp::dot4`) when `inputs` is a multiple of
@@ -406,24 +417,24 @@ pub(crate) fn dense_tile_i8(
     {
         use dsp::QUAD;
         let per_quad = QUAD * inputs / 2;
-        let rows = x.len().checked_div(inputs).unwrap_or(0);
-        let quads = (rows / QUAD).min(expanded.len() / per_quad.max(1));
-        if inputs.is_multiple_of(4) && inputs > 0 && quads > 0 {
-            let (head, rest) = x.split_at(quads * QUAD * inputs);
-            for (quad, out) in head
-                .chunks_exact(QUAD * inputs)
-                .zip(expanded.chunks_exact_mut(per_quad))
+        let points = x.len().checked_div(inputs).unwrap_or(0);
+        let quads = (points / QUAD).min(expanded.len() / per_quad.max(1));
+        if inputs.is_multiple_of(4)
+            && inputs > 0
+            && quads > 0
+            && let Some((head, rest)) = x.split_at_checked(quads * QUAD * inputs)
+            && let Some(expanded) = expanded.get_mut(..quads * per_quad)
+        {
+            for (quad, out) in
+                rows(head, QUAD * inputs).zip(expanded.chunks_exact_mut(per_quad.max(1)))
             {
                 dsp::expand_quad(quad, inputs, out);
             }
             let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
-            for (o, (row, ((bias, m), &s))) in weights.chunks_exact(inputs).zip(params).enumerate()
-            {
+            let quad_acts = rows(expanded, per_quad);
+            for (o, (row, ((bias, m), &s))) in rows(weights, inputs).zip(params).enumerate() {
                 let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
-                for (k, quad) in expanded[..quads * per_quad]
-                    .chunks_exact(per_quad)
-                    .enumerate()
-                {
+                for (k, quad) in quad_acts.clone().enumerate() {
                     sink.take(o, QUAD * k, &dsp::dot4(row, quad, bias), &step);
                 }
             }
@@ -492,46 +503,46 @@ pub(crate) fn dense_vector(
         {
             return false;
         }
-        let mut at = 0;
+        let Some(acts) = expanded.get_mut(..words) else {
+            return false;
+        };
+        let mut free = &mut *acts;
         for part in parts {
-            dsp::expand_vector(part, &mut expanded[at..at + part.len() / 2]);
-            at += part.len() / 2;
+            let Some((out, rest)) = free.split_at_mut_checked(part.len() / 2) else {
+                return false;
+            };
+            dsp::expand_vector(part, out);
+            free = rest;
         }
-        let acts = &expanded[..words];
-        let word = |b: &[u8]| i32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-        let groups = weights
-            .chunks_exact(4 * inputs)
-            .zip(q.bias.chunks_exact(16))
-            .zip(q.multiplier.chunks_exact(16))
-            .zip(q.shift.chunks_exact(4));
+        let acts = &*acts;
+        // Four rows, with their four biases, multipliers and shifts.
+        let groups = rows(weights, 4 * inputs)
+            .zip(q.bias.as_chunks::<16>().0)
+            .zip(q.multiplier.as_chunks::<16>().0)
+            .zip(q.shift.as_chunks::<4>().0);
         let mut o = 0;
         for (((rows, bias), m), shift) in groups {
-            let init = [
-                word(bias),
-                word(&bias[4..]),
-                word(&bias[8..]),
-                word(&bias[12..]),
-            ];
-            let accs = dsp::dot_rows4(rows, inputs, acts, init);
-            for (j, acc) in accs.into_iter().enumerate() {
-                let step =
-                    OutputStep::new(word(&m[4 * j..]), shift[j] as i8, q.zero_point, q.act_min);
-                sink.take(o + j, 0, &[acc], &step);
+            let accs = dsp::dot_rows4(rows, inputs, acts, words4(bias));
+            let (m, shift) = (words4(m), *shift);
+            for j in 0..4 {
+                let step = OutputStep::new(m[j], shift[j] as i8, q.zero_point, q.act_min);
+                sink.take(o + j, 0, &[accs[j]], &step);
             }
             o += 4;
         }
         // The last rows (fewer than four), one at a time.
-        let rest = weights
-            .chunks_exact(inputs)
-            .skip(o)
-            .zip(le_i32s(&q.bias[4 * o..]));
-        let rest = rest.zip(le_i32s(&q.multiplier[4 * o..])).zip(&q.shift[o..]);
+        let rest = rows(weights, inputs)
+            .zip(le_i32s(q.bias))
+            .zip(le_i32s(q.multiplier))
+            .zip(q.shift)
+            .skip(o);
         for (((row, b), m), &s) in rest {
             let mut acc = b;
-            let mut k = 0;
+            let mut row = row;
             for part in parts {
-                acc = acc.wrapping_add(dot(&row[k..k + part.len()], part));
-                k += part.len();
+                let (w, tail) = row.split_at(part.len().min(row.len()));
+                acc = acc.wrapping_add(dot(w, part));
+                row = tail;
             }
             let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
             sink.take(o, 0, &[acc], &step);
@@ -544,6 +555,36 @@ pub(crate) fn dense_vector(
         let _ = (weights, parts, q, expanded, sink);
         false
     }
+}
+
+/// Four little-endian i32 from 16 bytes (destructured: no bounds check).
+#[cfg(pcrnet_arm_dsp)]
+#[inline(always)]
+fn words4(b: &[u8; 16]) -> [i32; 4] {
+    let [
+        a0,
+        a1,
+        a2,
+        a3,
+        b0,
+        b1,
+        b2,
+        b3,
+        c0,
+        c1,
+        c2,
+        c3,
+        d0,
+        d1,
+        d2,
+        d3,
+    ] = *b;
+    [
+        i32::from_le_bytes([a0, a1, a2, a3]),
+        i32::from_le_bytes([b0, b1, b2, b3]),
+        i32::from_le_bytes([c0, c1, c2, c3]),
+        i32::from_le_bytes([d0, d1, d2, d3]),
+    ]
 }
 
 /// Where a layer's int8 activations go.
@@ -631,18 +672,17 @@ fn dense_tile_from<X: QValue>(
     if x.len() < inputs.max(1) {
         return;
     }
-    let rows = weights
-        .chunks_exact(inputs)
+    let channels = rows(weights, inputs)
         .zip(le_i32s(q.bias))
         .zip(le_i32s(q.multiplier))
         .zip(q.shift);
-    for (o, (((row, bias), m), &s)) in rows.enumerate() {
+    for (o, (((row, bias), m), &s)) in channels.enumerate() {
         let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
         // Two rows at a time share each weight load (see `dot2`).
-        let mut pairs = x.chunks_exact(2 * inputs);
+        let mut pairs = rows(x, 2 * inputs);
         let mut t = first;
         for pair in pairs.by_ref() {
-            let (a, b) = pair.split_at(inputs);
+            let (a, b) = pair.split_at(pair.len() / 2);
             let (da, db) = X::dot2(row, a, b);
             sink.take(o, t, &[bias.wrapping_add(da), bias.wrapping_add(db)], &step);
             t += 2;

@@ -46,7 +46,7 @@ impl<'s> Subset<'s> {
     }
 
     fn points(&self) -> impl Iterator<Item = &'s [f32; 3]> + 's {
-        self.source.iter().step_by(self.stride)
+        self.source.iter().step_by(self.stride.max(1))
     }
 }
 
@@ -412,7 +412,7 @@ pub fn resolve(
     max_distance: f32,
 ) -> Result<Resolved> {
     let turns = template.turns();
-    let count = hypotheses.clamp(1, 1 + turns.len());
+    let count = hypotheses.min(turns.len().saturating_add(1)).max(1);
     let first = IcpSettings {
         iterations: screen.min(icp_settings.iterations),
         ..*icp_settings

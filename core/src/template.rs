@@ -179,8 +179,10 @@ impl<'a> Template<'a> {
     /// Cell coordinate along `axis` of a value, clamped into the grid.
     fn axis_cell(&self, axis: usize, v: i32) -> i32 {
         let rel = v - self.cloud.origin[axis] as i32;
-        rel.div_euclid(self.cloud.cell as i32)
-            .clamp(0, self.grid - 1)
+        // The cell size is positive (checked at load); `checked_` and
+        // `min`/`max` instead of `clamp` leave the compiler no panic path.
+        let c = rel.checked_div_euclid(self.cloud.cell as i32).unwrap_or(0);
+        c.min(self.grid - 1).max(0)
     }
 
     /// The cell index of a point, `None` if it lies outside the grid.
@@ -188,7 +190,7 @@ impl<'a> Template<'a> {
         let mut index = 0usize;
         for (axis, &v) in p.iter().enumerate() {
             let rel = v - self.cloud.origin[axis] as i32;
-            let c = rel.div_euclid(self.cloud.cell as i32);
+            let c = rel.checked_div_euclid(self.cloud.cell as i32)?;
             if !(0..self.grid).contains(&c) {
                 return None;
             }

@@ -4,6 +4,7 @@
 //! target through rustup, QEMU through apt-get), so a fresh machine needs
 //! only a Rust toolchain.
 
+mod no_panic;
 mod profile;
 
 use std::path::{Path, PathBuf};
@@ -19,7 +20,7 @@ cargo xtask <command>
 
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
-                the C header, the QEMU harness on every core, the C
+                the no-panic proof, the C header, the QEMU harness on every core, the C
                 example, then the host tests
   demo          the main job: register the shipped source with the trained
                 embedded default (int8) through the device pipeline, and say
@@ -36,6 +37,10 @@ cargo xtask <command>
   firmware-run  build firmware-example and run it under QEMU
   profile       run firmware-example under QEMU with instruction tracing
                 and print the instructions per function and hottest blocks
+  no-panic      link-time proof that no panic is reachable from core's
+                entry points or the C API (tests/no-panic, on the M4F,
+                M0, M3 and M33 targets); on failure, lists each call into
+                panic code with its inline chain
   size          flash and static RAM of firmware-example
   c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
                 linking libpcrnet.a), run it under QEMU and compare every
@@ -69,6 +74,7 @@ fn main() -> ExitCode {
             .and_then(|()| profile::run(&root())),
         Some("c-example") => c_example(),
         Some("c-header") => c_header(args.get(1).map(String::as_str) == Some("--check")),
+        Some("no-panic") => no_panic::run(&root()),
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
         Some("help") | None => {
             print!("{HELP}");
@@ -144,7 +150,7 @@ fn cores() -> Result<(), String> {
 }
 
 /// The crates built for the device, outside the host workspace.
-const FIRMWARE_CRATES: [&str; 2] = ["firmware-example", "tests/firmware"];
+const FIRMWARE_CRATES: [&str; 3] = ["firmware-example", "tests/firmware", "tests/no-panic"];
 
 /// Installs Debian `packages` through apt-get unless `probe` runs.
 fn ensure_apt(probe: &str, packages: &[&str]) -> Result<(), String> {
@@ -234,6 +240,7 @@ fn ci() -> Result<(), String> {
         &["build", "--release", "--features", "defmt"],
     )?;
     cargo(&["build", "-p", "pcrnet-core", "--target", TARGET])?;
+    no_panic::run(&root())?;
     c_header(true)?;
     cargo(&[
         "build",

@@ -212,12 +212,12 @@ fn register(
     let source = read_cloud(source_path)?;
     let method = options.method(kind);
     let blob = options.read_model()?;
-    if let (MethodKind::Ipcrnet, Some(b)) = (kind, blob.as_deref()) {
-        if pcrnet_train::register::trained_passes(b).is_ok_and(|p| p == 1) {
-            eprintln!(
-                "warning: this model was trained for one pass (PCRNet); --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
-            );
-        }
+    if let (MethodKind::Ipcrnet, Some(b)) = (kind, blob.as_deref())
+        && pcrnet_train::register::trained_passes(b).is_ok_and(|p| p == 1)
+    {
+        eprintln!(
+            "warning: this model was trained for one pass (PCRNet); --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
+        );
     }
     let out = methods::run(&method, blob.as_deref(), template.as_deref(), &source).with_context(
         || match &options.model {

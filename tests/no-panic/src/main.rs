@@ -1,0 +1,126 @@
+//! Link-time proof that no panic is reachable from the device entry points.
+//!
+//! This image calls every public inference entry point of `pcrnet-core`
+//! (load and parse, `register`, the network alone, `infer`, `encode`,
+//! `head`, `pose`, the f32 reference) and every function of the C API, on
+//! a blob, a cloud, options, tiles and scratch lengths the optimiser cannot
+//! see (they pass through [`black_box`]), so every branch that some input
+//! could take is kept. Its panic handler (the C API's, with the feature
+//! `prove-no-panic`) calls a function that exists nowhere: if any panic path survives optimisation (a bounds check, an
+//! `unwrap`, an overflow check, a formatting call), linking fails with
+//! `undefined reference to pcrnet_core_can_panic`.
+//!
+//! `cargo xtask no-panic` builds it with the firmware's optimisation
+//! (release, LTO, one codegen unit) for thumbv7em-none-eabihf and
+//! thumbv6m-none-eabi, and on failure lists where the panics come from.
+//! The image is linked, never run.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+
+use cortex_m_rt::entry;
+use pcrnet as capi;
+use pcrnet_core::{F32Model, Int8Model, Options};
+
+/// Bytes that stand for a blob, a cloud and C handles: zeros the optimiser
+/// cannot see through once they pass through `black_box`.
+static BLOB: [u8; 4096] = [0; 4096];
+static CLOUD: [[f32; 3]; 64] = [[0.0; 3]; 64];
+
+#[entry]
+fn main() -> ! {
+    static mut SCRATCH: [i8; 8192] = [0; 8192];
+    static mut F32_SCRATCH: [f32; 2048] = [0.0; 2048];
+    static mut FEATURE: [f32; 1024] = [0.0; 1024];
+    static mut MODEL: capi::PcrnetModel = capi::PcrnetModel::new();
+    let (scratch, f32_scratch, feature) = (SCRATCH, F32_SCRATCH, FEATURE);
+    loop {
+        rust_api(scratch, f32_scratch, feature);
+        c_api(MODEL, scratch);
+    }
+}
+
+/// Everything a Rust firmware calls.
+fn rust_api(scratch: &mut [i8], f32_scratch: &mut [f32], feature: &mut [f32]) {
+    let blob: &[u8] = black_box(&BLOB[..]);
+    let source: &[[f32; 3]] = black_box(&CLOUD[..]);
+    let options: Options = black_box(Options::default());
+    let tile: usize = black_box(8);
+    let passes: usize = black_box(1);
+    let tolerance: f32 = black_box(0.0);
+    let scratch = black_box(scratch);
+
+    let _ = black_box(Int8Model::from_bytes(blob).is_ok());
+    if let Ok(model) = Int8Model::load(blob, scratch) {
+        let _ = black_box(model.register(source, &options, scratch));
+        let _ = black_box(model.network_pose(source, passes, tolerance, scratch));
+        if let Ok(inference) = model.infer_tiled(source, tile, scratch) {
+            let (head, centring) = (inference.head, inference.centring);
+            model.dequantize_feature(inference.feature, feature);
+            let _ = black_box(model.pose(&head).map(|p| centring.then(&p).matrix()));
+        }
+        let _ = black_box(model.infer(source, scratch).map(|i| i.head));
+        let _ = black_box(model.encode(source, scratch).map(|f| f.len()));
+        let _ = black_box(model.encode_tiled(source, tile, scratch).map(|f| f.len()));
+        let (source_feature, work) = scratch.split_at_mut(black_box(256).min(scratch.len()));
+        let _ = black_box(model.head(source_feature, work));
+        let _ = black_box(model.scratch_len(tile));
+    }
+    if let Ok(model) = F32Model::from_bytes(blob) {
+        let f32_scratch = black_box(f32_scratch);
+        let _ = black_box(model.register(source, &options, f32_scratch));
+        let _ = black_box(model.network_pose(source, passes, tolerance, f32_scratch));
+        let network = model.network();
+        let _ = black_box(network.infer(source, f32_scratch));
+        let (source_feature, work) =
+            f32_scratch.split_at_mut(black_box(1024).min(f32_scratch.len()));
+        let _ = black_box(network.head(source_feature, work));
+    }
+}
+
+/// Everything a C firmware calls, with pointers and lengths the optimiser
+/// cannot see.
+fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
+    let blob = black_box(BLOB.as_ptr());
+    let blob_len = black_box(BLOB.len());
+    let points = black_box(CLOUD.as_ptr()) as *const f32;
+    let n_points = black_box(CLOUD.len());
+    let model: *mut capi::PcrnetModel = black_box(model);
+    let scratch_len = black_box(scratch.len());
+    let scratch = black_box(scratch.as_mut_ptr());
+    let mut options = core::mem::MaybeUninit::<capi::PcrnetOptions>::uninit();
+    let mut out = core::mem::MaybeUninit::<capi::PcrnetRegistration>::uninit();
+    let mut pose = [0f32; 7];
+    let mut passes_run = 0u32;
+    // SAFETY: every pointer is to live storage of the right size; the C
+    // API checks null, alignment and lengths itself.
+    unsafe {
+        black_box(capi::pcrnet_model_load(blob, blob_len, model));
+        black_box(capi::pcrnet_model_scratch_len(model, black_box(8)));
+        black_box(capi::pcrnet_model_trained_passes(model));
+        capi::pcrnet_options_default(black_box(options.as_mut_ptr()));
+        capi::pcrnet_options_network_only(black_box(options.as_mut_ptr()));
+        black_box(capi::pcrnet_register(
+            model,
+            points,
+            n_points,
+            black_box(options.as_ptr()),
+            scratch,
+            scratch_len,
+            black_box(out.as_mut_ptr()),
+        ));
+        black_box(capi::pcrnet_network_pose(
+            model,
+            points,
+            n_points,
+            black_box(1),
+            black_box(0.0),
+            scratch,
+            scratch_len,
+            black_box(pose.as_mut_ptr()),
+            black_box(&mut passes_run),
+        ));
+        black_box(capi::pcrnet_status_message(black_box(-3)));
+    }
+}
