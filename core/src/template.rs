@@ -54,7 +54,7 @@ impl<'a> Template<'a> {
         if !(1..=MAX_GRID).contains(&cloud.grid) || cloud.cell == 0 {
             return bad("template grid size or cell");
         }
-        if cloud.normals.len() != 3 * len {
+        if len.checked_mul(3) != Some(cloud.normals.len()) {
             return bad("template normals: 3 bytes per point");
         }
         for n in cloud.normals.chunks_exact(3) {

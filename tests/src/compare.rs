@@ -43,6 +43,9 @@ pub struct DeviceRun {
     pub iterative: BTreeMap<usize, Iterative>,
     /// `register` calls, per (case index, option set index).
     pub registrations: BTreeMap<(usize, usize), DeviceRegistration>,
+    /// Load verdict per model (`ok int8`, `ok f32`, `error ...`; see
+    /// [`crate::hostile::load_verdict`]).
+    pub loads: BTreeMap<usize, String>,
     /// Lines that were not understood (reported, and they fail the run).
     pub unparsed: Vec<String>,
     /// Whether the runner printed its closing `done`.
@@ -164,6 +167,9 @@ pub fn parse(stdout: &str) -> DeviceRun {
                 run.done = true;
                 Some(())
             }
+            ["model", m, "load", verdict @ ..] if !verdict.is_empty() => m.parse().ok().map(|m| {
+                run.loads.insert(m, verdict.join(" "));
+            }),
             ["case", c, "ok", rest @ ..] => c.parse().ok().zip(parse_ok(rest)).map(|(c, r)| {
                 run.cases.insert(c, r);
             }),

@@ -18,6 +18,7 @@
 pub mod c_example;
 pub mod compare;
 pub mod elf;
+pub mod hostile;
 pub mod layers;
 pub mod qemu;
 pub mod vectors;

@@ -26,6 +26,8 @@
 //!   point-to-point / 1 point-to-plane).
 //!
 //! Output lines (f32 as 8 hex digits of their bits, `{:?}` for errors):
+//! - `model M load ok int8`, `model M load ok f32` (parsed, no cases run) or
+//!   `model M load error E`;
 //! - `case C ok ENCODE_INSTR INFER_INSTR STACK feature HEX head H0..H6 pose Q0..T2`
 //!   (or `pose_error E`), or `case C error ENCODED E`;
 //! - `case C iter ok PASSES Q0..T2`, or `case C iter error E`;
@@ -41,7 +43,7 @@ use core::fmt::Write;
 use heapless::String;
 #[cfg(target_arch = "arm")]
 use panic_semihosting as _;
-use pcrnet_core::{Int8Model, Metric, Options};
+use pcrnet_core::{Error, F32Model, Int8Model, Metric, Options};
 use pcrnet_firmware_example::board::{exit, print};
 use pcrnet_firmware_example::{icount, stack};
 
@@ -151,10 +153,21 @@ fn main() -> ! {
     let mut line: String<LINE> = String::new();
     for m in 0..n_models {
         let blob = bytes(word(4 + 2 * m), word(5 + 2 * m));
+        // The load verdict, as the host's `hostile::load_verdict` words it.
         let model = match Int8Model::from_bytes(blob) {
-            Ok(model) => model,
+            Ok(model) => {
+                say!("model {} load ok int8", m);
+                model
+            }
+            Err(Error::WrongKind { .. }) => {
+                match F32Model::from_bytes(blob) {
+                    Ok(_) => say!("model {} load ok f32", m),
+                    Err(e) => say!("model {} load error {:?}", m, e),
+                }
+                continue;
+            }
             Err(e) => {
-                say!("model {} error {:?}", m, e);
+                say!("model {} load error {:?}", m, e);
                 continue;
             }
         };
