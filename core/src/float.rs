@@ -320,10 +320,12 @@ impl<P: Params> F32Network<P> {
         Pose::from_head_output(&self.head(feature, work)?)
     }
 
-    /// Encodes `source` into its global feature (a view into `scratch`).
+    /// Encodes `source` into its global feature (a view into `scratch`;
+    /// [`Error::NonFiniteResult`] if an entry overflows f32).
     pub fn encode<'s>(&self, source: &[[f32; 3]], scratch: &'s mut [f32]) -> Result<&'s [f32]> {
         let (feature, work) = self.split(scratch)?;
         self.encode_centred(source, feature, work)?;
+        finite(feature)?;
         Ok(feature)
     }
 
@@ -389,7 +391,8 @@ impl<P: Params> F32Network<P> {
             .ok_or(LAYER_COUNT)
     }
 
-    /// Runs the head on a source feature, returning the raw 7 outputs.
+    /// Runs the head on a source feature, returning the raw 7 outputs
+    /// ([`Error::NonFiniteResult`] if one overflows f32).
     pub fn head(&self, source_feature: &[f32], work: &mut [f32]) -> Result<[f32; POSE_DIM]> {
         let f = self.arch.feature_dim();
         if source_feature.len() != f {
@@ -430,7 +433,18 @@ impl<P: Params> F32Network<P> {
                 core::mem::swap(&mut a, &mut b);
             }
         }
+        finite(&raw)?;
         Ok(raw)
+    }
+}
+
+/// Coordinates far beyond the model's range overflow f32 in the layers: a
+/// feature or head output that is not finite is an error, never a value.
+fn finite(values: &[f32]) -> Result<()> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(Error::NonFiniteResult)
     }
 }
 
