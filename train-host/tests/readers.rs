@@ -128,6 +128,16 @@ fn assert_err_mentions<T: std::fmt::Debug>(r: Result<T, FormatError>, words: &[&
     }
 }
 
+/// The size checks behind the point limit (`DEFAULT_MAX_POINTS` refuses
+/// these counts first; `hostile_sizes.rs` tests that).
+fn unlimited_pcd(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+    pcd::parse_limited(bytes, usize::MAX)
+}
+
+fn unlimited_ply(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+    ply::parse_limited(bytes, usize::MAX)
+}
+
 /// Every proper prefix of `bytes` must fail to parse (and none may panic).
 fn assert_every_truncation_fails<T: std::fmt::Debug>(
     bytes: &[u8],
@@ -478,34 +488,34 @@ fn pcd_absurd_sizes_error_without_allocating() {
         "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS {}\nDATA binary\n",
         usize::MAX / 2
     );
-    assert_err_mentions(pcd::parse(h.as_bytes()), &["DATA binary", "overflows"]);
+    assert_err_mentions(unlimited_pcd(h.as_bytes()), &["DATA binary", "overflows"]);
     let h = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1000000000000\nDATA binary\n";
     assert_err_mentions(
-        pcd::parse(cat(&[h.as_bytes(), &[0; 64]]).as_slice()),
+        unlimited_pcd(cat(&[h.as_bytes(), &[0; 64]]).as_slice()),
         &["expected 12000000000000 bytes of points, found 64"],
     );
     let h = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1000000000000\nDATA ascii\n1 2 3\n";
     assert_err_mentions(
-        pcd::parse(h.as_bytes()),
+        unlimited_pcd(h.as_bytes()),
         &["expected 1000000000000 points, found 1"],
     );
     // Compressed: sizes in the block header that lie.
     let h = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\nDATA binary_compressed\n";
     let body = cat(&[&u32::MAX.to_le_bytes(), &12u32.to_le_bytes(), &[0x0b; 13]]);
     assert_err_mentions(
-        pcd::parse(&cat(&[h.as_bytes(), &body])),
+        unlimited_pcd(&cat(&[h.as_bytes(), &body])),
         &["expected 4294967295 bytes of compressed data, found 13"],
     );
     let body = cat(&[&13u32.to_le_bytes(), &u32::MAX.to_le_bytes(), &[0x0b; 13]]);
     assert_err_mentions(
-        pcd::parse(&cat(&[h.as_bytes(), &body])),
+        unlimited_pcd(&cat(&[h.as_bytes(), &body])),
         &["uncompressed size 4294967295", "12"],
     );
     let h = format!(
         "FIELDS x y z pad\nSIZE 4 4 4 {}\nTYPE F F F U\nCOUNT 1 1 1 2\nPOINTS 1\nDATA binary\n",
         usize::MAX
     );
-    assert_err_mentions(pcd::parse(h.as_bytes()), &["field pad", "overflows"]);
+    assert_err_mentions(unlimited_pcd(h.as_bytes()), &["field pad", "overflows"]);
 }
 
 #[test]
@@ -699,17 +709,17 @@ fn ply_data_errors_and_absurd_counts() {
     let h = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
              property float z\nend_header\n";
     assert_err_mentions(
-        ply::parse(format!("{h}1 2 3\n4 x 6\n").as_bytes()),
+        unlimited_ply(format!("{h}1 2 3\n4 x 6\n").as_bytes()),
         &["vertex", "row 1", "y value", "\"x\""],
     );
     assert_err_mentions(
-        ply::parse(format!("{h}1 2 3\n").as_bytes()),
+        unlimited_ply(format!("{h}1 2 3\n").as_bytes()),
         &["expected 2 rows, found 1"],
     );
     let h = "ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000000\n\
              property float x\nproperty float y\nproperty float z\nend_header\n";
     assert_err_mentions(
-        ply::parse(cat(&[h.as_bytes(), &[0; 24]]).as_slice()),
+        unlimited_ply(cat(&[h.as_bytes(), &[0; 24]]).as_slice()),
         &[
             "element \"vertex\"",
             "expected 12000000000000000 bytes, found 24",
@@ -720,19 +730,19 @@ fn ply_data_errors_and_absurd_counts() {
          property double y\nproperty double z\nend_header\n",
         usize::MAX
     );
-    assert!(ply::parse(h.as_bytes()).is_err());
+    assert!(unlimited_ply(h.as_bytes()).is_err());
     // A list claiming 2^32 - 1 items, in binary and ascii.
     let h = "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
              property float y\nproperty float z\nproperty list uint uchar junk\nend_header\n";
     let body = cat(&[&le(&[PTS[0]]), &u32::MAX.to_le_bytes(), &[1, 2, 3]]);
     assert_err_mentions(
-        ply::parse(&cat(&[h.as_bytes(), &body])),
+        unlimited_ply(&cat(&[h.as_bytes(), &body])),
         &["expected 1 rows, found 0"],
     );
     let h = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
              property float z\nproperty list uint uchar junk\nend_header\n";
     assert_err_mentions(
-        ply::parse(format!("{h}1 2 3 4294967295 1 2 3\n").as_bytes()),
+        unlimited_ply(format!("{h}1 2 3 4294967295 1 2 3\n").as_bytes()),
         &["expected 1 rows, found 0"],
     );
     // Negative list length in a signed count type.
@@ -740,7 +750,7 @@ fn ply_data_errors_and_absurd_counts() {
              property float y\nproperty float z\nproperty list char uchar junk\nend_header\n";
     let body = cat(&[&le(&[PTS[0]]), &[0xff]]);
     assert_err_mentions(
-        ply::parse(&cat(&[h.as_bytes(), &body])),
+        unlimited_ply(&cat(&[h.as_bytes(), &body])),
         &["negative length"],
     );
 }

@@ -114,6 +114,10 @@ enum Command {
         /// Write the whole result as JSON to this file (`-`: standard output).
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Refuse cloud files that declare or hold more points than this
+        /// (before allocating: a small hostile file can declare billions).
+        #[arg(long, default_value_t = pcrnet_train::io::DEFAULT_MAX_POINTS)]
+        max_cloud_points: usize,
     },
 }
 
@@ -188,28 +192,29 @@ fn run(command: Command) -> anyhow::Result<()> {
             options,
             aligned,
             json,
+            max_cloud_points,
         } => {
             let (template, source) = match clouds.as_slice() {
                 [t, s] => (Some(t.as_path()), s.as_path()),
                 [s] => (None, s.as_path()),
                 _ => anyhow::bail!("register takes [TEMPLATE] SOURCE"),
             };
-            register(template, source, method, &options, aligned, json)?
+            let read = |path| read_cloud(path, max_cloud_points);
+            let (template, source) = (template.map(read).transpose()?, read(source)?);
+            register(template, &source, method, &options, aligned, json)?
         }
     }
     Ok(())
 }
 
 fn register(
-    template_path: Option<&Path>,
-    source_path: &Path,
+    template: Option<Vec<[f32; 3]>>,
+    source: &[[f32; 3]],
     kind: MethodKind,
     options: &MethodOptions,
     aligned: Option<PathBuf>,
     json: Option<PathBuf>,
 ) -> anyhow::Result<()> {
-    let template = template_path.map(read_cloud).transpose()?;
-    let source = read_cloud(source_path)?;
     let method = options.method(kind);
     let blob = options.read_model()?;
     if let (MethodKind::Ipcrnet, Some(b)) = (kind, blob.as_deref())
@@ -219,12 +224,13 @@ fn register(
             "warning: this model was trained for one pass (PCRNet); --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
         );
     }
-    let out = methods::run(&method, blob.as_deref(), template.as_deref(), &source).with_context(
-        || match &options.model {
-            Some(path) => format!("registering with {}", path.display()),
-            None => "registering".into(),
-        },
-    )?;
+    let out =
+        methods::run(&method, blob.as_deref(), template.as_deref(), source).with_context(|| {
+            match &options.model {
+                Some(path) => format!("registering with {}", path.display()),
+                None => "registering".into(),
+            }
+        })?;
     let pose = out.pose;
     // With --json -, standard output carries the JSON alone.
     let to_stdout = json.as_deref() == Some(Path::new("-"));
@@ -239,7 +245,7 @@ fn register(
         "method: {}, {} pass(es)/step(s){}",
         method.name(out.precision),
         out.iterations,
-        match (kind, template_path) {
+        match (kind, &template) {
             (MethodKind::Device, None) => " - the firmware's pipeline, the blob's own template",
             (MethodKind::Device, Some(_)) =>
                 " - the firmware's pipeline, with the given template bound into the model",
@@ -362,8 +368,8 @@ fn write_xyz(path: &Path, cloud: &[[f32; 3]]) -> anyhow::Result<()> {
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
-fn read_cloud(path: &Path) -> anyhow::Result<Vec<[f32; 3]>> {
-    let cloud = pcrnet_train::io::read_cloud(path)?;
+fn read_cloud(path: &Path, max_points: usize) -> anyhow::Result<Vec<[f32; 3]>> {
+    let cloud = pcrnet_train::io::read_cloud_limited(path, max_points)?;
     anyhow::ensure!(!cloud.is_empty(), "{}: no points", path.display());
     Ok(cloud)
 }

@@ -36,6 +36,14 @@ pub mod pcd;
 pub mod ply;
 pub mod xyz;
 
+/// Most points a reader takes from one file unless told otherwise: 20
+/// million (240 MB as f32), four times a 5 M-point scan. Every reader
+/// refuses a larger declared size before allocating ([`FormatError::TooLarge`]);
+/// binary data must also be present in full before anything is sized from
+/// it, and `binary_compressed` PCD may not claim more than LZF can expand
+/// its bytes to (88 x). `pcrnet register --max-cloud-points` raises the limit.
+pub const DEFAULT_MAX_POINTS: usize = 20_000_000;
+
 /// Number of points [`read_cloud`] samples from an OFF mesh.
 pub const DEFAULT_OFF_SAMPLES: usize = 2048;
 
@@ -75,12 +83,43 @@ pub enum FormatError {
         /// What is wrong.
         message: String,
     },
+    /// The file declares (or holds) more points than the reader's limit
+    /// ([`DEFAULT_MAX_POINTS`] unless raised): refused before allocating.
+    #[error(
+        "{what} {declared}, more than the limit of {limit} points (a hostile or mistaken size; \
+         if the file is real, raise the limit: pcrnet register --max-cloud-points N)"
+    )]
+    TooLarge {
+        /// What was counted, e.g. `"PCD POINTS"`.
+        what: &'static str,
+        /// The count in the file.
+        declared: u64,
+        /// The limit in force.
+        limit: usize,
+    },
     /// A mesh cannot be sampled (no faces, zero area, bad indices).
     #[error("OFF mesh: {0}")]
     Mesh(String),
 }
 
 impl FormatError {
+    /// [`FormatError::TooLarge`] unless `declared <= limit`.
+    pub(crate) fn check_count(
+        what: &'static str,
+        declared: usize,
+        limit: usize,
+    ) -> Result<(), FormatError> {
+        if declared <= limit {
+            Ok(())
+        } else {
+            Err(FormatError::TooLarge {
+                what,
+                declared: declared as u64,
+                limit,
+            })
+        }
+    }
+
     pub(crate) fn header(format: &'static str, message: impl Into<String>) -> Self {
         FormatError::Header {
             format,
@@ -174,15 +213,28 @@ impl Format {
         }
     }
 
-    /// Parses `bytes` in this format. OFF meshes are sampled with
-    /// [`DEFAULT_OFF_SAMPLES`] points and [`DEFAULT_OFF_SEED`].
+    /// Parses `bytes` in this format with [`DEFAULT_MAX_POINTS`]. OFF
+    /// meshes are sampled with [`DEFAULT_OFF_SAMPLES`] points and
+    /// [`DEFAULT_OFF_SEED`].
     pub fn parse(self, bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+        self.parse_limited(bytes, DEFAULT_MAX_POINTS)
+    }
+
+    /// [`Format::parse`], refusing files that declare or hold more than
+    /// `max_points` points (OFF: vertices or faces).
+    pub fn parse_limited(
+        self,
+        bytes: &[u8],
+        max_points: usize,
+    ) -> Result<Vec<[f32; 3]>, FormatError> {
         let bytes = strip_bom(bytes);
         match self {
-            Format::Pcd => pcd::parse(bytes),
-            Format::Ply => ply::parse(bytes),
-            Format::Off => off::parse_sampled(bytes, DEFAULT_OFF_SAMPLES, DEFAULT_OFF_SEED),
-            Format::Xyz => xyz::parse(bytes),
+            Format::Pcd => pcd::parse_limited(bytes, max_points),
+            Format::Ply => ply::parse_limited(bytes, max_points),
+            Format::Off => {
+                off::parse_sampled_limited(bytes, DEFAULT_OFF_SAMPLES, DEFAULT_OFF_SEED, max_points)
+            }
+            Format::Xyz => xyz::parse_limited(bytes, max_points),
         }
     }
 }
@@ -216,11 +268,17 @@ fn with_path<T>(path: &Path, r: Result<T, FormatError>) -> Result<T, ReadError> 
 /// [`Format::from_path`]). OFF meshes are sampled to [`DEFAULT_OFF_SAMPLES`]
 /// points with the fixed seed [`DEFAULT_OFF_SEED`].
 pub fn read_cloud(path: &Path) -> Result<Vec<[f32; 3]>, ReadError> {
+    read_cloud_limited(path, DEFAULT_MAX_POINTS)
+}
+
+/// [`read_cloud`] with a limit on the points a file may declare or hold
+/// (see [`DEFAULT_MAX_POINTS`]).
+pub fn read_cloud_limited(path: &Path, max_points: usize) -> Result<Vec<[f32; 3]>, ReadError> {
     let format = Format::from_path(path).ok_or_else(|| ReadError::UnknownFormat {
         path: path.to_path_buf(),
     })?;
     let bytes = read_bytes(path)?;
-    with_path(path, format.parse(&bytes))
+    with_path(path, format.parse_limited(&bytes, max_points))
 }
 
 /// Reads an OFF mesh and samples `n` points uniformly over its surface,
@@ -234,6 +292,19 @@ pub fn read_off_sampled(path: &Path, n: usize, seed: u64) -> Result<Vec<[f32; 3]
 /// (every format's header is text, so this is safe for binary bodies too).
 fn strip_bom(bytes: &[u8]) -> &[u8] {
     bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
+}
+
+/// An empty point vector with room for `n` points, or an error naming
+/// `section` if the memory is not there (instead of aborting the process).
+pub(crate) fn points_vec(n: usize, section: &str) -> Result<Vec<[f32; 3]>, FormatError> {
+    let mut out = Vec::new();
+    out.try_reserve_exact(n)
+        .map_err(|_| FormatError::data(section, out_of_memory(n)))?;
+    Ok(out)
+}
+
+pub(crate) fn out_of_memory(points: usize) -> String {
+    format!("cannot allocate {points} points: not enough memory")
 }
 
 /// Keeps the point if all three coordinates are finite.

@@ -37,6 +37,11 @@ pub struct Mesh {
 
 /// Parses an OFF file held in memory into a triangle mesh.
 pub fn parse(bytes: &[u8]) -> Result<Mesh, FormatError> {
+    parse_limited(bytes, super::DEFAULT_MAX_POINTS)
+}
+
+/// [`parse`], refusing more than `max_points` vertices or faces.
+pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Mesh, FormatError> {
     let body = text(bytes, FMT)?;
     // Content lines with their 1-based line numbers, comments removed.
     let mut lines = body.lines().enumerate().filter_map(|(i, l)| {
@@ -103,6 +108,8 @@ pub fn parse(bytes: &[u8]) -> Result<Mesh, FormatError> {
     };
     let nv = count(0, "vertex")?;
     let nf = count(1, "face")?;
+    FormatError::check_count("OFF vertex count", nv, max_points)?;
+    FormatError::check_count("OFF face count", nf, max_points)?;
 
     // No capacity from the counts: vectors grow with the lines present.
     let mut vertices = Vec::new();
@@ -253,7 +260,17 @@ pub fn sample(mesh: &Mesh, n: usize, seed: u64) -> Result<Vec<[f32; 3]>, FormatE
 /// [`sample`]); a file without triangles is a point cloud: its finite
 /// vertices, as stored.
 pub fn parse_sampled(bytes: &[u8], n: usize, seed: u64) -> Result<Vec<[f32; 3]>, FormatError> {
-    let mesh = parse(bytes)?;
+    parse_sampled_limited(bytes, n, seed, super::DEFAULT_MAX_POINTS)
+}
+
+/// [`parse_sampled`] with [`parse_limited`]'s limit.
+pub fn parse_sampled_limited(
+    bytes: &[u8],
+    n: usize,
+    seed: u64,
+    max_points: usize,
+) -> Result<Vec<[f32; 3]>, FormatError> {
+    let mesh = parse_limited(bytes, max_points)?;
     if mesh.triangles.is_empty() {
         // Vertices without a surface (`OFF` / `N 0 0`, a common way to store
         // a scan, or only point and edge "faces"): a point cloud.

@@ -73,7 +73,13 @@ struct Header {
 
 /// Parses a PCD file held in memory and returns its finite points.
 pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+    parse_limited(bytes, super::DEFAULT_MAX_POINTS)
+}
+
+/// [`parse`], refusing a file whose `POINTS` exceeds `max_points`.
+pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, FormatError> {
     let h = parse_header(bytes)?;
+    FormatError::check_count("PCD POINTS", h.points, max_points)?;
     let body = bytes.get(h.body_start..).unwrap_or_default();
     match h.data {
         DataKind::Ascii => parse_ascii(&h, body),
@@ -382,7 +388,7 @@ fn parse_binary(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
         ));
     };
     // The bytes are there, so `points` is bounded by the input size.
-    let mut out = Vec::with_capacity(h.points);
+    let mut out = super::points_vec(h.points, SECTION)?;
     for rec in data.chunks_exact(h.record_size) {
         let mut p = [0f32; 3];
         for (v, c) in p.iter_mut().zip(&h.xyz) {
@@ -427,10 +433,23 @@ fn parse_compressed(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatErro
             rest.len() as u64,
         ));
     };
+    // LZF's best case is a 3-byte back-reference copying 264 bytes: more
+    // than 88 x the compressed size cannot be there (refused before the
+    // output buffer is sized).
+    if need > compressed.saturating_mul(LZF_MAX_RATIO) {
+        return Err(FormatError::data(
+            SECTION,
+            format!(
+                "{compressed} compressed bytes cannot hold the {need} bytes POINTS {} declares \
+                 (LZF expands at most {LZF_MAX_RATIO} x)",
+                h.points
+            ),
+        ));
+    }
     let raw = lzf_decompress(lzf, need).map_err(|m| FormatError::data(SECTION, m))?;
     // Struct-of-arrays: field f's column starts at points * (its record
     // offset), and point i's element at column + i * (SIZE * COUNT).
-    let mut out = Vec::with_capacity(h.points);
+    let mut out = super::points_vec(h.points, SECTION)?;
     for i in 0..h.points {
         let mut p = [0f32; 3];
         for (v, c) in p.iter_mut().zip(&h.xyz) {
@@ -443,6 +462,10 @@ fn parse_compressed(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatErro
     Ok(out)
 }
 
+/// Most bytes LZF can produce per compressed byte: a back-reference of
+/// 3 bytes (control, extra length, offset) copies at most 7 + 255 + 2.
+const LZF_MAX_RATIO: usize = 88;
+
 /// Decompresses LZF (Marc Lehmann's liblzf format, as used by PCL) into
 /// exactly `expected` bytes.
 ///
@@ -452,7 +475,9 @@ fn parse_compressed(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatErro
 /// One input byte yields at most 88 output bytes, which bounds the
 /// allocation by the input actually present.
 fn lzf_decompress(input: &[u8], expected: usize) -> Result<Vec<u8>, String> {
-    let mut out: Vec<u8> = Vec::with_capacity(expected.min(input.len().saturating_mul(88)));
+    let mut out: Vec<u8> = Vec::new();
+    out.try_reserve_exact(expected.min(input.len().saturating_mul(LZF_MAX_RATIO)))
+        .map_err(|_| format!("cannot allocate {expected} bytes to decompress into"))?;
     let mut i = 0;
     let ends = || format!("LZF data ends early (at byte {})", input.len());
     while let Some(&ctrl) = input.get(i) {

@@ -66,7 +66,14 @@ struct Header {
 
 /// Parses a PLY file held in memory and returns the finite vertex positions.
 pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+    parse_limited(bytes, super::DEFAULT_MAX_POINTS)
+}
+
+/// [`parse`], refusing a file whose `vertex` element count exceeds `max_points`.
+pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, FormatError> {
     let h = parse_header(bytes)?;
+    let vertices = h.elements.get(h.vertex).map_or(0, |e| e.count);
+    FormatError::check_count("PLY element vertex", vertices, max_points)?;
     let body = bytes.get(h.body_start..).unwrap_or_default();
     match h.encoding {
         Encoding::Ascii => parse_ascii(&h, body),
@@ -254,7 +261,9 @@ fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f32; 3]>, Form
                         Some(here)
                     })
                     .collect();
-                out.reserve(el.count);
+                out.try_reserve_exact(el.count).map_err(|_| {
+                    FormatError::data(section.clone(), super::out_of_memory(el.count))
+                })?;
                 for rec in data.chunks_exact(row) {
                     let mut p = [0f32; 3];
                     for (v, &(pi, s)) in p.iter_mut().zip(&h.xyz) {

@@ -3,10 +3,15 @@
 //! Further columns (normals, colours, labels) are ignored, blank lines and
 //! `#` comments (whole-line or trailing) are skipped.
 
-use super::{FormatError, finite, parse_coordinate, text};
+use super::{DEFAULT_MAX_POINTS, FormatError, finite, parse_coordinate, text};
 
 /// Parses an XYZ text file held in memory and returns its finite points.
 pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+    parse_limited(bytes, DEFAULT_MAX_POINTS)
+}
+
+/// [`parse`], refusing more than `max_points` point lines.
+pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, FormatError> {
     let body = text(bytes, "XYZ")?;
     let mut out = Vec::new();
     for (i, line) in body.lines().enumerate() {
@@ -15,6 +20,7 @@ pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
             .split(|c: char| c.is_whitespace() || c == ',')
             .filter(|t| !t.is_empty());
         let Some(first) = toks.next() else { continue };
+        FormatError::check_count("XYZ point lines", out.len() + 1, max_points)?;
         let section = || format!("XYZ line {}", i + 1);
         let mut p = [0f32; 3];
         for (k, v) in p.iter_mut().enumerate() {
