@@ -64,15 +64,21 @@ fn main() -> ! {
         }
     }
 
-    let code = match Int8Model::load(MODEL, SCRATCH_BUF) {
+    // Stack of each phase, measured by painting (see `stack`).
+    let baseline = stack::paint();
+    let loaded = Int8Model::load(MODEL, SCRATCH_BUF);
+    let load_stack = stack::used_below(baseline);
+    let code = match loaded {
         Ok(model) => {
             log!("points: {}", POINTS);
             // The recommended pipeline: one network pass, 4 starting poses,
             // ICP against the template's points, residual.
             let options = Options::default();
+            let baseline = stack::paint();
             let start = counter.instructions();
             let mut result = model.register(CLOUD, &options, SCRATCH_BUF);
             log!("instructions: {}", counter.instructions() - start);
+            let register_stack = stack::used_below(baseline);
             if let Ok(r) = &result {
                 report(r);
                 if !r.reliable {
@@ -90,7 +96,12 @@ fn main() -> ! {
                     }
                 }
             }
-            log!("peak stack: {} bytes", stack::peak());
+            log!(
+                "stack: load {} B, register {} B, below main's {} B",
+                load_stack,
+                register_stack,
+                stack::in_use(baseline)
+            );
             match result {
                 Ok(r) if r.reliable => {
                     log!("pose reliable: acting on it");

@@ -19,16 +19,21 @@ fn bounds() -> (usize, usize) {
     )
 }
 
-/// Paints the unused stack (from the end of static RAM up to just below the
-/// current stack pointer) and returns that stack pointer, the baseline for
-/// [`used_below`].
+/// Paints the unused stack (from the end of static RAM up to the caller's
+/// stack pointer: no unpainted gap, so every byte a later call uses is
+/// seen) and returns that stack pointer, the baseline for [`used_below`].
+/// Inlined, so the painting loop runs in the caller's frame and the
+/// baseline is the caller's own stack pointer.
+#[inline(always)]
 pub fn paint() -> usize {
     let (low, _) = bounds();
     let sp = crate::board::stack_pointer();
     let mut p = low;
-    while p + 4 <= sp.saturating_sub(256) {
-        // SAFETY: [low, sp - 256) is RAM that nothing uses (no heap; the
-        // stack lives above sp).
+    while p + 4 <= sp {
+        // SAFETY: [low, sp) is RAM that nothing uses (no heap; the stack
+        // lives at and above sp, and this loop keeps its state in
+        // registers or above sp). An interrupt that pushes a frame while
+        // this runs can only make a later measurement larger, never smaller.
         unsafe { core::ptr::write_volatile(p as *mut u32, PAINT) };
         p += 4;
     }
@@ -46,10 +51,10 @@ fn deepest() -> usize {
     p
 }
 
-/// Bytes of stack used at the deepest point since [`paint`], counted from
-/// the top of the stack (the whole program's stack).
-pub fn peak() -> usize {
-    bounds().1 - deepest()
+/// Bytes of stack in use at `baseline` (a value [`paint`] returned),
+/// counted from the top of the stack: the frames of the callers.
+pub fn in_use(baseline: usize) -> usize {
+    bounds().1.saturating_sub(baseline)
 }
 
 /// Bytes of stack used below `baseline` (the value [`paint`] returned) at

@@ -46,6 +46,8 @@ pub struct DeviceRun {
     /// Load verdict per model (`ok int8`, `ok f32`, `error ...`; see
     /// [`crate::hostile::load_verdict`]).
     pub loads: BTreeMap<usize, String>,
+    /// Peak stack bytes of parsing each model's blob.
+    pub load_stacks: BTreeMap<usize, usize>,
     /// Lines that were not understood (reported, and they fail the run).
     pub unparsed: Vec<String>,
     /// Whether the runner printed its closing `done`.
@@ -167,6 +169,9 @@ pub fn parse(stdout: &str) -> DeviceRun {
                 run.done = true;
                 Some(())
             }
+            ["model", m, "load_stack", n] => m.parse().ok().zip(n.parse().ok()).map(|(m, n)| {
+                run.load_stacks.insert(m, n);
+            }),
             ["model", m, "load", verdict @ ..] if !verdict.is_empty() => m.parse().ok().map(|m| {
                 run.loads.insert(m, verdict.join(" "));
             }),

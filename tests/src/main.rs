@@ -477,7 +477,7 @@ fn report(
         sizes.static_ram()
     );
     println!(
-        "\n| model | blob B | points | instructions / inference | encoder instr/MAC | head instr/MAC | peak stack B |\n|---|---|---|---|---|---|---|"
+        "\n| model | blob B | points | instructions / inference | encoder instr/MAC | head instr/MAC | peak stack B | load stack B |\n|---|---|---|---|---|---|---|---|"
     );
     for (mi, model) in models.iter().enumerate() {
         // The hostile blobs (no cases) do not load.
@@ -512,14 +512,18 @@ fn report(
             let enc_macs = (c.cloud.len() * arch.encoder_macs_per_point()) as f64;
             let head_instr = d.infer_instructions.saturating_sub(d.encode_instructions) as f64;
             println!(
-                "| {} | {} | {} | {} | {:.2} | {:.2} | {} |",
+                "| {} | {} | {} | {} | {:.2} | {:.2} | {} | {} |",
                 model.name,
                 model.blob.len(),
                 c.cloud.len(),
                 d.infer_instructions,
                 d.encode_instructions as f64 / enc_macs,
                 head_instr / arch.head_macs() as f64,
-                stack
+                stack,
+                device
+                    .load_stacks
+                    .get(&mi)
+                    .map_or("-".to_string(), |s| s.to_string())
             );
         }
     }

@@ -26,7 +26,8 @@
 //!   point-to-point / 1 point-to-plane).
 //!
 //! Output lines (f32 as 8 hex digits of their bits, `{:?}` for errors):
-//! - `model M load ok int8`, `model M load ok f32` (parsed, no cases run) or
+//! - `model M load_stack STACK` (peak stack of parsing the blob), then
+//!   `model M load ok int8`, `model M load ok f32` (parsed, no cases run) or
 //!   `model M load error E`;
 //! - `case C ok ENCODE_INSTR INFER_INSTR STACK feature HEX head H0..H6 pose Q0..T2`
 //!   (or `pose_error E`), or `case C error ENCODED E`;
@@ -153,16 +154,25 @@ fn main() -> ! {
     let mut line: String<LINE> = String::new();
     for m in 0..n_models {
         let blob = bytes(word(4 + 2 * m), word(5 + 2 * m));
-        // The load verdict, as the host's `hostile::load_verdict` words it.
-        let model = match Int8Model::from_bytes(blob) {
+        // The load verdict, as the host's `hostile::load_verdict` words it,
+        // and the stack parsing and validating the blob takes.
+        let baseline = stack::paint();
+        let loaded = Int8Model::from_bytes(blob);
+        let f32_loaded = match loaded {
+            Err(Error::WrongKind { .. }) => Some(F32Model::from_bytes(blob).map(|_| ())),
+            _ => None,
+        };
+        say!("model {} load_stack {}", m, stack::used_below(baseline));
+        let model = match loaded {
             Ok(model) => {
                 say!("model {} load ok int8", m);
                 model
             }
             Err(Error::WrongKind { .. }) => {
-                match F32Model::from_bytes(blob) {
-                    Ok(_) => say!("model {} load ok f32", m),
-                    Err(e) => say!("model {} load error {:?}", m, e),
+                match f32_loaded {
+                    Some(Ok(())) => say!("model {} load ok f32", m),
+                    Some(Err(e)) => say!("model {} load error {:?}", m, e),
+                    None => {}
                 }
                 continue;
             }
