@@ -78,7 +78,16 @@ impl<'a> Int8Model<'a> {
 
     /// Validates an already decoded payload (dimensions, parameter ranges,
     /// accumulator bounds).
+    #[inline(always)]
     pub fn from_payload(p: Int8Payload<'a>) -> Result<Self> {
+        // Checked by reference, then moved once into the model.
+        let template = Self::validate(&p)?;
+        Ok(Int8Model { p, template })
+    }
+
+    /// Every check of [`Self::from_payload`]; returns the template.
+    #[inline(never)]
+    fn validate(p: &Int8Payload<'a>) -> Result<Template<'a>> {
         let arch = &p.arch;
         arch.validate()?;
         if !(p.input_scale.is_finite() && p.input_scale > 0.0) {
@@ -117,8 +126,7 @@ impl<'a> Int8Model<'a> {
         )?;
         check_frame(&p.frame)?;
         check_passes(p.passes)?;
-        let template = Template::new(p.template.clone())?;
-        Ok(Int8Model { p, template })
+        Template::new(p.template.clone())
     }
 
     /// The template's points (model frame) used to check and refine poses.
