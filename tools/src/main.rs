@@ -4,6 +4,7 @@
 //! target through rustup, QEMU through apt-get), so a fresh machine needs
 //! only a Rust toolchain.
 
+mod fuzz;
 mod no_panic;
 mod profile;
 
@@ -20,8 +21,9 @@ cargo xtask <command>
 
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
-                the no-panic proof, the C header, the QEMU harness on every core, the C
-                example, then the host tests
+                the no-panic proof, the C header, the QEMU harness on
+                every core, the C example, every fuzz target for 10 s,
+                then the host tests
   demo          the main job: register the shipped source with the trained
                 embedded default (int8) through the device pipeline, and say
                 whether the pose is reliable; extra arguments go to
@@ -41,6 +43,11 @@ cargo xtask <command>
                 entry points or the C API (tests/no-panic, on the M4F,
                 M0, M3 and M33 targets); on failure, lists each call into
                 panic code with its inline chain
+  fuzz [SECONDS]
+                every fuzz target (fuzz/: blobs, sealed blobs, clouds, the
+                C API, each reader) for SECONDS each (default 60) with
+                cargo-fuzz on nightly, from generated seed corpora and the
+                committed regressions; prints executions and coverage
   size          flash and static RAM of firmware-example
   c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
                 linking libpcrnet.a), run it under QEMU and compare every
@@ -54,9 +61,10 @@ cargo xtask <command>
                 target/experiments) and regenerate RESULTS.md
   help          this text
 
-Missing tools are installed: the Rust targets of the cores (rustup),
-qemu-system-arm, qemu-system-misc (RISC-V), gcc-arm-none-eabi and
-libnewlib-arm-none-eabi (apt-get).
+Missing tools are installed: the Rust targets of the cores and the
+nightly toolchain (rustup), cargo-fuzz (cargo install), qemu-system-arm,
+qemu-system-misc (RISC-V), gcc-arm-none-eabi, libnewlib-arm-none-eabi and
+binutils-arm-none-eabi (apt-get).
 ";
 
 fn main() -> ExitCode {
@@ -75,6 +83,13 @@ fn main() -> ExitCode {
         Some("c-example") => c_example(),
         Some("c-header") => c_header(args.get(1).map(String::as_str) == Some("--check")),
         Some("no-panic") => no_panic::run(&root()),
+        Some("fuzz") => match args.get(1).map(|s| s.parse::<u64>()) {
+            None => fuzz::run(&root(), 60),
+            Some(Ok(seconds)) => fuzz::run(&root(), seconds),
+            Some(Err(_)) => Err(format!(
+                "fuzz takes a number of seconds per target\n\n{HELP}"
+            )),
+        },
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
         Some("help") | None => {
             print!("{HELP}");
@@ -148,6 +163,10 @@ fn cores() -> Result<(), String> {
     }
     Ok(())
 }
+
+/// Seconds each fuzz target runs in CI (a smoke run that also replays the
+/// corpora; campaigns: `cargo xtask fuzz 3600`).
+const CI_FUZZ_SECONDS: u64 = 10;
 
 /// The crates built for the device, outside the host workspace.
 const FIRMWARE_CRATES: [&str; 3] = ["firmware-example", "tests/firmware", "tests/no-panic"];
@@ -268,6 +287,12 @@ fn ci() -> Result<(), String> {
     qemu_test()?;
     cores()?;
     c_example()?;
+    run_in(
+        &root().join("fuzz"),
+        env!("CARGO"),
+        &["fmt", "--", "--check"],
+    )?;
+    fuzz::run(&root(), CI_FUZZ_SECONDS)?;
     cargo(&["test", "--workspace"])
 }
 

@@ -1,0 +1,24 @@
+//! Payload bytes sealed into a blob with a correct header and CRC (the
+//! first byte picks int8 or f32), so mutations reach the decoder and the
+//! validation instead of stopping at the checksum.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use pcrnet_core::format::ModelKind;
+
+fuzz_target!(|data: &[u8]| {
+    let Some((&kind, payload)) = data.split_first() else {
+        return;
+    };
+    let kind = if kind & 1 == 0 {
+        ModelKind::Int8
+    } else {
+        ModelKind::F32
+    };
+    let blob = pcrnet_fuzz::seal(kind, payload);
+    pcrnet_fuzz::run_blob(
+        &blob,
+        &pcrnet_fuzz::fixed_cloud(),
+        &pcrnet_fuzz::quick_options(),
+    );
+});
