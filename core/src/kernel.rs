@@ -64,6 +64,14 @@ fn scalar_dot<X: QValue>(w: &[u8], x: &[X]) -> i32 {
     })
 }
 
+/// The first `n` values (all of them if there are fewer): `split_at` at a
+/// clamped index, which leaves no bounds check behind at any optimisation level.
+#[cfg(pcrnet_arm_dsp)]
+#[inline(always)]
+fn prefix_of<T>(values: &[T], n: usize) -> &[T] {
+    values.split_at(n.min(values.len())).0
+}
+
 /// Dot product of int8 weights with int8 values (given as bytes by `byte`).
 #[cfg(not(pcrnet_arm_dsp))]
 #[inline(always)]
@@ -85,16 +93,20 @@ fn int8_dot2(w: &[u8], a: &[i8], b: &[i8]) -> (i32, i32) {
 #[inline(always)]
 fn int8_dot2(w: &[u8], a: &[i8], b: &[i8]) -> (i32, i32) {
     let n = w.len().min(a.len()).min(b.len());
-    let (w, a, b) = (&w[..n], &a[..n], &b[..n]);
+    let (w, a, b) = (prefix_of(w, n), prefix_of(a, n), prefix_of(b, n));
     let (wc, ac, bc) = (w.chunks_exact(4), a.chunks_exact(4), b.chunks_exact(4));
     let tail_a = scalar_dot(wc.remainder(), ac.remainder());
     let tail_b = scalar_dot(wc.remainder(), bc.remainder());
-    let word = |c: &[i8]| u32::from_le_bytes([c[0] as u8, c[1] as u8, c[2] as u8, c[3] as u8]);
     let (mut acc_a, mut acc_b) = (0i32, 0i32);
     for ((w4, a4), b4) in wc.zip(ac).zip(bc) {
-        let wv = u32::from_le_bytes([w4[0], w4[1], w4[2], w4[3]]);
+        // Chunks of four: the patterns always match (no bounds checks).
+        let (&[w0, w1, w2, w3], &[a0, a1, a2, a3], &[b0, b1, b2, b3]) = (w4, a4, b4) else {
+            continue;
+        };
+        let wv = u32::from_le_bytes([w0, w1, w2, w3]);
+        let av = u32::from_le_bytes([a0 as u8, a1 as u8, a2 as u8, a3 as u8]);
+        let bv = u32::from_le_bytes([b0 as u8, b1 as u8, b2 as u8, b3 as u8]);
         let (we, wo) = (dsp::sxtb16(wv), dsp::sxtb16_ror8(wv));
-        let (av, bv) = (word(a4), word(b4));
         acc_a = dsp::smlad(we, dsp::sxtb16(av), acc_a);
         acc_a = dsp::smlad(wo, dsp::sxtb16_ror8(av), acc_a);
         acc_b = dsp::smlad(we, dsp::sxtb16(bv), acc_b);
@@ -111,13 +123,17 @@ fn int8_dot2(w: &[u8], a: &[i8], b: &[i8]) -> (i32, i32) {
 #[inline(always)]
 fn int8_dot<X: QValue>(w: &[u8], x: &[X], byte: impl Fn(X) -> u8) -> i32 {
     let n = w.len().min(x.len());
-    let (w, x) = (&w[..n], &x[..n]);
+    let (w, x) = (prefix_of(w, n), prefix_of(x, n));
     let (wc, xc) = (w.chunks_exact(4), x.chunks_exact(4));
     let tail = scalar_dot(wc.remainder(), xc.remainder());
     let mut acc = 0i32;
     for (w4, x4) in wc.zip(xc) {
-        let wv = u32::from_le_bytes([w4[0], w4[1], w4[2], w4[3]]);
-        let xv = u32::from_le_bytes([byte(x4[0]), byte(x4[1]), byte(x4[2]), byte(x4[3])]);
+        // Chunks of four: the patterns always match (no bounds checks).
+        let (&[w0, w1, w2, w3], &[x0, x1, x2, x3]) = (w4, x4) else {
+            continue;
+        };
+        let wv = u32::from_le_bytes([w0, w1, w2, w3]);
+        let xv = u32::from_le_bytes([byte(x0), byte(x1), byte(x2), byte(x3)]);
         acc = dsp::smlad(dsp::sxtb16(wv), dsp::sxtb16(xv), acc);
         acc = dsp::smlad(dsp::sxtb16_ror8(wv), dsp::sxtb16_ror8(xv), acc);
     }
@@ -456,22 +472,25 @@ pub(crate) fn dense_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink:
     const DIM: usize = crate::arch::INPUT_DIM;
     const MAX: usize = crate::arch::MAX_TILE;
     let rows = weights
-        .chunks_exact(DIM)
+        .as_chunks::<DIM>()
+        .0
+        .iter()
         .zip(le_i32s(q.bias))
         .zip(le_i32s(q.multiplier))
         .zip(q.shift);
     for (o, (((row, bias), m), &s)) in rows.enumerate() {
         let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
-        let w = [0, 1, 2].map(|k| row[k] as i8 as i32);
+        let [w0, w1, w2] = row.map(|w| w as i8 as i32);
         for (c, chunk) in points.chunks(DIM * MAX).enumerate() {
             let mut accs = [0i32; MAX];
             let mut n = 0;
-            for (acc, p) in accs.iter_mut().zip(chunk.chunks_exact(DIM)) {
-                let dot = w[0] * p[0] as i32 + w[1] * p[1] as i32 + w[2] * p[2] as i32;
-                *acc = bias.wrapping_add(dot);
+            for (acc, p) in accs.iter_mut().zip(chunk.as_chunks::<DIM>().0) {
+                let &[x, y, z] = p;
+                *acc = bias.wrapping_add(w0 * x as i32 + w1 * y as i32 + w2 * z as i32);
                 n += 1;
             }
-            sink.take(o, c * MAX, &accs[..n], &step);
+            let (accs, _) = accs.split_at(n.min(MAX));
+            sink.take(o, c * MAX, accs, &step);
         }
     }
 }

@@ -164,7 +164,8 @@ impl Rigid {
 impl Frame {
     /// A user-unit point in the model frame: `(p - centre) * scale`, per axis.
     pub fn to_model(&self, p: [f32; 3]) -> [f32; 3] {
-        [0, 1, 2].map(|k| (p[k] - self.centre[k]) * self.scale)
+        let ([x, y, z], [cx, cy, cz], s) = (p, self.centre, self.scale);
+        [(x - cx) * s, (y - cy) * s, (z - cz) * s]
     }
 
     /// A pose between model-frame clouds as a pose between user-unit
@@ -175,11 +176,11 @@ impl Frame {
             rotation: pose.rotation,
             translation: [0.0; 3],
         };
-        let rc = r.transform_point(self.centre);
-        let t = pose.translation;
+        let [rx, ry, rz] = r.transform_point(self.centre);
+        let ([tx, ty, tz], [cx, cy, cz], s) = (pose.translation, self.centre, self.scale);
         Pose {
             rotation: pose.rotation,
-            translation: [0, 1, 2].map(|k| t[k] / self.scale + self.centre[k] - rc[k]),
+            translation: [tx / s + cx - rx, ty / s + cy - ry, tz / s + cz - rz],
         }
     }
 }

@@ -228,11 +228,11 @@ fn icp_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64)
     let nf = n as f32;
     let mean_p = sp.map(|v| v as f32 / nf);
     let mean_q = sq.map(|v| v as f32 / nf);
-    let rp = r.transform_point(mean_p);
-    let step = template.step();
+    let [px, py, pz] = r.transform_point(mean_p);
+    let ([qx, qy, qz], step) = (mean_q, template.step());
     Some(Pose {
         rotation,
-        translation: [0, 1, 2].map(|k| (mean_q[k] - rp[k]) * step),
+        translation: [(qx - px) * step, (qy - py) * step, (qz - pz) * step],
     })
 }
 

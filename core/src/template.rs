@@ -176,9 +176,10 @@ impl<'a> Template<'a> {
         }
     }
 
-    /// Cell coordinate along `axis` of a value, clamped into the grid.
-    fn axis_cell(&self, axis: usize, v: i32) -> i32 {
-        let rel = v - self.cloud.origin[axis] as i32;
+    /// Cell coordinate of a value along an axis whose grid starts at
+    /// `origin`, clamped into the grid.
+    fn axis_cell(&self, origin: i16, v: i32) -> i32 {
+        let rel = v - origin as i32;
         // The cell size is positive (checked at load); `checked_` and
         // `min`/`max` instead of `clamp` leave the compiler no panic path.
         let c = rel.checked_div_euclid(self.cloud.cell as i32).unwrap_or(0);
@@ -206,7 +207,12 @@ impl<'a> Template<'a> {
     /// (clamped) cell and stops once no unvisited cell can hold a closer
     /// point than the best so far (or than `limit`): exact, not approximate.
     pub fn nearest(&self, q: [i32; 3], limit: u64) -> Option<Neighbour> {
-        let centre = [0, 1, 2].map(|a| self.axis_cell(a, q[a]));
+        let ([x, y, z], [ox, oy, oz]) = (q, self.cloud.origin);
+        let centre = [
+            self.axis_cell(ox, x),
+            self.axis_cell(oy, y),
+            self.axis_cell(oz, z),
+        ];
         let mut best: Option<Neighbour> = None;
         let mut bound = limit;
         let g = self.grid;
