@@ -51,7 +51,12 @@
 //!
 //! ## Guarantees
 //! - No allocation, no panic reachable from any blob or any cloud: every
-//!   failure is an [`Error`].
+//!   failure is an [`Error`]. Proven at link time for the release
+//!   Cortex-M builds (`cargo xtask no-panic`: an image calling every entry
+//!   point on inputs the optimiser cannot see, whose panic handler cannot
+//!   link); fuzzed on the host (`cargo xtask fuzz`).
+//! - Blob sizes are combined with checked arithmetic, so a blob loads or
+//!   fails the same way on 32- and 64-bit targets (checked under QEMU).
 //! - The int8 path is integer-only up to the head output; the pose uses
 //!   single f32 operations and `libm`, so the device and the host agree bit
 //!   for bit. So does refinement: the nearest-neighbour search and the
@@ -60,8 +65,8 @@
 //!   (checked on 186 registrations under QEMU).
 //! - Refinement's memory does not depend on the number of points: it uses
 //!   no scratch (running sums, the blob's own search grid).
-//! - A pose or residual is never NaN or infinite: such a result is
-//!   [`Error::NonFiniteResult`].
+//! - A pose, residual, f32 feature or f32 head output is never NaN or
+//!   infinite: such a result is [`Error::NonFiniteResult`].
 //! - Encoder output is invariant to the order of the points and to the tile
 //!   size, bit for bit. For models that centre the source, the centroid is
 //!   an f64 sum in point order: exact, hence order-independent, while the
