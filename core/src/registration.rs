@@ -157,8 +157,9 @@ pub struct Registration {
     pub reliable: bool,
 }
 
-/// Standard deviation (model units) below which a source counts as one point.
-const MIN_EXTENT: f32 = 1e-3;
+/// Standard deviation (model units) below which a source counts as one
+/// point (see [`refine::degeneracy`]).
+pub const MIN_EXTENT: f32 = 1e-3;
 
 /// Runs the pipeline with `pass`, one network pass on the source moved by a
 /// [`PointMap`], returning the pass's pose (model frame) and its saturation count.

@@ -262,6 +262,11 @@ fn register(
             row[0], row[1], row[2], row[3]
         ));
     }
+    if let (None, Some(d)) = (&out.check, out.degenerate) {
+        say(format!(
+            "degenerate source: {d:?} - its points do not determine a rotation; do not act on this pose"
+        ));
+    }
     if let Some(c) = &out.check {
         say(format!(
             "residual: {:.6} (source units), {:.4} of the template's size; plane residual {:.6}, {:.4} of the size; fitness {:.3}; inlier RMSE {:.6}",
@@ -316,6 +321,7 @@ fn report_json(method: &str, out: &methods::Outcome) -> serde_json::Value {
         "quaternion_wxyz": p.rotation,
         "translation": p.translation,
         "matrix": p.matrix(),
+        "degenerate": out.degenerate.map(|d| format!("{d:?}")),
     });
     if let Some(c) = &out.check {
         v["residual"] = c.residual.into();
@@ -328,7 +334,6 @@ fn report_json(method: &str, out: &methods::Outcome) -> serde_json::Value {
         v["passes"] = c.passes.into();
         v["icp_iterations"] = c.icp_iterations.into();
         v["saturated"] = c.saturated.into();
-        v["degenerate"] = c.degenerate.map(|d| format!("{d:?}")).into();
         v["reliable"] = c.reliable.into();
     }
     v

@@ -20,12 +20,15 @@
 
 use std::time::Instant;
 
-use pcrnet_core::Pose;
+use pcrnet_core::refine::{self, Subset};
+use pcrnet_core::registration::MIN_EXTENT;
+use pcrnet_core::template::Template;
+use pcrnet_core::{Degeneracy, F32Model, Frame, Int8Model, Options, Pose};
 use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
 use crate::register::{ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk};
-use crate::template::TemplateError;
+use crate::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError};
 
 /// A method family.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -230,6 +233,11 @@ pub struct Outcome {
     pub trajectory: Option<Vec<Pose>>,
     /// The device pipeline's residual and flags.
     pub check: Option<pcrnet_core::Registration>,
+    /// The source's shape does not determine a pose (every point in one
+    /// place, or on one line), judged for every method by the device's
+    /// rule ([`pcrnet_core::refine::degeneracy`]) in the template's frame:
+    /// the pose is then not to be acted on, whatever the method returned.
+    pub degenerate: Option<Degeneracy>,
 }
 
 /// Why a registration failed.
@@ -263,6 +271,7 @@ pub fn run(
 ) -> Result<Outcome, MethodError> {
     let start = Instant::now();
     let model = || blob.ok_or(MethodError::NoModel(method.kind));
+    let degenerate = source_degeneracy(blob, template, source)?;
     let mut out = match method.kind {
         MethodKind::Icp => {
             let config = IcpConfig {
@@ -277,6 +286,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: Some(r.trajectory),
                 check: None,
+                degenerate,
             }
         }
         MethodKind::Device => {
@@ -288,6 +298,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: None,
                 check: Some(r),
+                degenerate,
             }
         }
         MethodKind::Pointnetlk => {
@@ -299,6 +310,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: Some(r.trajectory),
                 check: None,
+                degenerate,
             }
         }
         MethodKind::Pcrnet | MethodKind::Ipcrnet => {
@@ -314,6 +326,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: None,
                 check: None,
+                degenerate,
             }
         }
     };
@@ -329,6 +342,36 @@ pub fn run(
     }
     out.seconds = start.elapsed().as_secs_f64();
     Ok(out)
+}
+
+/// The device's degeneracy verdict on `source`, against the template cloud
+/// if one is given (recorded as a blob records it) or else the blob's own
+/// template. A template with no extent is an error for every method.
+fn source_degeneracy(
+    blob: Option<&[u8]>,
+    template: Option<&[[f32; 3]]>,
+    source: &[[f32; 3]],
+) -> Result<Option<Degeneracy>, MethodError> {
+    let judge = |t: &Template<'_>, frame: Frame| {
+        let subset = Subset::new(source, frame, Options::default().max_points);
+        refine::degeneracy(t, &subset, MIN_EXTENT)
+    };
+    if let Some(template) = template {
+        let reference = Reference::new(template, DEFAULT_TEMPLATE_POINTS)?;
+        let t = Template::new(reference.cloud()).map_err(TemplateError::from)?;
+        return Ok(judge(&t, reference.frame));
+    }
+    let Some(blob) = blob else {
+        return Ok(None);
+    };
+    if let Ok(m) = Int8Model::from_bytes(blob) {
+        Ok(judge(m.template(), *m.frame()))
+    } else if let Ok(m) = F32Model::from_bytes(blob) {
+        Ok(judge(m.template(), *m.frame()))
+    } else {
+        // The method itself reports what is wrong with the blob.
+        Ok(None)
+    }
 }
 
 #[cfg(test)]
