@@ -61,9 +61,10 @@ static void report(const char *label, int32_t status, const PcrnetRegistration *
            (double)r->rotation[2], (double)r->rotation[3]);
     printf("  translation: %.6f %.6f %.6f\n", (double)r->translation[0], (double)r->translation[1],
            (double)r->translation[2]);
-    printf("  plane residual %.6f (%.4f of the template's size), fitness %.3f, hypothesis %lu, ICP iterations %lu, saturated %lu\n",
+    printf("  plane residual %.6f (%.4f of the template's size), fitness %.3f, hypothesis %lu, ICP iterations %lu, saturated %lu, out of range %lu\n",
            (double)r->plane_residual, (double)r->relative_plane_residual, (double)r->fitness,
-           (unsigned long)r->hypothesis, (unsigned long)r->icp_iterations, (unsigned long)r->saturated);
+           (unsigned long)r->hypothesis, (unsigned long)r->icp_iterations, (unsigned long)r->saturated,
+           (unsigned long)r->out_of_range);
     printf("  reliable: %s\n", r->reliable ? "yes" : "no");
     printf("@ reg %s 0", label);
     print_bits(r->rotation, 4);
@@ -71,9 +72,9 @@ static void report(const char *label, int32_t status, const PcrnetRegistration *
     const float scores[6] = {r->residual, r->relative_residual, r->plane_residual,
                              r->relative_plane_residual, r->fitness, r->inlier_rmse};
     print_bits(scores, 6);
-    printf(" %lu %lu %lu %lu %lu %d\n", (unsigned long)r->hypothesis, (unsigned long)r->passes,
-           (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->degenerate,
-           r->reliable ? 1 : 0);
+    printf(" %lu %lu %lu %lu %lu %lu %d\n", (unsigned long)r->hypothesis, (unsigned long)r->passes,
+           (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->out_of_range,
+           (unsigned long)r->degenerate, r->reliable ? 1 : 0);
 }
 
 static int32_t run(const char *label, const float *points, size_t n, const PcrnetOptions *options,

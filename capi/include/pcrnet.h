@@ -127,9 +127,11 @@ enum PcrnetStatus
    */
   PCRNET_ERROR_NON_FINITE_COORDINATE = -31,
   /*
-   A coordinate is outside the model's input range.
+   Every point is outside the model's input range (points outside it
+   are left out and counted in `out_of_range`; with none left there is
+   no pose).
    */
-  PCRNET_ERROR_COORDINATE_OUT_OF_RANGE = -32,
+  PCRNET_ERROR_NO_POINT_IN_RANGE = -32,
   /*
    The network produced a zero quaternion.
    */
@@ -270,6 +272,11 @@ typedef struct {
    int8 values that reached the top of their range.
    */
   uint32_t saturated;
+  /*
+   Source points left out of the network: outside the model's input
+   range (stray points far from the object).
+   */
+  uint32_t out_of_range;
   /*
    `PCRNET_DEGENERATE_NONE`, `_POINT` or `_LINE`.
    */

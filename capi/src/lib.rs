@@ -125,8 +125,10 @@ pub enum PcrnetStatus {
     PCRNET_ERROR_EMPTY_CLOUD = -30,
     /// A coordinate is NaN or infinite.
     PCRNET_ERROR_NON_FINITE_COORDINATE = -31,
-    /// A coordinate is outside the model's input range.
-    PCRNET_ERROR_COORDINATE_OUT_OF_RANGE = -32,
+    /// Every point is outside the model's input range (points outside it
+    /// are left out and counted in `out_of_range`; with none left there is
+    /// no pose).
+    PCRNET_ERROR_NO_POINT_IN_RANGE = -32,
     /// The network produced a zero quaternion.
     PCRNET_ERROR_DEGENERATE_POSE = -33,
     /// The pose or a residual came out non-finite.
@@ -155,7 +157,7 @@ impl From<Error> for PcrnetStatus {
             Error::BufferTooSmall { .. } => PCRNET_ERROR_BUFFER_TOO_SMALL,
             Error::EmptyCloud => PCRNET_ERROR_EMPTY_CLOUD,
             Error::NonFiniteCoordinate { .. } => PCRNET_ERROR_NON_FINITE_COORDINATE,
-            Error::CoordinateOutOfRange { .. } => PCRNET_ERROR_COORDINATE_OUT_OF_RANGE,
+            Error::NoPointInRange => PCRNET_ERROR_NO_POINT_IN_RANGE,
             Error::DegeneratePose => PCRNET_ERROR_DEGENERATE_POSE,
             Error::NonFiniteResult => PCRNET_ERROR_NON_FINITE_RESULT,
             Error::InvalidOption { .. } => PCRNET_ERROR_INVALID_OPTION,
@@ -283,6 +285,9 @@ pub struct PcrnetRegistration {
     pub icp_iterations: u32,
     /// int8 values that reached the top of their range.
     pub saturated: u32,
+    /// Source points left out of the network: outside the model's input
+    /// range (stray points far from the object).
+    pub out_of_range: u32,
     /// `PCRNET_DEGENERATE_NONE`, `_POINT` or `_LINE`.
     pub degenerate: u32,
     /// Not degenerate and the relative plane residual within `max_residual`.
@@ -305,6 +310,7 @@ impl From<&Registration> for PcrnetRegistration {
             passes: count(r.passes),
             icp_iterations: count(r.icp_iterations),
             saturated: r.saturated,
+            out_of_range: r.out_of_range,
             degenerate: match r.degenerate {
                 None => PCRNET_DEGENERATE_NONE,
                 Some(Degeneracy::Point) => PCRNET_DEGENERATE_POINT,
@@ -598,7 +604,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -21 => c"output buffer too small",
         -30 => c"the point cloud is empty",
         -31 => c"a point has a NaN or infinite coordinate",
-        -32 => c"a point lies outside the model's input range: a stray point far from the object, or a cloud in other units than the template; remove outliers or crop the cloud to the object",
+        -32 => c"every point lies outside the model's input range: the cloud is in other units than the template, or far from where the template is; bring it into the template's units and frame",
         -33 => c"the network's output has a zero quaternion",
         -34 => c"the pose or residual is not finite: the coordinates are too large once moved into the model's frame",
         -40 => c"a registration option is out of range (zero passes, hypotheses or max_points, a negative or non-finite tolerance or distance, an unknown metric, or too many points)",

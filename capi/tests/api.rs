@@ -64,6 +64,7 @@ fn sentinel() -> PcrnetRegistration {
         passes: 7,
         icp_iterations: 7,
         saturated: 7,
+        out_of_range: 7,
         degenerate: 7,
         reliable: true,
     }
@@ -280,9 +281,19 @@ fn bad_blobs_bad_clouds_and_bad_options_get_their_own_status() {
     cloud[3][1] = f32::NAN;
     let (s, _) = register(&model, &cloud, &options, &mut scratch);
     assert_eq!(s, PCRNET_ERROR_NON_FINITE_COORDINATE);
+    // A stray point is left out and counted; a cloud with no point in
+    // range has no pose.
     cloud[3][1] = 1e9;
-    let (s, _) = register(&model, &cloud, &options, &mut scratch);
-    assert_eq!(s, PCRNET_ERROR_COORDINATE_OUT_OF_RANGE);
+    let (s, r) = register(&model, &cloud, &options, &mut scratch);
+    assert_eq!((s, r.out_of_range), (PCRNET_OK, 1));
+    let far = [
+        [1e9f32, 0.0, 0.0],
+        [-1e9, 0.0, 0.0],
+        [0.0, 1e9, 0.0],
+        [0.0, -1e9, 0.0],
+    ];
+    let (s, _) = register(&model, &far, &options, &mut scratch);
+    assert_eq!(s, PCRNET_ERROR_NO_POINT_IN_RANGE);
 
     let source = shipped_source();
     for bad in [
@@ -326,7 +337,7 @@ fn every_status_has_a_message_naming_what_to_do() {
         PCRNET_ERROR_BUFFER_TOO_SMALL,
         PCRNET_ERROR_EMPTY_CLOUD,
         PCRNET_ERROR_NON_FINITE_COORDINATE,
-        PCRNET_ERROR_COORDINATE_OUT_OF_RANGE,
+        PCRNET_ERROR_NO_POINT_IN_RANGE,
         PCRNET_ERROR_DEGENERATE_POSE,
         PCRNET_ERROR_NON_FINITE_RESULT,
         PCRNET_ERROR_INVALID_OPTION,

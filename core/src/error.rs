@@ -80,13 +80,12 @@ pub enum Error {
         /// Index of the offending point.
         index: usize,
     },
-    /// A coordinate does not fit the model's int16 input range
-    /// (`|x| > 32767 * input_scale`). Such points are rejected, not saturated,
-    /// because clamping would silently move them.
-    CoordinateOutOfRange {
-        /// Index of the offending point.
-        index: usize,
-    },
+    /// Every point lies outside the model's int16 input range
+    /// (`|x| > 32767 * input_scale` in the model frame, after centring for
+    /// models that centre the source). Points outside it are left out of the
+    /// network (never clamped, which would move them) and counted in
+    /// [`crate::Registration::out_of_range`]; with none left there is no pose.
+    NoPointInRange,
     /// The network's quaternion output has zero (or non-finite) norm, so no
     /// rotation can be formed from it.
     DegeneratePose,
@@ -145,9 +144,9 @@ impl fmt::Display for Error {
             Error::NonFiniteCoordinate { index } => {
                 write!(f, "point {index} has a NaN or infinite coordinate")
             }
-            Error::CoordinateOutOfRange { index } => write!(
+            Error::NoPointInRange => write!(
                 f,
-                "point {index} lies outside the model's input range (`pcrnet inspect` prints it, in template sizes around the template's frame or the source's centroid): a stray point far from the object, or a cloud in other units than the template; remove outliers or crop the cloud to the object"
+                "every point lies outside the model's input range (`pcrnet inspect` prints it, in template sizes around the template's frame or the source's centroid): the cloud is in other units than the template, or far from where the template is; bring it into the template's units and frame"
             ),
             Error::DegeneratePose => write!(f, "network output has a zero quaternion"),
             Error::NonFiniteResult => write!(

@@ -11,8 +11,8 @@
 use crate::arch::{Arch, INPUT_DIM, POSE_DIM, ping_pong, prefix};
 use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, expect_len};
-use crate::pose::{self, PointMap, Pose};
-use crate::registration::{self, Options, Registration};
+use crate::pose::{self, Centring, PointMap, Pose};
+use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
 
 /// Read access to an array of f32 parameters.
@@ -128,11 +128,11 @@ impl<'a> F32Model<'a> {
         let net = &self.network;
         registration::run(
             &self.frame,
-            net.centre_source,
+            net.centring(),
             &self.template,
             source,
             options,
-            |map| Ok((net.pass(source, map, scratch)?, 0)),
+            |map| Ok((net.pass(source, map, scratch)?, PassCounts::default())),
         )
     }
 
@@ -244,6 +244,18 @@ impl<P: Params> F32Network<P> {
         self.centre_source
     }
 
+    /// How the source is placed for the network: the f32 path has no input
+    /// range, so a centred source is centred on the centroid of every point.
+    fn centring(&self) -> Centring {
+        if self.centre_source {
+            Centring::Centroid {
+                radius: f32::INFINITY,
+            }
+        } else {
+            Centring::None
+        }
+    }
+
     /// The layers: encoder first, then head, output last.
     pub fn layers(&self) -> &[Layer<P>] {
         &self.layers
@@ -276,7 +288,7 @@ impl<P: Params> F32Network<P> {
         feature: &mut [f32],
         work: &mut [f32],
     ) -> Result<Pose> {
-        let centring = pose::centring(source, self.centre_source, &Frame::IDENTITY)?;
+        let centring = pose::centring(source, self.centring(), &Frame::IDENTITY)?;
         let map = PointMap::new(Frame::IDENTITY, &centring);
         self.encode_into(source, &map, feature, work)?;
         Ok(centring)
@@ -303,14 +315,9 @@ impl<P: Params> F32Network<P> {
         tolerance: f32,
         scratch: &mut [f32],
     ) -> Result<(Pose, usize)> {
-        registration::network_pose(
-            frame,
-            self.centre_source,
-            source,
-            passes,
-            tolerance,
-            |map| self.pass(source, map, scratch),
-        )
+        registration::network_pose(frame, self.centring(), source, passes, tolerance, |map| {
+            self.pass(source, map, scratch)
+        })
     }
 
     /// One pass on the source moved by `map`: the pose in the model frame.

@@ -27,8 +27,8 @@ use crate::kernel::{
     QValue, Requant, Sink, as_words, bytes_of, dense_points, dense_tile, dense_tile_i8,
     dense_vector, dot, rows,
 };
-use crate::pose::{self, PointMap, Pose};
-use crate::registration::{self, Options, Registration};
+use crate::pose::{self, Centring, PointMap, Pose};
+use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
 
 /// A validated int8 model borrowing its weights from a blob.
@@ -54,6 +54,8 @@ pub struct Int8Inference<'s> {
     pub centring: Pose,
     /// Feature entries and head activations at the top of the int8 range.
     pub saturated: u32,
+    /// Points left out of the encoder: outside the model's input range.
+    pub out_of_range: u32,
 }
 
 impl<'a> Int8Model<'a> {
@@ -187,7 +189,7 @@ impl<'a> Int8Model<'a> {
         let tile = self.tile_for(scratch.len())?;
         registration::run(
             &self.p.frame,
-            self.p.centre_source,
+            self.centring(),
             &self.template,
             source,
             options,
@@ -198,6 +200,20 @@ impl<'a> Int8Model<'a> {
     /// Whether the network sees the source centred on its centroid.
     pub fn centres_source(&self) -> bool {
         self.p.centre_source
+    }
+
+    /// How the source is placed for the network: centred on the centroid of
+    /// the points within the input range of a robust centre, if the model
+    /// centres sources (a stray point the encoder leaves out does not move
+    /// the centre either).
+    fn centring(&self) -> Centring {
+        if self.p.centre_source {
+            Centring::Centroid {
+                radius: INPUT_QMAX as f32 * self.p.input_scale,
+            }
+        } else {
+            Centring::None
+        }
     }
 
     /// The network alone, in user units: up to `passes` passes (1: PCRNet;
@@ -224,7 +240,7 @@ impl<'a> Int8Model<'a> {
         let tile = self.tile_for(scratch.len())?;
         registration::network_pose(
             &self.p.frame,
-            self.p.centre_source,
+            self.centring(),
             source,
             passes,
             tolerance,
@@ -233,18 +249,22 @@ impl<'a> Int8Model<'a> {
     }
 
     /// One network pass on the source moved by `map`: the pose (model
-    /// frame) and the saturation count.
+    /// frame), the saturation count and the points left out.
     fn pass(
         &self,
         source: &[[f32; 3]],
         map: &PointMap,
         tile: usize,
         scratch: &mut [i8],
-    ) -> Result<(Pose, u32)> {
+    ) -> Result<(Pose, PassCounts)> {
         let (feature, work) = self.split_scratch(tile, scratch)?;
-        self.encode_into(source, map, tile, feature, work)?;
+        let out_of_range = self.encode_into(source, map, tile, feature, work)?;
         let (head, saturated) = self.head_counted(feature, work)?;
-        Ok((self.pose(&head)?, saturated))
+        let counts = PassCounts {
+            saturated,
+            out_of_range,
+        };
+        Ok((self.pose(&head)?, counts))
     }
 
     /// Encodes `source` and runs the head, returning the raw results.
@@ -267,13 +287,14 @@ impl<'a> Int8Model<'a> {
         scratch: &'s mut [i8],
     ) -> Result<Int8Inference<'s>> {
         let (feature, work) = self.split_scratch(tile, scratch)?;
-        let centring = self.encode_centred(source, tile, feature, work)?;
+        let (centring, out_of_range) = self.encode_centred(source, tile, feature, work)?;
         let (head, saturated) = self.head_counted(feature, work)?;
         Ok(Int8Inference {
             feature,
             head,
             centring,
             saturated,
+            out_of_range,
         })
     }
 
@@ -298,18 +319,18 @@ impl<'a> Int8Model<'a> {
     }
 
     /// Encodes `source`, centred first if the model says so; returns how it
-    /// was moved (the identity otherwise).
+    /// was moved (the identity otherwise) and the points left out.
     fn encode_centred(
         &self,
         source: &[[f32; 3]],
         tile: usize,
         feature: &mut [i8],
         work: &mut [i8],
-    ) -> Result<Pose> {
-        let centring = pose::centring(source, self.p.centre_source, &self.p.frame)?;
+    ) -> Result<(Pose, u32)> {
+        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
         let map = PointMap::new(self.p.frame, &centring);
-        self.encode_into(source, &map, tile, feature, work)?;
-        Ok(centring)
+        let out_of_range = self.encode_into(source, &map, tile, feature, work)?;
+        Ok((centring, out_of_range))
     }
 
     fn split_scratch<'s>(
@@ -333,22 +354,31 @@ impl<'a> Int8Model<'a> {
     }
 
     /// Quantizes point `index` to the model's int16 input grid, after
-    /// moving it by `map` (into the model frame, then by the current pose;
-    /// a moved point may leave the input range).
-    pub fn quantize_point(&self, index: usize, p: &[f32; 3], map: &PointMap) -> Result<[i16; 3]> {
+    /// moving it by `map` (into the model frame, then by the current pose);
+    /// `None` if it lies outside the input range (a moved point may leave
+    /// it). A non-finite coordinate is an error.
+    pub fn quantize_point(
+        &self,
+        index: usize,
+        p: &[f32; 3],
+        map: &PointMap,
+    ) -> Result<Option<[i16; 3]>> {
         if p.iter().any(|x| !x.is_finite()) {
             return Err(Error::NonFiniteCoordinate { index });
         }
-        let p = map.apply(*p);
-        let mut q = [0i16; 3];
-        for (q, x) in q.iter_mut().zip(p) {
-            *q = quantize_coordinate(x, self.p.input_scale)
-                .ok_or(Error::CoordinateOutOfRange { index })?;
-        }
-        Ok(q)
+        let [x, y, z] = map.apply(*p);
+        let q = |v| quantize_coordinate(v, self.p.input_scale);
+        Ok(match (q(x), q(y), q(z)) {
+            (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+            _ => None,
+        })
     }
 
-    /// Encodes `source`, each point first moved by `map`.
+    /// Encodes `source`, each point first moved by `map`, into `feature`
+    /// (max-pooled over the points). Points outside the input range are
+    /// left out; returns how many. Those inside are packed into tiles of
+    /// `tile` points in source order, so the feature does not depend on the
+    /// tile size. No point inside the range: [`Error::NoPointInRange`].
     fn encode_into(
         &self,
         source: &[[f32; 3]],
@@ -356,46 +386,75 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         feature: &mut [i8],
         work: &mut [i8],
-    ) -> Result<()> {
+    ) -> Result<u32> {
         if source.is_empty() {
             return Err(Error::EmptyCloud);
         }
         feature.fill(i8::MIN);
-        let widths = &self.p.arch.encoder;
-        let last = widths.len().saturating_sub(1);
+        let tile = tile.clamp(1, MAX_TILE);
         let half = tile * self.p.arch.widest_hidden_encoder();
         let (pairs, spare) = work.split_at_mut((2 * half).min(work.len()));
-        let (mut a, mut b) = ping_pong(pairs, half)?;
+        let mut pairs = ping_pong(pairs, half)?;
         let expanded = as_words(spare);
-        for (chunk_index, chunk) in source.chunks(tile.max(1)).enumerate() {
-            let mut q = [[0i16; INPUT_DIM]; MAX_TILE];
-            for (i, (q, p)) in q.iter_mut().zip(chunk).enumerate() {
-                *q = self.quantize_point(chunk_index * tile + i, p, map)?;
+        let mut points = [[0i16; INPUT_DIM]; MAX_TILE];
+        let (mut filled, mut encoded, mut left_out) = (0usize, 0usize, 0u32);
+        for (index, p) in source.iter().enumerate() {
+            let Some(q) = self.quantize_point(index, p, map)? else {
+                left_out = left_out.saturating_add(1);
+                continue;
+            };
+            if let Some(slot) = points.get_mut(filled) {
+                *slot = q;
+                filled += 1;
             }
-            let x0 = prefix(q.as_flattened(), INPUT_DIM * chunk.len())?;
-            let mut inputs = INPUT_DIM;
-            for (l, (layer, &width)) in self.p.encoder.iter().zip(widths.iter()).enumerate() {
-                let outputs = width as usize;
-                let rq = requant(layer, true);
-                let mut sink = if l == last {
-                    Sink::Pool(&mut *feature)
-                } else {
-                    Sink::Store {
-                        out: &mut *b,
-                        outputs,
-                    }
-                };
-                if l == 0 {
-                    dense_points(layer.weights, rq, x0, &mut sink);
-                } else {
-                    let x = prefix(a, chunk.len() * inputs)?;
-                    dense_tile_i8(layer.weights, inputs, rq, x, expanded, &mut sink);
-                }
-                if l != last {
-                    core::mem::swap(&mut a, &mut b);
-                }
-                inputs = outputs;
+            if filled == tile {
+                self.encode_tile(&points[..filled], &mut pairs, expanded, feature)?;
+                encoded += filled;
+                filled = 0;
             }
+        }
+        if filled > 0 {
+            self.encode_tile(prefix(&points, filled)?, &mut pairs, expanded, feature)?;
+            encoded += filled;
+        }
+        if encoded == 0 {
+            return Err(Error::NoPointInRange);
+        }
+        Ok(left_out)
+    }
+
+    /// Runs the encoder's layers on one tile of quantized points (at most
+    /// the tile the work buffers were sized for) and max-pools the last
+    /// layer into `feature`.
+    fn encode_tile<'w>(
+        &self,
+        points: &[[i16; INPUT_DIM]],
+        (a, b): &mut (&'w mut [i8], &'w mut [i8]),
+        expanded: &mut [u32],
+        feature: &mut [i8],
+    ) -> Result<()> {
+        let widths = &self.p.arch.encoder;
+        let last = widths.len().saturating_sub(1);
+        let x0 = points.as_flattened();
+        let mut inputs = INPUT_DIM;
+        for (l, (layer, &width)) in self.p.encoder.iter().zip(widths.iter()).enumerate() {
+            let outputs = width as usize;
+            let rq = requant(layer, true);
+            let mut sink = if l == last {
+                Sink::Pool(&mut *feature)
+            } else {
+                Sink::Store { out: b, outputs }
+            };
+            if l == 0 {
+                dense_points(layer.weights, rq, x0, &mut sink);
+            } else {
+                let x = prefix(a, points.len() * inputs)?;
+                dense_tile_i8(layer.weights, inputs, rq, x, expanded, &mut sink);
+            }
+            if l != last {
+                core::mem::swap(a, b);
+            }
+            inputs = outputs;
         }
         Ok(())
     }

@@ -233,17 +233,100 @@ pub fn centroid(points: &[[f32; 3]]) -> Result<[f32; 3]> {
     Ok(sum.map(|s| (s / n) as f32))
 }
 
+/// How a network expects its source placed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Centring {
+    /// As given (in the model frame).
+    None,
+    /// Centred on its centroid, computed over the points within `radius`
+    /// (model units, per axis) of a robust centre ([`robust_centroid`]):
+    /// the int8 path's input range, so that a stray point the encoder
+    /// leaves out does not move the centre either; infinite on the f32
+    /// path (every point).
+    Centroid {
+        /// Per-axis distance from the robust centre, model units.
+        radius: f32,
+    },
+}
+
+/// Points whose coordinate-wise median is the robust centre of
+/// [`robust_centroid`] (a stride sample, sorted on the stack).
+pub const MEDIAN_SAMPLE: usize = 31;
+
+/// The centroid ([`centroid`]) of the points within `radius` (per axis,
+/// user units) of a robust centre: the coordinate-wise median of a stride
+/// sample of at most [`MEDIAN_SAMPLE`] points. A cloud whose points all lie
+/// within `radius` of it gives exactly [`centroid`]'s value; far stray
+/// points (fewer than half the sample) are left out instead of pulling the
+/// centre towards them. If no point is within `radius` (impossible for a
+/// cloud with at most a few outliers), every point counts.
+pub fn robust_centroid(points: &[[f32; 3]], radius: f32) -> Result<[f32; 3]> {
+    if points.is_empty() {
+        return Err(Error::EmptyCloud);
+    }
+    if let Some(index) = points.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+        return Err(Error::NonFiniteCoordinate { index });
+    }
+    let stride = points.len().div_ceil(MEDIAN_SAMPLE).max(1);
+    let mut median = [0f32; 3];
+    for (axis, m) in median.iter_mut().enumerate() {
+        let mut sample = [0f32; MEDIAN_SAMPLE];
+        let mut n = 0;
+        for (slot, p) in sample.iter_mut().zip(points.iter().step_by(stride)) {
+            if let Some(&x) = p.get(axis) {
+                *slot = x;
+                n += 1;
+            }
+        }
+        *m = lower_median(sample.split_at(n.min(MEDIAN_SAMPLE)).0);
+    }
+    let near = |p: &[f32; 3]| {
+        p.iter()
+            .zip(&median)
+            .all(|(&x, &m)| libm::fabsf(x - m) <= radius)
+    };
+    let (mut sum, mut n) = ([0f64; 3], 0usize);
+    for p in points.iter().filter(|p| near(p)) {
+        for (s, &x) in sum.iter_mut().zip(p) {
+            *s += x as f64;
+        }
+        n += 1;
+    }
+    if n == 0 {
+        return centroid(points);
+    }
+    let n = n as f64;
+    Ok(sum.map(|s| (s / n) as f32))
+}
+
+/// The lower median (the `(n - 1) / 2`-th smallest) of finite values, by
+/// counting rather than sorting (no index arithmetic, no allocation; n is
+/// at most [`MEDIAN_SAMPLE`]); 0 for none.
+fn lower_median(values: &[f32]) -> f32 {
+    let k = values.len().saturating_sub(1) / 2;
+    values
+        .iter()
+        .copied()
+        .find(|&v| {
+            let less = values.iter().filter(|&&x| x < v).count();
+            let not_more = values.iter().filter(|&&x| x <= v).count();
+            less <= k && k < not_more
+        })
+        .unwrap_or(0.0)
+}
+
 /// Where registration starts, in the model frame: the identity, or for a
 /// network trained on centred sources (as the reference PCRNet
 /// implementation does), the translation by minus the source's centroid
-/// (computed in user units, then moved into the model frame). The network
-/// then sees the centred source, and composing its estimate after this pose
-/// gives the pose of the source as given.
-pub fn centring(points: &[[f32; 3]], centre_source: bool, frame: &Frame) -> Result<Pose> {
-    if !centre_source {
+/// ([`robust_centroid`] with the radius of `centring`, in user units, then
+/// moved into the model frame). The network then sees the centred source,
+/// and composing its estimate after this pose gives the pose of the source
+/// as given.
+pub fn centring(points: &[[f32; 3]], centring: Centring, frame: &Frame) -> Result<Pose> {
+    let Centring::Centroid { radius } = centring else {
         return Ok(Pose::IDENTITY);
-    }
-    let c = frame.to_model(centroid(points)?);
+    };
+    let c = frame.to_model(robust_centroid(points, radius / frame.scale)?);
     Ok(Pose {
         rotation: Pose::IDENTITY.rotation,
         translation: [-c[0], -c[1], -c[2]],
@@ -330,17 +413,31 @@ mod tests {
     }
 
     #[test]
+    fn the_lower_median_counts_instead_of_sorting() {
+        assert_eq!(lower_median(&[3.0, 1.0, 2.0, 2.0]), 2.0);
+        assert_eq!(lower_median(&[5.0, 1.0]), 1.0);
+        assert_eq!(lower_median(&[-0.0, 0.0, 7.0]), 0.0);
+        assert_eq!(lower_median(&[]), 0.0);
+    }
+
+    #[test]
     fn centring_moves_the_centroid_to_the_origin() {
         let pts = [[1.0, 2.0, 3.0], [3.0, 2.0, 1.0]];
         assert_eq!(centroid(&pts), Ok([2.0, 2.0, 2.0]));
-        let c = centring(&pts, true, &Frame::IDENTITY).unwrap();
+        let all = Centring::Centroid {
+            radius: f32::INFINITY,
+        };
+        let c = centring(&pts, all, &Frame::IDENTITY).unwrap();
         assert_eq!(c.transform_point([2.0, 2.0, 2.0]), [0.0; 3]);
-        assert_eq!(centring(&pts, false, &Frame::IDENTITY), Ok(Pose::IDENTITY));
+        assert_eq!(
+            centring(&pts, Centring::None, &Frame::IDENTITY),
+            Ok(Pose::IDENTITY)
+        );
         let frame = Frame {
             centre: [1.0, 1.0, 1.0],
             scale: 0.5,
         };
-        let c = centring(&pts, true, &frame).unwrap();
+        let c = centring(&pts, all, &frame).unwrap();
         assert_eq!(c.transform_point(frame.to_model([2.0, 2.0, 2.0])), [0.0; 3]);
         assert_eq!(centroid(&[]), Err(Error::EmptyCloud));
         assert_eq!(

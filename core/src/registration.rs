@@ -19,7 +19,7 @@
 
 use crate::error::{Error, Result};
 use crate::format::Frame;
-use crate::pose::{self, PointMap, Pose};
+use crate::pose::{self, Centring, PointMap, Pose};
 use crate::refine::{self, Degeneracy, IcpSettings, Metric, Subset};
 use crate::template::Template;
 
@@ -150,11 +150,25 @@ pub struct Registration {
     /// head activations, summed over passes): clipping that costs accuracy.
     /// Always 0 on the f32 path.
     pub saturated: u32,
+    /// Source points the network left out because they lie outside the
+    /// model's input range (the most over its passes): stray points far
+    /// from the object. They still count in the residual and the fitness
+    /// (capped at the inlier distance). Always 0 on the f32 path.
+    pub out_of_range: u32,
     /// The source's shape does not determine a pose.
     pub degenerate: Option<Degeneracy>,
     /// Not degenerate, and the relative plane residual is at most the
     /// option's `max_residual`.
     pub reliable: bool,
+}
+
+/// What one network pass counted (the int8 path; the f32 path has no range).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct PassCounts {
+    /// int8 values at the top of their range.
+    pub saturated: u32,
+    /// Source points outside the input range, left out of the encoder.
+    pub out_of_range: u32,
 }
 
 /// Standard deviation (model units) below which a source counts as one
@@ -165,26 +179,27 @@ pub const MIN_EXTENT: f32 = 1e-3;
 /// [`PointMap`], returning the pass's pose (model frame) and its saturation count.
 pub(crate) fn run(
     frame: &Frame,
-    centre_source: bool,
+    centring: Centring,
     template: &Template<'_>,
     source: &[[f32; 3]],
     options: &Options,
-    mut pass: impl FnMut(&PointMap) -> Result<(Pose, u32)>,
+    mut pass: impl FnMut(&PointMap) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     options.validate()?;
     if source.is_empty() {
         return Err(Error::EmptyCloud);
     }
-    let mut saturated = 0u32;
+    let (mut saturated, mut out_of_range) = (0u32, 0u32);
     let (network, passes) = network_passes(
         frame,
-        centre_source,
+        centring,
         source,
         options.passes,
         options.tolerance,
         |map| {
-            let (delta, s) = pass(map)?;
-            saturated = saturated.saturating_add(s);
+            let (delta, counts) = pass(map)?;
+            saturated = saturated.saturating_add(counts.saturated);
+            out_of_range = out_of_range.max(counts.out_of_range);
             Ok(delta)
         },
     )?;
@@ -225,6 +240,7 @@ pub(crate) fn run(
         passes,
         icp_iterations: r.icp_iterations,
         saturated,
+        out_of_range,
         degenerate,
         reliable: degenerate.is_none() && r.fit.plane_residual <= options.max_residual,
     })
@@ -235,13 +251,13 @@ pub(crate) fn run(
 /// in the model frame and the passes run. A non-finite pose is an error.
 fn network_passes(
     frame: &Frame,
-    centre_source: bool,
+    centring: Centring,
     source: &[[f32; 3]],
     passes: usize,
     tolerance: f32,
     mut pass: impl FnMut(&PointMap) -> Result<Pose>,
 ) -> Result<(Pose, usize)> {
-    let start = pose::centring(source, centre_source, frame)?;
+    let start = pose::centring(source, centring, frame)?;
     let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
         pass(&PointMap::new(*frame, current))
     })?;
@@ -256,13 +272,13 @@ fn network_passes(
 /// `Int8Model::network_pose` and `F32Model::network_pose` give it.
 pub(crate) fn network_pose(
     frame: &Frame,
-    centre_source: bool,
+    centring: Centring,
     source: &[[f32; 3]],
     passes: usize,
     tolerance: f32,
     pass: impl FnMut(&PointMap) -> Result<Pose>,
 ) -> Result<(Pose, usize)> {
-    let (pose, n) = network_passes(frame, centre_source, source, passes, tolerance, pass)?;
+    let (pose, n) = network_passes(frame, centring, source, passes, tolerance, pass)?;
     let pose = frame.pose_to_user(&pose);
     if pose.is_finite() {
         Ok((pose, n))

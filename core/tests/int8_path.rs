@@ -189,10 +189,21 @@ fn bad_clouds_are_typed_errors() {
         model.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0),
         Err(Error::NonFiniteCoordinate { index: 13 })
     );
-    pts[13][1] = 4.5; // input range is +-4
+    // A point outside the input range (+-4) is left out of the network:
+    // the same pose as without it, and counted.
+    pts[13][1] = 4.5;
+    let without: Vec<[f32; 3]> = [&pts[..13], &pts[14..]].concat();
     assert_eq!(
         model.network_pose(&pts, 1, 0.0, &mut s).map(|r| r.0),
-        Err(Error::CoordinateOutOfRange { index: 13 })
+        model.network_pose(&without, 1, 0.0, &mut s).map(|r| r.0),
+    );
+    assert_eq!(model.infer(&pts, &mut s).unwrap().out_of_range, 1);
+    assert_eq!(model.infer(&without, &mut s).unwrap().out_of_range, 0);
+    // Every point outside: no pose.
+    let far = [[4.5, 0.0, 0.0], [0.0, -5.0, 0.0]];
+    assert_eq!(
+        model.network_pose(&far, 1, 0.0, &mut s).map(|r| r.0),
+        Err(Error::NoPointInRange)
     );
     // Extreme but valid coordinates work.
     pts[13] = [3.9999, -3.9999, 0.0];
@@ -312,7 +323,10 @@ fn centring_models_see_the_centred_source() {
         .iter()
         .map(|p| [p[0] + 1.0, p[1] - 0.7, p[2] + 0.3])
         .collect();
-    let start = centring(&pts, true, &pcrnet_core::Frame::IDENTITY).unwrap();
+    let every_point = pcrnet_core::pose::Centring::Centroid {
+        radius: f32::INFINITY,
+    };
+    let start = centring(&pts, every_point, &pcrnet_core::Frame::IDENTITY).unwrap();
     let moved: Vec<[f32; 3]> = pts.iter().map(|&p| Rigid::from(&start).apply(p)).collect();
     let mut s1 = vec![0i8; mc.scratch_len(MAX_TILE)];
     let mut s2 = vec![0i8; mp.scratch_len(MAX_TILE)];
@@ -368,13 +382,32 @@ fn finite_clouds_never_give_non_finite_poses() {
             match result {
                 Ok(p) => assert!(p.is_finite(), "{p:?}"),
                 Err(e) => assert!(
-                    matches!(
-                        e,
-                        Error::NonFiniteResult | Error::CoordinateOutOfRange { .. }
-                    ),
+                    matches!(e, Error::NonFiniteResult | Error::NoPointInRange),
                     "{e:?}"
                 ),
             }
         }
     }
+}
+
+#[test]
+fn the_robust_centroid_leaves_out_stray_points_only() {
+    use pcrnet_core::pose::{centroid, robust_centroid};
+    let mut rng = SplitMix64(5);
+    let cloud: Vec<[f32; 3]> = (0..500)
+        .map(|_| [0; 3].map(|_: i32| rng.uniform(-0.5, 0.5)))
+        .collect();
+    // Every point within the radius: exactly the centroid, bit for bit.
+    assert_eq!(robust_centroid(&cloud, 4.0), centroid(&cloud));
+    // Two far points: the centroid of the others.
+    let mut stray = cloud.clone();
+    stray.insert(17, [1e9, 0.0, 0.0]);
+    stray.push([0.0, -400.0, 3.0]);
+    assert_eq!(robust_centroid(&stray, 4.0), centroid(&cloud));
+    assert_ne!(centroid(&stray), centroid(&cloud));
+    assert_eq!(
+        robust_centroid(&[[0.0; 3], [0.0, f32::INFINITY, 0.0]], 4.0),
+        Err(Error::NonFiniteCoordinate { index: 1 })
+    );
+    assert_eq!(robust_centroid(&[], 4.0), Err(Error::EmptyCloud));
 }

@@ -23,7 +23,7 @@ use crate::qemu;
 const REQUIRED: [&str; 4] = ["reg default", "reg network", "pose iterated", "reg nan"];
 
 /// Names of the values of an `@ reg` line after its status.
-const REG_FIELDS: [&str; 19] = [
+const REG_FIELDS: [&str; 20] = [
     "rotation w",
     "rotation x",
     "rotation y",
@@ -41,6 +41,7 @@ const REG_FIELDS: [&str; 19] = [
     "passes",
     "icp_iterations",
     "saturated",
+    "out_of_range",
     "degenerate",
     "reliable",
 ];
@@ -57,7 +58,7 @@ fn reg_line(label: &str, result: Result<PcrnetRegistration, PcrnetStatus>) -> St
     match result {
         Err(s) => format!("@ reg {label} {}", s as i32),
         Ok(r) => format!(
-            "@ reg {label} 0{}{}{} {} {} {} {} {} {}",
+            "@ reg {label} 0{}{}{} {} {} {} {} {} {} {}",
             hex(&r.rotation),
             hex(&r.translation),
             hex(&[
@@ -72,6 +73,7 @@ fn reg_line(label: &str, result: Result<PcrnetRegistration, PcrnetStatus>) -> St
             r.passes,
             r.icp_iterations,
             r.saturated,
+            r.out_of_range,
             r.degenerate,
             u8::from(r.reliable)
         ),

@@ -100,7 +100,7 @@ fn hex_bits(s: &str) -> Option<u32> {
 }
 
 /// `instructions stack qw qx qy qz tx ty tz residual relative fitness rmse
-/// hypothesis passes icp_iterations saturated degenerate reliable`.
+/// hypothesis passes icp_iterations saturated out_of_range degenerate reliable`.
 fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
     let [
         instructions,
@@ -122,6 +122,7 @@ fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
         passes,
         icp,
         saturated,
+        out_of_range,
         degenerate,
         reliable,
     ] = rest
@@ -145,6 +146,7 @@ fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
             passes: passes.parse().ok()?,
             icp_iterations: icp.parse().ok()?,
             saturated: saturated.parse().ok()?,
+            out_of_range: out_of_range.parse().ok()?,
             degenerate: degenerate.to_string(),
             reliable: reliable.parse().ok()?,
         }),
@@ -320,6 +322,7 @@ pub fn registration_difference(
             .or_else(|| int_difference("passes", h.passes, d.passes))
             .or_else(|| int_difference("icp_iterations", h.icp_iterations, d.icp_iterations))
             .or_else(|| int_difference("saturated", h.saturated, d.saturated))
+            .or_else(|| int_difference("out_of_range", h.out_of_range, d.out_of_range))
             .or_else(|| int_difference("degenerate", &h.degenerate, &d.degenerate))
             .or_else(|| int_difference("reliable", h.reliable, d.reliable)),
         (h, Some(d)) if h == d => None,
@@ -384,7 +387,7 @@ mod tests {
         let out = "calibration 2000000 2000000\nstatic_ram 65600\n\
                    case 0 ok 100 250 512 feature 7f80ff00 head 1 -2 3 4 5 6 7 pose 3f800000 0 0 0 0 0 0\n\
                    case 0 iter ok 3 3f800000 0 0 0 0 0 1\n\
-                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 1 1 7 12 none true\n\
+                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 1 1 7 12 2 none true\n\
                    case 1 error false EmptyCloud\ncase 1 iter error EmptyCloud\n\
                    case 1 reg 0 error 20 100 InvalidOption { what: \"hypotheses must be at least 1\" }\n\
                    case 1 reg 1 error 20 100 EmptyCloud\ndone\n";
@@ -436,6 +439,7 @@ mod tests {
             passes: 1,
             icp_iterations: 7,
             saturated: 12,
+            out_of_range: 2,
             degenerate: "none".into(),
             reliable: true,
         };

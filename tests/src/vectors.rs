@@ -62,6 +62,8 @@ pub struct RegistrationBits {
     pub icp_iterations: usize,
     /// Saturated int8 values.
     pub saturated: u32,
+    /// Points outside the input range, left out of the network.
+    pub out_of_range: u32,
     /// `none`, or the `Degeneracy` variant's name (`Point`, `Line`).
     pub degenerate: String,
     /// Whether the pose is reliable.
@@ -82,6 +84,7 @@ impl From<&Registration> for RegistrationBits {
             passes: r.passes,
             icp_iterations: r.icp_iterations,
             saturated: r.saturated,
+            out_of_range: r.out_of_range,
             degenerate: r
                 .degenerate
                 .map_or_else(|| "none".to_string(), |d| format!("{d:?}")),

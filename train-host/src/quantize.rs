@@ -30,7 +30,7 @@
 use pcrnet_core::fixed::quantize_multiplier;
 use pcrnet_core::float::{Layer, dense};
 use pcrnet_core::format::{Int8Layer, Int8Output, Int8Payload};
-use pcrnet_core::pose::Rigid;
+use pcrnet_core::pose::{Centring, Rigid};
 use pcrnet_core::{Frame, POSE_DIM};
 
 use crate::net::{F32Params, TrainedFor, le_bytes};
@@ -252,7 +252,15 @@ pub fn quantize(
         centred = calibration
             .iter()
             .map(|c| {
-                let moved = Rigid::from(&pcrnet_core::pose::centring(c, true, &Frame::IDENTITY)?);
+                // Clean shapes: the device's robust centroid is their centroid.
+                let every_point = Centring::Centroid {
+                    radius: f32::INFINITY,
+                };
+                let moved = Rigid::from(&pcrnet_core::pose::centring(
+                    c,
+                    every_point,
+                    &Frame::IDENTITY,
+                )?);
                 Ok(c.iter().map(|&p| moved.apply(p)).collect())
             })
             .collect::<Result<_, pcrnet_core::Error>>()?;

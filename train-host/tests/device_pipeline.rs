@@ -103,14 +103,33 @@ fn degenerate_and_hostile_sources_are_errors_or_flagged() {
         })
         .collect();
     assert_eq!(check("planar", &plane).unwrap().degenerate, None);
-    // One stray point far away: rejected with the index of the point.
-    let mut outlier = random_transform(&template, 20.0, 0.1, 3);
-    outlier.push([40.0, 0.0, 0.0]);
-    let index = outlier.len() - 1;
-    assert_eq!(
-        check("outlier", &outlier).unwrap_err(),
-        Error::CoordinateOutOfRange { index }
+    // Stray points far away (issue 10, item 7): left out of the network
+    // and of the centring, counted, and the pose is the clean cloud's.
+    let clean = random_transform(&template, 20.0, 0.1, 3);
+    let mut stray = clean.clone();
+    stray.insert(100, [40.0, 0.0, 0.0]);
+    stray.push([1e9, -1e9, 5.0]);
+    let (with, without) = (
+        check("outliers", &stray).unwrap(),
+        check("clean", &clean).unwrap(),
     );
+    assert_eq!((with.out_of_range, without.out_of_range), (2, 0));
+    assert!(with.reliable && without.reliable);
+    let (a, b) = (with.pose.rotation, without.pose.rotation);
+    let dot: f32 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+    let angle = 2.0 * dot.abs().min(1.0).acos().to_degrees();
+    assert!(
+        angle < 0.5,
+        "the outliers moved the pose by {angle} degrees"
+    );
+    // Every point far away: no pose, and the error says why.
+    let far = [
+        [40.0, 0.0, 0.0],
+        [-40.0, 0.0, 0.0],
+        [0.0, 40.0, 0.0],
+        [0.0, -40.0, 0.0],
+    ];
+    assert_eq!(check("far", &far).unwrap_err(), Error::NoPointInRange);
     // Finite but huge coordinates: an error, not an infinite pose.
     let huge = [
         [3e38f32, 3e38, 3e38],

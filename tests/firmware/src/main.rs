@@ -34,7 +34,7 @@
 //! - `case C iter ok PASSES Q0..T2`, or `case C iter error E`;
 //! - `case C reg K ok INSTR STACK QW QX QY QZ TX TY TZ RESIDUAL RELATIVE
 //!   FITNESS RMSE PLANE RELATIVE_PLANE HYPOTHESIS PASSES ICP_ITERATIONS
-//!   SATURATED none|Point|Line true|false`, or `case C reg K error INSTR
+//!   SATURATED OUT_OF_RANGE none|Point|Line true|false`, or `case C reg K error INSTR
 //!   STACK E`.
 #![no_std]
 #![no_main]
@@ -265,8 +265,8 @@ fn main() -> ! {
                         }
                         let _ = write!(
                             line,
-                            " {} {} {} {} ",
-                            r.hypothesis, r.passes, r.icp_iterations, r.saturated
+                            " {} {} {} {} {} ",
+                            r.hypothesis, r.passes, r.icp_iterations, r.saturated, r.out_of_range
                         );
                         let _ = match r.degenerate {
                             None => write!(line, "none"),

@@ -287,6 +287,12 @@ fn register(
                 None => String::new(),
             }
         ));
+        if c.out_of_range > 0 {
+            say(format!(
+                "{} point(s) outside the model's input range were left out of the network and the centring (stray points far from the object)",
+                c.out_of_range
+            ));
+        }
         say(if c.reliable {
             "trust: RELIABLE (relative plane residual within the threshold)".into()
         } else {
@@ -334,6 +340,7 @@ fn report_json(method: &str, out: &methods::Outcome) -> serde_json::Value {
         v["passes"] = c.passes.into();
         v["icp_iterations"] = c.icp_iterations.into();
         v["saturated"] = c.saturated.into();
+        v["out_of_range"] = c.out_of_range.into();
         v["reliable"] = c.reliable.into();
     }
     v
