@@ -175,3 +175,32 @@ fn sources_sampled_apart_from_the_template_are_judged_by_the_plane_residual() {
     assert!(!wrong.reliable, "{wrong:?}");
     assert!(wrong.relative_plane_residual > 2.0 * r.relative_plane_residual);
 }
+
+/// Issue 10, item 8: inside the accepted input range, a cloud larger than
+/// the calibration saw clips int8 activations, and the int8 pose can part
+/// from the f32 one. The result says so: `saturated` counts the clipped
+/// values (0 at the template's size), and such a cloud is not reliable.
+#[test]
+fn a_cloud_larger_than_calibrated_is_flagged() {
+    let blob = shipped();
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/embedded-default-source.xyz");
+    let source = pcrnet_train::io::read_cloud(&path).unwrap();
+    let centre = pcrnet_core::pose::centroid(&source).unwrap();
+    let scaled = |s: f32| -> Vec<[f32; 3]> {
+        source
+            .iter()
+            .map(|p| [0, 1, 2].map(|k| centre[k] + s * (p[k] - centre[k])))
+            .collect()
+    };
+    let run = |s: f32| {
+        pipeline(&blob, None, &scaled(s), &Options::default())
+            .unwrap()
+            .0
+    };
+    let (one, big) = (run(1.0), run(2.5));
+    assert_eq!(one.saturated, 0);
+    assert!(one.reliable);
+    assert!(big.saturated > 0, "{big:?}");
+    assert!(!big.reliable);
+}

@@ -287,6 +287,12 @@ fn register(
                 None => String::new(),
             }
         ));
+        if c.saturated > 0 {
+            say(format!(
+                "{} int8 value(s) clipped at the top of their range: the cloud is larger than the model was calibrated for (another scale or object?); the int8 pose can differ from the f32 model's",
+                c.saturated
+            ));
+        }
         if c.out_of_range > 0 {
             say(format!(
                 "{} point(s) outside the model's input range were left out of the network and the centring (stray points far from the object)",
