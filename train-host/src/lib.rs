@@ -13,6 +13,7 @@ pub mod inspect;
 pub mod io;
 pub mod net;
 pub mod quantize;
+pub mod reduce;
 pub mod register;
 pub mod shapes;
 pub mod template;

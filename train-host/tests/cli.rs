@@ -103,3 +103,47 @@ fn bad_flag_values_are_errors_naming_the_flag() {
         assert!(!stderr.contains("stack backtrace"), "{stderr}");
     }
 }
+
+/// Issue 10, item 5: a large cloud is reduced before registration (by
+/// default to 8,192 points, seeded), says so, and still registers; voxel
+/// reduction without a cube size is refused with what to pass.
+#[test]
+fn large_clouds_are_reduced_and_say_so() {
+    let m = models();
+    let text = std::fs::read_to_string(m.join("embedded-default-source.xyz")).unwrap();
+    let big: String = (0..40).map(|_| text.as_str()).collect();
+    let dir = std::env::temp_dir().join(format!("pcrnet-cli-reduce-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("big.xyz");
+    std::fs::write(&path, big).unwrap();
+    let n = 40 * text.lines().count();
+    let run = |extra: &[&str]| {
+        pcrnet()
+            .arg("register")
+            .arg(&path)
+            .arg("--model")
+            .arg(m.join("embedded-default-int8.pcrn"))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = run(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{n} points, 8192 kept (Random")),
+        "{stderr}"
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("trust: RELIABLE"));
+    let out = run(&["--reduce", "fps", "--reduce-to", "1000"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(&format!("{n} points, 1000 kept (Fps")),
+        "{stderr}"
+    );
+    let out = run(&["--reduce", "voxel"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("--voxel SIZE"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
 use pcrnet_train::eval::cli::MethodOptions;
 use pcrnet_train::eval::methods::{self, MethodKind};
+use pcrnet_train::reduce::{Reduction, reduce_cloud};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use pcrnet_train::{
@@ -118,6 +119,18 @@ enum Command {
         /// (before allocating: a small hostile file can declare billions).
         #[arg(long, default_value_t = pcrnet_train::io::DEFAULT_MAX_POINTS)]
         max_cloud_points: usize,
+        /// Keep at most this many points of each cloud (0: all): a large
+        /// scan registers as well from a few thousand, much faster.
+        #[arg(long, default_value_t = pcrnet_train::reduce::DEFAULT_SOURCE_POINTS)]
+        reduce_to: usize,
+        /// How to keep them: random (seeded; keeps the density), fps
+        /// (farthest points: even coverage, slow on millions), voxel (the
+        /// mean per cube of --voxel units, then random).
+        #[arg(long, value_enum, default_value_t = Reduction::Random)]
+        reduce: Reduction,
+        /// Cube side for --reduce voxel, in the clouds' units.
+        #[arg(long, default_value_t = 0.0)]
+        voxel: f32,
     },
 }
 
@@ -193,13 +206,34 @@ fn run(command: Command) -> anyhow::Result<()> {
             aligned,
             json,
             max_cloud_points,
+            reduce_to,
+            reduce,
+            voxel,
         } => {
+            if reduce == Reduction::Voxel && !(voxel.is_finite() && voxel > 0.0) {
+                anyhow::bail!(
+                    "--reduce voxel needs --voxel SIZE: the cube side in the clouds' units, e.g. a tenth of the object's size"
+                );
+            }
             let (template, source) = match clouds.as_slice() {
                 [t, s] => (Some(t.as_path()), s.as_path()),
                 [s] => (None, s.as_path()),
                 _ => anyhow::bail!("register takes [TEMPLATE] SOURCE"),
             };
-            let read = |path| read_cloud(path, max_cloud_points);
+            let read = |path: &Path| -> anyhow::Result<Vec<[f32; 3]>> {
+                let cloud = read_cloud(path, max_cloud_points)?;
+                let kept = reduce_cloud(&cloud, reduce, reduce_to, voxel, 0);
+                if kept.len() < cloud.len() {
+                    eprintln!(
+                        "{}: {} points, {} kept ({reduce:?}; --reduce-to {reduce_to}, 0 keeps all)",
+                        path.display(),
+                        cloud.len(),
+                        kept.len()
+                    );
+                }
+                anyhow::ensure!(!kept.is_empty(), "{}: no finite point", path.display());
+                Ok(kept)
+            };
             let (template, source) = (template.map(read).transpose()?, read(source)?);
             register(template, &source, method, &options, aligned, json)?
         }

@@ -316,7 +316,7 @@ pub fn reduce(
 }
 
 /// `k` distinct points of `cloud` in a random order (partial Fisher-Yates).
-fn random_subset(cloud: &[[f32; 3]], k: usize, rng: &mut ChaCha8Rng) -> Vec<[f32; 3]> {
+pub(crate) fn random_subset(cloud: &[[f32; 3]], k: usize, rng: &mut ChaCha8Rng) -> Vec<[f32; 3]> {
     let mut idx: Vec<usize> = (0..cloud.len()).collect();
     let k = k.min(idx.len());
     for i in 0..k {
