@@ -9,6 +9,7 @@
 //! definition.
 
 pub mod eval;
+pub mod frame;
 pub mod inspect;
 pub mod io;
 pub mod net;

@@ -8,6 +8,9 @@ use clap::{Parser, Subcommand};
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
 use pcrnet_train::eval::cli::MethodOptions;
 use pcrnet_train::eval::methods::{self, MethodKind};
+use pcrnet_train::frame::FilePose;
+use pcrnet_train::io::write::Coordinate;
+use pcrnet_train::io::{LocalCloud, read_cloud_local};
 use pcrnet_train::reduce::{Reduction, reduce_cloud};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
@@ -187,7 +190,7 @@ fn run(command: Command) -> anyhow::Result<()> {
                 other => anyhow::bail!("unknown shape {other} (box, torus, ell)"),
             };
             let cloud = sample(shape, points, seed);
-            write_xyz(&out, &cloud)?;
+            write_cloud(&out, &cloud)?;
             if let Some(s) = source_seed {
                 let source = random_transform(&cloud, 45.0, 1.0, s);
                 let bytes: Vec<u8> = source
@@ -196,7 +199,7 @@ fn run(command: Command) -> anyhow::Result<()> {
                     .flat_map(|v| v.to_le_bytes())
                     .collect();
                 std::fs::write(out.with_extension("source.f32"), bytes)?;
-                write_xyz(&out.with_extension("source.xyz"), &source)?;
+                write_cloud(&out.with_extension("source.xyz"), &source)?;
             }
         }
         Command::Register {
@@ -220,34 +223,56 @@ fn run(command: Command) -> anyhow::Result<()> {
                 [s] => (None, s.as_path()),
                 _ => anyhow::bail!("register takes [TEMPLATE] SOURCE"),
             };
-            let read = |path: &Path| -> anyhow::Result<Vec<[f32; 3]>> {
-                let cloud = read_cloud(path, max_cloud_points)?;
-                let kept = reduce_cloud(&cloud, reduce, reduce_to, voxel, 0);
-                if kept.len() < cloud.len() {
+            // Both clouds are read in f64 and moved by the template's
+            // median before rounding to f32 (map coordinates keep their
+            // shape); without a template file the source stays in the
+            // blob's frame, exactly as a device receives it.
+            let load = |path: &Path, origin: Option<[f64; 3]>| -> anyhow::Result<LocalCloud> {
+                let mut cloud = read_cloud_local(path, max_cloud_points, origin)?;
+                anyhow::ensure!(!cloud.points.is_empty(), "{}: no points", path.display());
+                warn_if_coarse(path, &cloud.points);
+                let kept = reduce_cloud(&cloud.points, reduce, reduce_to, voxel, 0);
+                if kept.len() < cloud.points.len() {
                     eprintln!(
                         "{}: {} points, {} kept ({reduce:?}; --reduce-to {reduce_to}, 0 keeps all)",
                         path.display(),
-                        cloud.len(),
+                        cloud.points.len(),
                         kept.len()
                     );
                 }
                 anyhow::ensure!(!kept.is_empty(), "{}: no finite point", path.display());
-                Ok(kept)
+                cloud.points = kept;
+                Ok(cloud)
             };
-            let (template, source) = (template.map(read).transpose()?, read(source)?);
-            register(template, &source, method, &options, aligned, json)?
+            let template = template.map(|t| load(t, None)).transpose()?;
+            let origin = template.as_ref().map_or([0.0; 3], |t| t.origin);
+            let source = load(source, Some(origin))?.points;
+            let template = template.map(|t| t.points);
+            let out = Output { aligned, json };
+            register(template, &source, origin, method, &options, out)?
         }
     }
     Ok(())
 }
 
+/// Where `register` writes besides standard output.
+struct Output {
+    /// The source moved onto the template (format by extension).
+    aligned: Option<PathBuf>,
+    /// The result as JSON (`-`: standard output).
+    json: Option<PathBuf>,
+}
+
+/// Registers `source` onto `template` (the blob's own when `None`), both
+/// given about `origin` in the files' frame, and reports the pose in the
+/// files' frame.
 fn register(
     template: Option<Vec<[f32; 3]>>,
     source: &[[f32; 3]],
+    origin: [f64; 3],
     kind: MethodKind,
     options: &MethodOptions,
-    aligned: Option<PathBuf>,
-    json: Option<PathBuf>,
+    Output { aligned, json }: Output,
 ) -> anyhow::Result<()> {
     let method = options.method(kind);
     let blob = options.read_model()?;
@@ -265,7 +290,7 @@ fn register(
                 None => "registering".into(),
             }
         })?;
-    let pose = out.pose;
+    let pose = FilePose::from_local(&out.pose, origin);
     // With --json -, standard output carries the JSON alone.
     let to_stdout = json.as_deref() == Some(Path::new("-"));
     let say = |line: String| {
@@ -287,9 +312,15 @@ fn register(
         }
     ));
     say(format!("time: {:.3} ms", out.seconds * 1e3));
-    say(format!("quaternion (w, x, y, z): {:?}", pose.rotation));
+    say(format!("quaternion (w, x, y, z): {:?}", out.pose.rotation));
     say(format!("translation: {:?}", pose.translation));
-    say("matrix (maps source onto template):".into());
+    if origin != [0.0; 3] {
+        say(format!(
+            "local origin (the template's median; both clouds were moved by it before rounding to f32): {origin:?}; translation about it: {:?}",
+            pose.local_translation
+        ));
+    }
+    say("matrix (maps source onto template, in the files' frame):".into());
     for row in pose.matrix() {
         say(format!(
             "  [{:>10.6} {:>10.6} {:>10.6} {:>10.6}]",
@@ -340,12 +371,21 @@ fn register(
         });
     }
     if let Some(out_path) = aligned {
-        let moved: Vec<[f32; 3]> = source.iter().map(|&p| pose.transform_point(p)).collect();
-        write_xyz(&out_path, &moved)?;
+        if origin == [0.0; 3] {
+            // In f32, exactly as a device moves the points.
+            let moved: Vec<[f32; 3]> = source.iter().map(|&p| out.pose.transform_point(p)).collect();
+            write_cloud(&out_path, &moved)?;
+        } else {
+            let moved: Vec<[f64; 3]> = source
+                .iter()
+                .map(|p| pose.transform_point([0, 1, 2].map(|k| origin[k] + f64::from(p[k]))))
+                .collect();
+            write_cloud(&out_path, &moved)?;
+        }
         say(format!("aligned source written to {}", out_path.display()));
     }
     if let Some(path) = json {
-        let value = report_json(&method.name(out.precision), &out);
+        let value = report_json(&method.name(out.precision), &out, &pose);
         let text = serde_json::to_string_pretty(&value)? + "\n";
         if to_stdout {
             write_stdout(&text);
@@ -356,17 +396,19 @@ fn register(
     Ok(())
 }
 
-/// The whole result of `register` as JSON: pose (quaternion w, x, y, z,
-/// translation, 4x4 row-major) and, for the device pipeline, the check.
-fn report_json(method: &str, out: &methods::Outcome) -> serde_json::Value {
-    let p = &out.pose;
+/// The whole result of `register` as JSON: pose in the files' frame
+/// (quaternion w, x, y, z, translation, 4x4 row-major), the local origin
+/// and the translation about it, and, for the device pipeline, the check.
+fn report_json(method: &str, out: &methods::Outcome, pose: &FilePose) -> serde_json::Value {
     let mut v = serde_json::json!({
         "method": method,
         "iterations": out.iterations,
         "seconds": out.seconds,
-        "quaternion_wxyz": p.rotation,
-        "translation": p.translation,
-        "matrix": p.matrix(),
+        "quaternion_wxyz": out.pose.rotation,
+        "translation": pose.translation,
+        "matrix": pose.matrix(),
+        "origin": pose.origin,
+        "local_translation": pose.local_translation,
         "degenerate": out.degenerate.map(|d| format!("{d:?}")),
     });
     if let Some(c) = &out.check {
@@ -411,19 +453,32 @@ fn write_stdout(text: &str) {
     }
 }
 
-/// Writes a cloud as XYZ text (one `x y z` line per point, exact f32 values).
-fn write_xyz(path: &Path, cloud: &[[f32; 3]]) -> anyhow::Result<()> {
-    let text: String = cloud
-        .iter()
-        .map(|p| format!("{:?} {:?} {:?}\n", p[0], p[1], p[2]))
-        .collect();
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+/// Writes `cloud` in the format its extension names.
+fn write_cloud<C: Coordinate>(path: &Path, cloud: &[[C; 3]]) -> anyhow::Result<()> {
+    Ok(pcrnet_train::io::write::write_cloud(path, cloud)?)
 }
 
-fn read_cloud(path: &Path, max_points: usize) -> anyhow::Result<Vec<[f32; 3]>> {
-    let cloud = pcrnet_train::io::read_cloud_limited(path, max_points)?;
-    anyhow::ensure!(!cloud.is_empty(), "{}: no points", path.display());
-    Ok(cloud)
+/// Warns when `f32` cannot hold `cloud`'s shape: its coordinates are so
+/// large against its extent that their spacing exceeds 1e-4 of it (map
+/// coordinates in a blob's frame, with no template file to take a local
+/// origin from).
+fn warn_if_coarse(path: &Path, cloud: &[[f32; 3]]) {
+    let (mut lo, mut hi, mut far) = ([f32::MAX; 3], [f32::MIN; 3], 0f32);
+    for p in cloud {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+            far = far.max(p[k].abs());
+        }
+    }
+    let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0f32, f32::max);
+    let spacing = far * f32::EPSILON;
+    if spacing > 1e-4 * extent {
+        eprintln!(
+            "warning: {}: coordinates reach {far:e} while the cloud spans {extent:e}; f32 keeps only {spacing:e} there. Give the template file too (both clouds are then read about a local origin), or express the cloud in the model's frame",
+            path.display()
+        );
+    }
 }
 
 fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {

@@ -29,8 +29,8 @@ const FMT: &str = "OFF";
 /// A triangle mesh read from an OFF file.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Mesh {
-    /// Vertex positions.
-    pub vertices: Vec<[f32; 3]>,
+    /// Vertex positions, as written in the file (not rounded to `f32`).
+    pub vertices: Vec<[f64; 3]>,
     /// Triangles as indices into `vertices` (polygons already fanned).
     pub triangles: Vec<[usize; 3]>,
 }
@@ -124,7 +124,7 @@ pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Mesh, FormatErro
         };
         let section = || format!("OFF line {lineno} (vertex {i})");
         let mut toks = l.split_ascii_whitespace();
-        let mut p = [0f32; 3];
+        let mut p = [0f64; 3];
         for (k, v) in p.iter_mut().enumerate() {
             let tok = toks
                 .next()
@@ -198,6 +198,19 @@ pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Mesh, FormatErro
 /// Samples `n` points uniformly over the surface of `mesh`, deterministically
 /// for a given `seed`. Fails if the mesh has no triangles or zero total area.
 pub fn sample(mesh: &Mesh, n: usize, seed: u64) -> Result<Vec<[f32; 3]>, FormatError> {
+    sample_about(mesh, [0.0; 3], n, seed)
+}
+
+/// [`sample`] with the mesh moved by `-origin` first: each vertex becomes
+/// `(v - origin)` rounded to `f32` (with the origin at zero, the vertex
+/// rounded to `f32`), and the points are sampled from those triangles. A
+/// vertex that does not fit `f32` there is an error.
+pub fn sample_about(
+    mesh: &Mesh,
+    origin: [f64; 3],
+    n: usize,
+    seed: u64,
+) -> Result<Vec<[f32; 3]>, FormatError> {
     if mesh.triangles.is_empty() {
         return Err(FormatError::Mesh("no faces to sample from".into()));
     }
@@ -208,7 +221,13 @@ pub fn sample(mesh: &Mesh, n: usize, seed: u64) -> Result<Vec<[f32; 3]>, FormatE
                 mesh.vertices.len()
             ))
         })?;
-        Ok(v.map(f64::from))
+        super::localise(*v, origin)
+            .map(|p| p.map(f64::from))
+            .ok_or_else(|| {
+                FormatError::Mesh(format!(
+                    "vertex {i} {v:?} does not fit f32 (move the mesh nearer its origin)"
+                ))
+            })
     };
     let mut tris = Vec::with_capacity(mesh.triangles.len());
     let mut cumulative = Vec::with_capacity(mesh.triangles.len());
@@ -274,11 +293,7 @@ pub fn parse_sampled_limited(
     if mesh.triangles.is_empty() {
         // Vertices without a surface (`OFF` / `N 0 0`, a common way to store
         // a scan, or only point and edge "faces"): a point cloud.
-        return Ok(mesh
-            .vertices
-            .into_iter()
-            .filter_map(super::finite)
-            .collect());
+        return Ok(super::to_f32(mesh.vertices));
     }
     sample(&mesh, n, seed)
 }

@@ -78,6 +78,12 @@ pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
 
 /// [`parse`], refusing a file whose `POINTS` exceeds `max_points`.
 pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, FormatError> {
+    parse_f64_limited(bytes, max_points).map(super::to_f32)
+}
+
+/// [`parse_limited`] at full precision: coordinates as `f64` (binary `f32`
+/// fields widen exactly, text and `f64` fields are not rounded).
+pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]>, FormatError> {
     let h = parse_header(bytes)?;
     FormatError::check_count("PCD POINTS", h.points, max_points)?;
     let body = bytes.get(h.body_start..).unwrap_or_default();
@@ -310,7 +316,7 @@ fn parse_header(bytes: &[u8]) -> Result<Header, FormatError> {
     })
 }
 
-fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatError> {
     const SECTION: &str = "DATA ascii";
     let body = text(body, SECTION)?;
     let mut out = Vec::new();
@@ -338,7 +344,7 @@ fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
                 ),
             ));
         }
-        let mut p = [0f32; 3];
+        let mut p = [0f64; 3];
         for (k, c) in h.xyz.iter().enumerate() {
             let tok = toks.get(c.value_index).copied().unwrap_or_default();
             p[k] = parse_coordinate(tok, k, section())?;
@@ -357,10 +363,9 @@ fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
     Ok(out)
 }
 
-fn read_coord(raw: &[u8], at: usize, scalar: Scalar, section: &str) -> Result<f32, FormatError> {
+fn read_coord(raw: &[u8], at: usize, scalar: Scalar, section: &str) -> Result<f64, FormatError> {
     raw.get(at..)
         .and_then(|b| scalar.read(b, false))
-        .map(|v| v as f32)
         .ok_or_else(|| FormatError::data(section, "field lies outside the data"))
 }
 
@@ -376,7 +381,7 @@ fn data_bytes(h: &Header, section: &str) -> Result<usize, FormatError> {
     })
 }
 
-fn parse_binary(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+fn parse_binary(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatError> {
     const SECTION: &str = "DATA binary";
     let need = data_bytes(h, SECTION)?;
     let Some(data) = body.get(..need) else {
@@ -390,7 +395,7 @@ fn parse_binary(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
     // The bytes are there, so `points` is bounded by the input size.
     let mut out = super::points_vec(h.points, SECTION)?;
     for rec in data.chunks_exact(h.record_size) {
-        let mut p = [0f32; 3];
+        let mut p = [0f64; 3];
         for (v, c) in p.iter_mut().zip(&h.xyz) {
             *v = read_coord(rec, c.offset, c.scalar, SECTION)?;
         }
@@ -399,7 +404,7 @@ fn parse_binary(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
     Ok(out)
 }
 
-fn parse_compressed(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+fn parse_compressed(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatError> {
     const SECTION: &str = "DATA binary_compressed";
     if h.points == 0 {
         return Ok(Vec::new());
@@ -451,7 +456,7 @@ fn parse_compressed(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatErro
     // offset), and point i's element at column + i * (SIZE * COUNT).
     let mut out = super::points_vec(h.points, SECTION)?;
     for i in 0..h.points {
-        let mut p = [0f32; 3];
+        let mut p = [0f64; 3];
         for (v, c) in p.iter_mut().zip(&h.xyz) {
             // Cannot overflow: every position is below `need`, checked above.
             let at = h.points * c.offset + i * c.stride;

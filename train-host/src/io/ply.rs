@@ -71,6 +71,12 @@ pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
 
 /// [`parse`], refusing a file whose `vertex` element count exceeds `max_points`.
 pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, FormatError> {
+    parse_f64_limited(bytes, max_points).map(super::to_f32)
+}
+
+/// [`parse_limited`] at full precision: coordinates as `f64` (binary `f32`
+/// fields widen exactly, text and `f64` fields are not rounded).
+pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]>, FormatError> {
     let h = parse_header(bytes)?;
     let vertices = h.elements.get(h.vertex).map_or(0, |e| e.count);
     FormatError::check_count("PLY element vertex", vertices, max_points)?;
@@ -222,7 +228,7 @@ fn parse_header(bytes: &[u8]) -> Result<Header, FormatError> {
     })
 }
 
-fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f32; 3]>, FormatError> {
+fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f64; 3]>, FormatError> {
     let enc = h.encoding.name();
     let mut pos = 0usize;
     let mut out = Vec::new();
@@ -265,14 +271,14 @@ fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f32; 3]>, Form
                     FormatError::data(section.clone(), super::out_of_memory(el.count))
                 })?;
                 for rec in data.chunks_exact(row) {
-                    let mut p = [0f32; 3];
+                    let mut p = [0f64; 3];
                     for (v, &(pi, s)) in p.iter_mut().zip(&h.xyz) {
                         *v = rec
                             .get(offsets[pi]..)
                             .and_then(|b| s.read(b, be))
                             .ok_or_else(|| {
                                 FormatError::data(section.clone(), "property outside row")
-                            })? as f32;
+                            })?;
                     }
                     out.extend(finite(p));
                 }
@@ -285,7 +291,7 @@ fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f32; 3]>, Form
         for r in 0..el.count {
             let ends =
                 || FormatError::truncated(section.clone(), el.count as u64, "rows", r as u64);
-            let mut p = [0f32; 3];
+            let mut p = [0f64; 3];
             for (pi, prop) in el.props.iter().enumerate() {
                 match prop.kind {
                     Kind::Scalar(s) => {
@@ -295,7 +301,7 @@ fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f32; 3]>, Form
                             .ok_or_else(ends)?;
                         pos += s.size();
                         if is_vertex && let Some(k) = h.xyz.iter().position(|&(x, _)| x == pi) {
-                            p[k] = v as f32;
+                            p[k] = v;
                         }
                     }
                     Kind::List { count, item } => {
@@ -326,7 +332,7 @@ fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f32; 3]>, Form
     Ok(out)
 }
 
-fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
+fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatError> {
     let body = text(body, "ascii data")?;
     let mut toks = body.split_ascii_whitespace();
     let mut out = Vec::new();
@@ -341,7 +347,7 @@ fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
         for r in 0..el.count {
             let ends =
                 || FormatError::truncated(section.clone(), el.count as u64, "rows", r as u64);
-            let mut p = [0f32; 3];
+            let mut p = [0f64; 3];
             for (pi, prop) in el.props.iter().enumerate() {
                 match prop.kind {
                     Kind::Scalar(_) => {
@@ -352,7 +358,7 @@ fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
                                     format!("{section} row {r}"),
                                     format!("{} value {} is not a number", prop.name, snippet(tok)),
                                 )
-                            })? as f32;
+                            })?;
                         }
                     }
                     Kind::List { .. } => {

@@ -12,6 +12,12 @@ pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
 
 /// [`parse`], refusing more than `max_points` point lines.
 pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, FormatError> {
+    parse_f64_limited(bytes, max_points).map(super::to_f32)
+}
+
+/// [`parse_limited`] at full precision: coordinates as `f64` (binary `f32`
+/// fields widen exactly, text and `f64` fields are not rounded).
+pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]>, FormatError> {
     let body = text(bytes, "XYZ")?;
     let mut out = Vec::new();
     for (i, line) in body.lines().enumerate() {
@@ -22,7 +28,7 @@ pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, F
         let Some(first) = toks.next() else { continue };
         FormatError::check_count("XYZ point lines", out.len() + 1, max_points)?;
         let section = || format!("XYZ line {}", i + 1);
-        let mut p = [0f32; 3];
+        let mut p = [0f64; 3];
         for (k, v) in p.iter_mut().enumerate() {
             let tok = if k == 0 { Some(first) } else { toks.next() };
             let tok = tok.ok_or_else(|| {
