@@ -87,6 +87,37 @@ pub fn trained_passes(blob: &[u8]) -> Result<usize, pcrnet_core::Error> {
     }
 }
 
+/// What is wrong with running a blob trained for `trained` passes as
+/// `kind` with `passes` passes (`None`: the method's default), or `None`
+/// if nothing: iterating a one-pass PCRNet (it was never trained to
+/// correct its own output, and diverges on unseen shapes: 73 deg mean in
+/// issue 10), one pass of an i-PCRNet (it stops short of its accuracy), or
+/// a pass count other than the one the blob was trained for.
+pub fn mode_mismatch(
+    kind: crate::eval::methods::MethodKind,
+    trained: usize,
+    passes: Option<usize>,
+) -> Option<String> {
+    use crate::eval::methods::MethodKind;
+    let mode = if trained == 1 {
+        "one pass (PCRNet)".to_string()
+    } else {
+        format!("{trained} passes (i-PCRNet)")
+    };
+    match (kind, passes) {
+        (MethodKind::Ipcrnet, _) if trained == 1 => Some(format!(
+            "this model was trained for {mode}; --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
+        )),
+        (MethodKind::Pcrnet, _) if trained > 1 => Some(format!(
+            "this model was trained for {mode}; --method pcrnet runs one and stops short of its accuracy (use --method ipcrnet or device)"
+        )),
+        (MethodKind::Ipcrnet | MethodKind::Device, Some(n)) if n != trained => Some(format!(
+            "this model was trained for {mode}; --iterations {n} runs it for {n}"
+        )),
+        _ => None,
+    }
+}
+
 /// The network's pose alone.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NetworkPose {
@@ -284,5 +315,29 @@ mod tests {
         assert!(r.reliable && r.fitness == 1.0 && r.residual < 0.05, "{r:?}");
         let (z, _) = (r.pose.rotation[3], r.pose.rotation[0]);
         assert!((2.0 * z.asin().to_degrees() + 15.0).abs() < 0.1, "{r:?}");
+    }
+
+    /// Issue 10, item 9, as a kind: every mismatch between the mode a blob
+    /// was trained for and the method run is named, with what to use.
+    #[test]
+    fn mode_mismatches_are_named() {
+        use crate::eval::methods::MethodKind::{Device, Icp, Ipcrnet, Pcrnet};
+        let said = |kind, trained, passes| mode_mismatch(kind, trained, passes).unwrap_or_default();
+        assert!(said(Ipcrnet, 1, None).contains("trained for one pass (PCRNet)"));
+        assert!(said(Ipcrnet, 1, None).contains("--method pcrnet or device"));
+        assert!(said(Pcrnet, 8, None).contains("trained for 8 passes (i-PCRNet)"));
+        assert!(said(Pcrnet, 8, None).contains("--method ipcrnet or device"));
+        assert!(said(Device, 1, Some(5)).contains("--iterations 5"));
+        assert!(said(Ipcrnet, 8, Some(3)).contains("--iterations 3"));
+        for ok in [
+            mode_mismatch(Pcrnet, 1, None),
+            mode_mismatch(Ipcrnet, 8, None),
+            mode_mismatch(Ipcrnet, 8, Some(8)),
+            mode_mismatch(Device, 8, None),
+            mode_mismatch(Device, 1, Some(1)),
+            mode_mismatch(Icp, 1, Some(30)),
+        ] {
+            assert_eq!(ok, None);
+        }
     }
 }

@@ -147,3 +147,31 @@ fn large_clouds_are_reduced_and_say_so() {
     assert!(stderr.contains("--voxel SIZE"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 10, item 9: iterating a blob trained for one pass is named, in
+/// `register` as in `eval`, with what to run instead.
+#[test]
+fn running_a_blob_in_another_mode_than_trained_warns() {
+    let m = models();
+    let out = pcrnet()
+        .arg("register")
+        .arg(m.join("embedded-default-source.xyz"))
+        .args(["--method", "ipcrnet", "--iterations", "2", "--model"])
+        .arg(m.join("embedded-default-int8.pcrn"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("warning: this model was trained for one pass (PCRNet); --method ipcrnet"),
+        "{stderr}"
+    );
+    let out = pcrnet()
+        .arg("register")
+        .arg(m.join("embedded-default-source.xyz"))
+        .args(["--method", "pcrnet", "--model"])
+        .arg(m.join("embedded-default-int8.pcrn"))
+        .output()
+        .unwrap();
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
+}

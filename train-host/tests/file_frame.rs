@@ -90,7 +90,9 @@ fn map_coordinates_register_like_the_same_clouds_at_the_origin() {
     let m = &far["matrix"];
     let apply = |p: [f64; 3]| -> [f64; 3] {
         [0, 1, 2].map(|r| {
-            (0..3).map(|c| m[r][c].as_f64().unwrap() * p[c]).sum::<f64>()
+            (0..3)
+                .map(|c| m[r][c].as_f64().unwrap() * p[c])
+                .sum::<f64>()
                 + m[r][3].as_f64().unwrap()
         })
     };
@@ -102,7 +104,10 @@ fn map_coordinates_register_like_the_same_clouds_at_the_origin() {
             assert!((w[k] - t[k]).abs() < 1e-3, "point {i}: {w:?} vs {t:?}");
             // The matrix printed and the points written agree to within the
             // rotation's lever arm over the file's origin (|R - I| x 5.4e6).
-            assert!((moved[k] - t[k]).abs() < 1.0, "point {i}: {moved:?} vs {t:?}");
+            assert!(
+                (moved[k] - t[k]).abs() < 1.0,
+                "point {i}: {moved:?} vs {t:?}"
+            );
         }
     }
     let _ = std::fs::remove_dir_all(&d);

@@ -276,12 +276,8 @@ fn register(
 ) -> anyhow::Result<()> {
     let method = options.method(kind);
     let blob = options.read_model()?;
-    if let (MethodKind::Ipcrnet, Some(b)) = (kind, blob.as_deref())
-        && pcrnet_train::register::trained_passes(b).is_ok_and(|p| p == 1)
-    {
-        eprintln!(
-            "warning: this model was trained for one pass (PCRNet); --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
-        );
+    if let Some(warning) = options.mode_warning(kind, blob.as_deref()) {
+        eprintln!("warning: {warning}");
     }
     let out =
         methods::run(&method, blob.as_deref(), template.as_deref(), source).with_context(|| {
@@ -373,7 +369,10 @@ fn register(
     if let Some(out_path) = aligned {
         if origin == [0.0; 3] {
             // In f32, exactly as a device moves the points.
-            let moved: Vec<[f32; 3]> = source.iter().map(|&p| out.pose.transform_point(p)).collect();
+            let moved: Vec<[f32; 3]> = source
+                .iter()
+                .map(|&p| out.pose.transform_point(p))
+                .collect();
             write_cloud(&out_path, &moved)?;
         } else {
             let moved: Vec<[f64; 3]> = source

@@ -126,6 +126,13 @@ pub struct MethodOptions {
 }
 
 impl MethodOptions {
+    /// What is wrong with running `blob` as `kind` with these options
+    /// (see [`crate::register::mode_mismatch`]), if anything.
+    pub fn mode_warning(&self, kind: MethodKind, blob: Option<&[u8]>) -> Option<String> {
+        let trained = crate::register::trained_passes(blob?).ok()?;
+        crate::register::mode_mismatch(kind, trained, self.iterations)
+    }
+
     /// `kind` with these settings (the paper's where not given).
     pub fn method(&self, kind: MethodKind) -> Method {
         let mut m = Method::new(kind);
@@ -256,6 +263,9 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let pairs = set.materialise(&set.spec.load_shapes()?)?;
     let method = args.options.method(args.method);
     let blob = args.options.read_model()?;
+    if let Some(warning) = args.options.mode_warning(args.method, blob.as_deref()) {
+        eprintln!("warning: {warning}");
+    }
     let name = args
         .options
         .model
