@@ -13,6 +13,7 @@ pub mod frame;
 pub mod inspect;
 pub mod io;
 pub mod net;
+pub mod progress;
 pub mod quantize;
 pub mod reduce;
 pub mod register;

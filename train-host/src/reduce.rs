@@ -12,7 +12,8 @@ use clap::ValueEnum;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::train::data::{farthest_point_sampling, random_subset};
+use crate::progress::Progress;
+use crate::train::data::{farthest_point_sampling_with, random_subset};
 
 /// Points `pcrnet register` keeps by default: well above what the device
 /// uses (the network sees every point it is given; ICP scores 256), small
@@ -56,7 +57,10 @@ pub fn reduce_cloud(
         return cloud;
     }
     match method {
-        Reduction::Fps => farthest_point_sampling(&cloud, max_points, 0),
+        Reduction::Fps => {
+            let progress = Progress::bar(max_points as u64, "farthest point sampling");
+            farthest_point_sampling_with(&cloud, max_points, 0, Some(&progress))
+        }
         Reduction::Random | Reduction::Voxel => random_subset(&cloud, max_points, &mut rng),
     }
 }

@@ -175,3 +175,50 @@ fn running_a_blob_in_another_mode_than_trained_warns() {
         .unwrap();
     assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
 }
+
+/// Issue 10, item 15: training prints each epoch as it ends, with the time
+/// left, and an --out folder holding an earlier run is refused unless the
+/// run is resumed or replaced on purpose.
+#[test]
+fn training_reports_epochs_and_guards_its_output_folder() {
+    let dir = std::env::temp_dir().join(format!("pcrnet-cli-train-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let train = |extra: &[&str]| {
+        pcrnet()
+            .args([
+                "train",
+                "--generated",
+                "4",
+                "--arch",
+                "8,16:16",
+                "--points",
+                "64",
+            ])
+            .args(["--batch", "2", "--epochs", "2", "--steps-per-epoch", "1"])
+            .arg("--out")
+            .arg(&dir)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = train(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    let first = stderr.find("epoch   1/2:").expect("epoch 1 reported");
+    let second = stderr.find("epoch   2/2:").expect("epoch 2 reported");
+    assert!(first < second && stderr.contains("s left"), "{stderr}");
+    let log = std::fs::read_to_string(dir.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 2);
+
+    let out = train(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("holds an earlier run") && stderr.contains("--force"));
+    assert_eq!(std::fs::read_to_string(dir.join("log.jsonl")).unwrap(), log);
+
+    let out = train(&["--force"]);
+    assert_eq!(out.status.code(), Some(0));
+    let log = std::fs::read_to_string(dir.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 2, "one run's log, not two mixed");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -11,6 +11,7 @@ use pcrnet_train::eval::methods::{self, MethodKind};
 use pcrnet_train::frame::FilePose;
 use pcrnet_train::io::write::Coordinate;
 use pcrnet_train::io::{LocalCloud, read_cloud_local};
+use pcrnet_train::progress::Progress;
 use pcrnet_train::reduce::{Reduction, reduce_cloud};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
@@ -228,7 +229,9 @@ fn run(command: Command) -> anyhow::Result<()> {
             // shape); without a template file the source stays in the
             // blob's frame, exactly as a device receives it.
             let load = |path: &Path, origin: Option<[f64; 3]>| -> anyhow::Result<LocalCloud> {
+                let reading = Progress::spinner(format!("reading {}", path.display()));
                 let mut cloud = read_cloud_local(path, max_cloud_points, origin)?;
+                drop(reading);
                 anyhow::ensure!(!cloud.points.is_empty(), "{}: no points", path.display());
                 warn_if_coarse(path, &cloud.points);
                 let kept = reduce_cloud(&cloud.points, reduce, reduce_to, voxel, 0);
@@ -279,13 +282,13 @@ fn register(
     if let Some(warning) = options.mode_warning(kind, blob.as_deref()) {
         eprintln!("warning: {warning}");
     }
-    let out =
-        methods::run(&method, blob.as_deref(), template.as_deref(), source).with_context(|| {
-            match &options.model {
-                Some(path) => format!("registering with {}", path.display()),
-                None => "registering".into(),
-            }
-        })?;
+    let registering = Progress::spinner(format!("registering with {}", method.name(None)));
+    let out = methods::run(&method, blob.as_deref(), template.as_deref(), source);
+    drop(registering);
+    let out = out.with_context(|| match &options.model {
+        Some(path) => format!("registering with {}", path.display()),
+        None => "registering".into(),
+    })?;
     let pose = FilePose::from_local(&out.pose, origin);
     // With --json -, standard output carries the JSON alone.
     let to_stdout = json.as_deref() == Some(Path::new("-"));

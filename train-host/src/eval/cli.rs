@@ -361,8 +361,14 @@ pub fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
     } else {
         vec![args.name.as_str()]
     };
-    for name in names {
-        eprintln!("experiment {name}");
+    let started = std::time::Instant::now();
+    for (i, name) in names.iter().enumerate() {
+        eprintln!(
+            "experiment {}/{} {name} ({:.0} s so far)",
+            i + 1,
+            names.len(),
+            started.elapsed().as_secs_f64()
+        );
         let report = experiments::run_experiment(&ctx, name)?;
         eprintln!(
             "wrote {} and {} plot(s) in {:.0} s",

@@ -114,8 +114,10 @@ pub fn score(
     parallel: bool,
 ) -> Result<MethodScore, ScoreError> {
     let blob = model.map(|(_, b)| b);
+    let progress = crate::progress::Progress::bar(pairs.len() as u64, method.name(None));
     type Scored = (PairScore, Option<Precision>, Option<String>);
     let one = |(index, p): (usize, &Pair)| -> Result<Scored, ScoreError> {
+        progress.inc(1);
         let started = std::time::Instant::now();
         let (pose, iterations, seconds, precision, check, failure) =
             match methods::run(method, blob, Some(&p.template), &p.source) {

@@ -138,8 +138,13 @@ pub struct TrainArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Resume from `<out>/checkpoint.bin` (its configuration wins).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "force")]
     pub resume: bool,
+    /// Start afresh in an --out folder that holds an earlier run, replacing
+    /// its checkpoint and log (without it, or --resume, such a folder is
+    /// refused: two runs would mix in one log).
+    #[arg(long)]
+    pub force: bool,
     /// Stop after this many steps and report step times (timing runs; no export).
     #[arg(long)]
     pub max_steps: Option<usize>,
@@ -328,7 +333,29 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
     let config = config_from(&args)?;
     std::fs::create_dir_all(&args.out)?;
     let ck_path = args.out.join(CHECKPOINT_FILE);
+    let log_path = args.out.join(crate::train::LOG_FILE);
+    let earlier = ck_path.exists() || log_path.exists();
+    if earlier && !args.resume {
+        anyhow::ensure!(
+            args.force,
+            "{} holds an earlier run (checkpoint or log): pass --resume to continue it, --force to replace it, or another --out",
+            args.out.display()
+        );
+        for p in [&ck_path, &log_path] {
+            if p.exists() {
+                std::fs::remove_file(p).with_context(|| format!("removing {}", p.display()))?;
+            }
+        }
+    }
+    anyhow::ensure!(
+        !args.resume || ck_path.exists() || !log_path.exists(),
+        "{} has a log but no checkpoint to resume from: pass --force to start afresh",
+        args.out.display()
+    );
     let resume = args.resume && ck_path.exists();
+    if args.resume && !resume {
+        eprintln!("no checkpoint in {}: starting afresh", args.out.display());
+    }
     // A resumed run loads its data as the checkpoint says.
     let (seed, data_args) = if resume {
         let ck = Checkpoint::load(&ck_path)?;
@@ -381,24 +408,31 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         trainer.steps_per_epoch(),
         trainer.config.epochs
     );
-    let summary = trainer.run(&RunOptions {
-        out_dir: Some(args.out.clone()),
-        progress: !args.no_progress,
-        max_steps: args.max_steps,
-    })?;
-    for e in &summary.epochs {
-        eprintln!(
-            "epoch {:>3}: loss {:.5}  lr {:.2e}  val rot {:.2} deg (median {:.2})  trans {:.4} (median {:.4})  {:.0} s",
-            e.epoch,
-            e.train_loss,
-            e.lr,
-            e.val.rotation_deg.mean,
-            e.val.rotation_deg.median,
-            e.val.translation.mean,
-            e.val.translation.median,
-            e.seconds
-        );
-    }
+    let epochs = trainer.config.epochs;
+    let summary = trainer.run_with(
+        &RunOptions {
+            out_dir: Some(args.out.clone()),
+            progress: !args.no_progress,
+            max_steps: args.max_steps,
+        },
+        // Each epoch as it ends, with an estimate of the time left from
+        // this epoch's duration.
+        |e| {
+            let left = e.seconds * (epochs.saturating_sub(e.epoch + 1)) as f64;
+            eprintln!(
+                "epoch {:>3}/{epochs}: loss {:.5}  lr {:.2e}  val rot {:.2} deg (median {:.2})  trans {:.4} (median {:.4})  {:.0} s, about {:.0} s left",
+                e.epoch + 1,
+                e.train_loss,
+                e.lr,
+                e.val.rotation_deg.mean,
+                e.val.rotation_deg.median,
+                e.val.translation.mean,
+                e.val.translation.median,
+                e.seconds,
+                left
+            );
+        },
+    )?;
     let st = &summary.step_seconds;
     if st.len() > 1 {
         let rest = &st[1..];

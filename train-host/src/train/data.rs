@@ -205,6 +205,16 @@ pub fn mix_seed(seed: u64, a: u64, b: u64) -> u64 {
 
 /// Farthest point sampling: `k` points of `cloud`, starting from `start`.
 pub fn farthest_point_sampling(cloud: &[[f32; 3]], k: usize, start: usize) -> Vec<[f32; 3]> {
+    farthest_point_sampling_with(cloud, k, start, None)
+}
+
+/// [`farthest_point_sampling`], counting each point picked on `progress`.
+pub fn farthest_point_sampling_with(
+    cloud: &[[f32; 3]],
+    k: usize,
+    start: usize,
+    progress: Option<&crate::progress::Progress>,
+) -> Vec<[f32; 3]> {
     if cloud.is_empty() || k == 0 {
         return Vec::new();
     }
@@ -215,6 +225,9 @@ pub fn farthest_point_sampling(cloud: &[[f32; 3]], k: usize, start: usize) -> Ve
     let mut dist = vec![f32::INFINITY; cloud.len()];
     let mut cur = start % cloud.len();
     for _ in 0..k.min(cloud.len()) {
+        if let Some(p) = progress {
+            p.inc(1);
+        }
         out.push(cloud[cur]);
         let c = cloud[cur];
         let mut best = (0usize, -1f32);

@@ -424,6 +424,16 @@ impl Trainer {
     /// Runs until every epoch is done (or `max_steps`), checkpointing into
     /// and logging to `out_dir` when given.
     pub fn run(&mut self, opts: &RunOptions) -> Result<RunSummary, TrainError> {
+        self.run_with(opts, |_| {})
+    }
+
+    /// [`Trainer::run`], calling `on_epoch` with each epoch's log line as
+    /// soon as the epoch is logged and checkpointed.
+    pub fn run_with(
+        &mut self,
+        opts: &RunOptions,
+        mut on_epoch: impl FnMut(&EpochLog),
+    ) -> Result<RunSummary, TrainError> {
         let io = |path: &Path| {
             let path = path.to_path_buf();
             move |error| TrainError::Io { path, error }
@@ -441,44 +451,32 @@ impl Trainer {
         let spe = self.steps_per_epoch();
         while !self.finished() {
             let started = Instant::now();
-            let bar = if opts.progress {
-                let bar = indicatif::ProgressBar::new(spe as u64);
-                bar.set_style(
-                    indicatif::ProgressStyle::with_template(
-                        "epoch {prefix} [{bar:30}] {pos}/{len} {per_sec} eta {eta} {msg}",
-                    )
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-                    .progress_chars("=> "),
-                );
-                bar.set_prefix(format!(
-                    "{}/{}",
-                    self.progress.epoch + 1,
-                    self.config.epochs
-                ));
-                bar.set_position(self.progress.step_in_epoch as u64);
+            let epoch = format!("epoch {}/{}", self.progress.epoch + 1, self.config.epochs);
+            let bar = opts.progress.then(|| {
+                let bar = crate::progress::Progress::bar(spe as u64, epoch.as_str());
+                bar.inc(self.progress.step_in_epoch as u64);
                 bar
-            } else {
-                indicatif::ProgressBar::hidden()
-            };
+            });
             while self.progress.step_in_epoch < spe {
                 if opts
                     .max_steps
                     .is_some_and(|m| summary.step_seconds.len() >= m)
                 {
-                    bar.abandon();
                     return Ok(summary);
                 }
                 let t0 = Instant::now();
                 let s = self.step();
                 summary.step_seconds.push(t0.elapsed().as_secs_f64());
-                bar.inc(1);
-                bar.set_message(format!("loss {:.5} lr {:.2e}", s.loss, s.lr));
+                if let Some(bar) = &bar {
+                    bar.inc(1);
+                    bar.set_message(format!("{epoch} loss {:.5} lr {:.2e}", s.loss, s.lr));
+                }
                 let every = self.config.checkpoint_every;
                 if every > 0 && self.progress.global_step.is_multiple_of(every) {
                     save(self)?;
                 }
             }
-            bar.finish_and_clear();
+            drop(bar);
             let log = self.end_epoch(started);
             if let Some(dir) = &opts.out_dir {
                 let path = dir.join(LOG_FILE);
@@ -491,6 +489,7 @@ impl Trainer {
                 writeln!(f, "{line}").map_err(io(&path))?;
             }
             save(self)?;
+            on_epoch(&log);
             summary.epochs.push(log);
         }
         Ok(summary)
