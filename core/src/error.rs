@@ -113,7 +113,19 @@ impl fmt::Display for Error {
                 )
             }
             Error::WrongKind { expected, found } => {
-                write!(f, "expected a {expected:?} model, blob holds kind {found}")
+                let wanted = match expected {
+                    crate::format::ModelKind::Int8 => "an int8 model",
+                    crate::format::ModelKind::F32 => "an f32 model",
+                };
+                match found {
+                    0 => write!(f, "the blob holds an int8 model; this needs {wanted}")?,
+                    1 => write!(f, "the blob holds an f32 model; this needs {wanted}")?,
+                    _ => write!(f, "the blob holds model kind {found}; this needs {wanted}")?,
+                }
+                write!(
+                    f,
+                    " (`pcrnet export` writes both: *-int8.pcrn and *-f32.pcrn)"
+                )
             }
             Error::Truncated { needed, available } => {
                 write!(f, "model blob truncated: {available} of {needed} bytes")

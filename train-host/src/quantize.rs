@@ -57,7 +57,7 @@ pub enum QuantizeError {
         scale: f64,
     },
     /// `pcrnet-core` rejected the result.
-    #[error("pcrnet-core: {0}")]
+    #[error(transparent)]
     Core(#[from] pcrnet_core::Error),
     /// The template could not be recorded.
     #[error(transparent)]

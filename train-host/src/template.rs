@@ -35,7 +35,7 @@ pub enum TemplateError {
     #[error("--template-points must be between 1 and 65535 (got {0})")]
     PointCount(usize),
     /// `pcrnet-core` refused the result.
-    #[error("pcrnet-core: {0}")]
+    #[error(transparent)]
     Core(#[from] pcrnet_core::Error),
 }
 

@@ -222,3 +222,114 @@ fn training_reports_epochs_and_guards_its_output_folder() {
     assert_eq!(log.lines().count(), 2, "one run's log, not two mixed");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 10, items 12 and 13, as a kind: every user error is one chain of
+/// messages in the user's terms (the flag or file it concerns, what to do),
+/// no backtrace even with RUST_BACKTRACE=1, no part said twice.
+#[test]
+fn user_errors_name_the_flag_or_file_once() {
+    let m = models();
+    let s = |p: &str| m.join(p).display().to_string();
+    let (src, tpl) = (
+        s("embedded-default-source.xyz"),
+        s("embedded-default-template.xyz"),
+    );
+    let (int8, f32) = (
+        s("embedded-default-int8.pcrn"),
+        s("embedded-default-f32.pcrn"),
+    );
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--method".into(),
+                "pcrnet".into(),
+            ],
+            "--method pcrnet needs a model: pass --model FILE",
+        ),
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--method".into(),
+                "pointnetlk".into(),
+                "--model".into(),
+                int8.clone(),
+            ],
+            "--method pointnetlk needs the f32 blob",
+        ),
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--model".into(),
+                src.clone(),
+            ],
+            "not a model blob",
+        ),
+        (
+            vec![
+                "register".into(),
+                tpl.clone(),
+                src.clone(),
+                "--model".into(),
+                f32.clone(),
+                "--hypotheses".into(),
+                "0".into(),
+            ],
+            "--hypotheses must be at least 1",
+        ),
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--model".into(),
+                int8.clone(),
+                "--icp-distance=nan".into(),
+            ],
+            "--icp-distance NaN",
+        ),
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--method".into(),
+                "icp".into(),
+            ],
+            "give TEMPLATE SOURCE",
+        ),
+        (
+            vec![
+                "pairs".into(),
+                "--generated".into(),
+                "2".into(),
+                "--noise".into(),
+                "abc".into(),
+                "--out".into(),
+                "/nonexistent/p.json".into(),
+            ],
+            "--noise \"abc\"",
+        ),
+        (
+            vec!["inspect".into(), "/nonexistent.pcrn".into()],
+            "/nonexistent.pcrn",
+        ),
+    ];
+    for (args, expected) in cases {
+        let out = pcrnet()
+            .args(&args)
+            .env("RUST_BACKTRACE", "1")
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!stderr.contains("backtrace") && !stderr.contains("panicked"));
+        let line = stderr.lines().find(|l| l.starts_with("error: ")).unwrap();
+        let parts: Vec<&str> = line.split(": ").filter(|p| p.len() > 12).collect();
+        for (i, p) in parts.iter().enumerate() {
+            assert!(!parts[i + 1..].contains(p), "said twice: {line}");
+        }
+    }
+}

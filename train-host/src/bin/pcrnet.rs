@@ -277,6 +277,7 @@ fn register(
     options: &MethodOptions,
     Output { aligned, json }: Output,
 ) -> anyhow::Result<()> {
+    options.check()?;
     let method = options.method(kind);
     let blob = options.read_model()?;
     if let Some(warning) = options.mode_warning(kind, blob.as_deref()) {

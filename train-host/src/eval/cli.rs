@@ -126,6 +126,31 @@ pub struct MethodOptions {
 }
 
 impl MethodOptions {
+    /// Refuses values no method can run with, naming the flag.
+    pub fn check(&self) -> anyhow::Result<()> {
+        let at_least_one = [
+            ("--iterations", self.iterations),
+            ("--hypotheses", self.hypotheses),
+            ("--max-points", self.max_points),
+        ];
+        for (flag, v) in at_least_one {
+            anyhow::ensure!(v != Some(0), "{flag} must be at least 1");
+        }
+        if let Some(d) = self.icp_distance {
+            anyhow::ensure!(
+                d.is_finite() && d > 0.0,
+                "--icp-distance {d} must be a finite share of the template's size above 0"
+            );
+        }
+        if let Some(t) = self.tolerance {
+            anyhow::ensure!(
+                t.is_finite() && t >= 0.0,
+                "--tolerance {t} must be finite and at least 0"
+            );
+        }
+        Ok(())
+    }
+
     /// What is wrong with running `blob` as `kind` with these options
     /// (see [`crate::register::mode_mismatch`]), if anything.
     pub fn mode_warning(&self, kind: MethodKind, blob: Option<&[u8]>) -> Option<String> {
@@ -193,7 +218,12 @@ pub struct ResultsArgs {
 /// Parses `X` (fixed) or `LO,HI`.
 fn range(s: &str, what: &str) -> anyhow::Result<[f32; 2]> {
     let (a, b) = s.split_once(',').unwrap_or((s, s));
-    let r: [f32; 2] = [a.trim().parse()?, b.trim().parse()?];
+    let number = |t: &str| -> anyhow::Result<f32> {
+        t.trim()
+            .parse()
+            .with_context(|| format!("{what} {s:?}: {t:?} is not a number"))
+    };
+    let r: [f32; 2] = [number(a)?, number(b)?];
     anyhow::ensure!(
         r[0].is_finite() && r[1].is_finite() && 0.0 <= r[0] && r[0] <= r[1],
         "{what} {s:?}: expected X or LO,HI with 0 <= LO <= HI"
@@ -262,6 +292,7 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let set = PairSet::load(&args.pairs)?;
     let pairs = set.materialise(&set.spec.load_shapes()?)?;
     let method = args.options.method(args.method);
+    args.options.check()?;
     let blob = args.options.read_model()?;
     if let Some(warning) = args.options.mode_warning(args.method, blob.as_deref()) {
         eprintln!("warning: {warning}");

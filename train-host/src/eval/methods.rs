@@ -45,6 +45,18 @@ pub enum MethodKind {
     Device,
 }
 
+/// The name `--method` takes (`pcrnet`, `ipcrnet`, `pointnetlk`, `icp`,
+/// `device`).
+impl std::fmt::Display for MethodKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use clap::ValueEnum;
+        match self.to_possible_value() {
+            Some(v) => f.write_str(v.get_name()),
+            None => write!(f, "{self:?}"),
+        }
+    }
+}
+
 /// What the device pipeline's ICP minimises (`pcrnet_core::Metric`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 pub enum DeviceMetric {
@@ -245,9 +257,14 @@ pub struct Outcome {
 pub enum MethodError {
     /// A network method was run without a model blob.
     #[error(
-        "{0:?} needs a model: pass --model FILE (the shipped one is models/embedded-default-int8.pcrn; PointNetLK needs an f32 blob such as models/embedded-default-f32.pcrn)"
+        "--method {0} needs a model: pass --model FILE (the shipped one is models/embedded-default-int8.pcrn; pointnetlk needs an f32 blob such as models/embedded-default-f32.pcrn)"
     )]
     NoModel(MethodKind),
+    /// PointNetLK was given an int8 blob.
+    #[error(
+        "--method pointnetlk needs the f32 blob (its Jacobian is taken on f32 features), such as models/embedded-default-f32.pcrn; this one is int8"
+    )]
+    NeedsF32,
     /// The network, the blob or the template failed.
     #[error(transparent)]
     Model(#[from] TemplateError),
@@ -302,7 +319,11 @@ pub fn run(
             }
         }
         MethodKind::Pointnetlk => {
-            let r = register_pointnetlk(model()?, template, source, method.iterations)?;
+            let blob = model()?;
+            if Int8Model::from_bytes(blob).is_ok() {
+                return Err(MethodError::NeedsF32);
+            }
+            let r = register_pointnetlk(blob, template, source, method.iterations)?;
             Outcome {
                 pose: r.pose,
                 iterations: r.iterations,

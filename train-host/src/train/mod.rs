@@ -214,7 +214,7 @@ pub struct Trainer {
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
     /// Invalid architecture.
-    #[error("architecture: {0}")]
+    #[error(transparent)]
     Arch(#[from] pcrnet_core::Error),
     /// No training shape.
     #[error("the training set is empty")]
