@@ -1,5 +1,5 @@
 //! `pcrnet`: the host command line (train, export, inspect, register,
-//! pairs, eval, experiment, results, shape, demo).
+//! pairs, eval, experiment, results, shape, untrained).
 
 use std::path::{Path, PathBuf};
 
@@ -37,9 +37,11 @@ enum Command {
         /// The blob (int8 or f32).
         model: PathBuf,
     },
-    /// Run points -> quantize -> encode -> head -> pose end to end on a
-    /// generated shape, int8 beside f32, with the embedded default architecture.
-    Demo {
+    /// Run points -> quantize -> encode -> head -> pose end to end with
+    /// seeded random (untrained) weights on a generated shape, int8 beside
+    /// f32: the sizes and layers of an architecture before training it.
+    /// (The trained model's demo is `cargo xtask demo`.)
+    Untrained {
         /// Seed for weights, shape and transform.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -54,8 +56,8 @@ enum Command {
         head: Option<Vec<u16>>,
     },
     /// Train PCRNet / i-PCRNet in f32 on ModelNet-style data or generated
-    /// shapes; writes checkpoints, a JSON-lines log and the f32 blob (and
-    /// with --export the int8 blob) into --out.
+    /// shapes; writes checkpoints, a JSON-lines log and, at the end, both
+    /// blobs (f32 and int8, as `export`) into --out.
     Train(Box<pcrnet_train::train::cli::TrainArgs>),
     /// Export a training checkpoint to the f32 and int8 blobs, with the
     /// template's feature embedded.
@@ -158,7 +160,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             let text = inspect::describe(&blob).with_context(|| format!("{}", model.display()))?;
             write_stdout(&text);
         }
-        Command::Demo {
+        Command::Untrained {
             seed,
             out,
             encoder,
@@ -168,7 +170,7 @@ fn run(command: Command) -> anyhow::Result<()> {
                 encoder.as_deref().unwrap_or(EMBEDDED_ENCODER),
                 head.as_deref().unwrap_or(EMBEDDED_HEAD),
             )?;
-            demo(arch, seed, out)?
+            untrained(arch, seed, out)?
         }
         Command::Train(args) => pcrnet_train::train::cli::train(*args)?,
         Command::Export(args) => pcrnet_train::train::cli::export(args)?,
@@ -484,7 +486,7 @@ fn warn_if_coarse(path: &Path, cloud: &[[f32; 3]]) {
     }
 }
 
-fn demo(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
+fn untrained(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> {
     write_stdout(
         "NOTE: weights are seeded random (untrained): this shows the pipeline, not accuracy.
 ",

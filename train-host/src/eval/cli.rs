@@ -9,6 +9,7 @@ use clap::Args;
 use super::experiments::{self, Context, EXPERIMENTS};
 use super::methods::{Method, MethodKind};
 use super::pairs::{PairSet, PairSetSpec, Shapes};
+use crate::train::cli::{parse_fraction, parse_sigma};
 use crate::train::data::{PairConfig, Sampling};
 
 /// Arguments of `pcrnet pairs`.
@@ -42,7 +43,8 @@ pub struct PairsArgs {
     /// Largest translation per axis.
     #[arg(long, default_value_t = 1.0)]
     pub max_t: f32,
-    /// Gaussian noise: a fixed SIGMA or a range LO,HI drawn per pair.
+    /// Gaussian noise on the source: a fixed SIGMA or a range LO,HI each
+    /// pair draws its sigma from (as `pcrnet train --noise`).
     #[arg(long)]
     pub noise: Option<String>,
     /// Partial source: fraction kept by a plane crop, FRAC or LO,HI.
@@ -215,26 +217,6 @@ pub struct ResultsArgs {
     pub out: PathBuf,
 }
 
-/// Parses `X` (fixed) or `LO,HI`.
-fn range(s: &str, what: &str) -> anyhow::Result<[f32; 2]> {
-    let (a, b) = s.split_once(',').unwrap_or((s, s));
-    let number = |t: &str| -> anyhow::Result<f32> {
-        t.trim()
-            .parse()
-            .with_context(|| format!("{what} {s:?}: {t:?} is not a number"))
-    };
-    let r: [f32; 2] = [number(a)?, number(b)?];
-    anyhow::ensure!(
-        r[0].is_finite() && r[1].is_finite() && 0.0 <= r[0] && r[0] <= r[1],
-        "{what} {s:?}: expected X or LO,HI with 0 <= LO <= HI"
-    );
-    Ok(r)
-}
-
-fn fraction(s: &str, what: &str) -> anyhow::Result<[f32; 2]> {
-    crate::train::cli::parse_range(s).with_context(|| what.to_string())
-}
-
 /// Runs `pcrnet pairs`.
 pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
     let shapes = match (&args.data, args.generated) {
@@ -256,17 +238,17 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
             noise: args
                 .noise
                 .as_deref()
-                .map(|s| range(s, "--noise"))
+                .map(|s| parse_sigma(s, "--noise"))
                 .transpose()?,
             partial: args
                 .partial
                 .as_deref()
-                .map(|s| fraction(s, "--partial"))
+                .map(|s| parse_fraction(s, "--partial"))
                 .transpose()?,
             sparse: args
                 .sparse
                 .as_deref()
-                .map(|s| fraction(s, "--sparse"))
+                .map(|s| parse_fraction(s, "--sparse"))
                 .transpose()?,
             centre: false,
         },
@@ -417,24 +399,4 @@ pub fn results(args: ResultsArgs) -> anyhow::Result<()> {
     std::fs::write(&args.out, md).with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn ranges_and_fractions() {
-        assert_eq!(range("0.02", "--noise").unwrap(), [0.02, 0.02]);
-        assert_eq!(range("0, 0.04", "--noise").unwrap(), [0.0, 0.04]);
-        for bad in ["-0.1", "0.04,0.01", "nan", "inf", "x"] {
-            assert!(range(bad, "--noise").is_err(), "{bad}");
-        }
-        assert_eq!(fraction("0.3,0.8", "--partial").unwrap(), [0.3, 0.8]);
-        assert_eq!(fraction("1", "--sparse").unwrap(), [1.0, 1.0]);
-        for bad in ["0", "1.5", "0.8,0.3", "x"] {
-            let e = fraction(bad, "--partial").unwrap_err();
-            assert!(format!("{e:#}").starts_with("--partial"), "{e:#}");
-        }
-    }
 }

@@ -178,7 +178,6 @@ impl Recipe {
         ];
         v.extend(self.args.iter().map(|s| s.to_string()));
         v.extend([
-            "--export".to_string(),
             "--no-progress".to_string(),
             "--out".to_string(),
             out.display().to_string(),
@@ -1250,7 +1249,9 @@ mod tests {
                 TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))
                     .unwrap_or_else(|e| panic!("{}: {e}", r.name));
             assert_eq!(cmd.args.points, POINTS, "{}", r.name);
-            assert!(cmd.args.export, "{}", r.name);
+            if let Some(noise) = &cmd.args.noise {
+                assert_eq!(noise, "0,0.04", "{}: the recorded models' noise", r.name);
+            }
             assert_eq!(cmd.args.out, Path::new("/work/m"));
             assert_eq!(Recipe::named(r.name).map(|x| x.name), Some(r.name));
         }

@@ -112,9 +112,10 @@ pub struct TrainArgs {
     /// Largest translation per axis.
     #[arg(long, default_value_t = 1.0)]
     pub max_t: f32,
-    /// Gaussian noise on the source, sigma drawn from U[0, SIGMA] (default 0.04).
-    #[arg(long, num_args = 0..=1, default_missing_value = "0.04")]
-    pub noise: Option<f32>,
+    /// Gaussian noise on the source: a fixed SIGMA or a range LO,HI each
+    /// pair draws its sigma from, as in `pcrnet pairs` (alone: 0,0.04).
+    #[arg(long, num_args = 0..=1, default_missing_value = "0,0.04")]
+    pub noise: Option<String>,
     /// Partial source: plane crop keeping a fraction in LO,HI (default 0.3,0.8).
     #[arg(long, num_args = 0..=1, default_missing_value = "0.3,0.8")]
     pub partial: Option<String>,
@@ -148,8 +149,10 @@ pub struct TrainArgs {
     /// Stop after this many steps and report step times (timing runs; no export).
     #[arg(long)]
     pub max_steps: Option<usize>,
-    /// Also write the int8 blob at the end.
-    #[arg(long)]
+    /// No effect: training always ends by exporting both blobs (f32 and
+    /// int8), as `pcrnet export` does. Accepted so that commands recorded
+    /// in RESULTS.md before that still run.
+    #[arg(long, hide = true)]
     pub export: bool,
     /// Template embedded in the blobs (default: the first training shape).
     #[arg(long)]
@@ -212,13 +215,35 @@ pub fn parse_arch(s: &str) -> anyhow::Result<(Vec<u16>, Vec<u16>)> {
     })
 }
 
+/// `X` or `LO,HI` as the two ends of a range (`X` is `X,X`), naming
+/// `flag` and the text when a part is not a number.
+fn parse_pair(s: &str, flag: &str) -> anyhow::Result<[f32; 2]> {
+    let (a, b) = s.split_once(',').unwrap_or((s, s));
+    let number = |t: &str| -> anyhow::Result<f32> {
+        t.trim()
+            .parse()
+            .with_context(|| format!("{flag} {s:?}: {t:?} is not a number"))
+    };
+    Ok([number(a)?, number(b)?])
+}
+
+/// Parses a noise level: a fixed `SIGMA` or a range `LO,HI` from which
+/// each pair draws its sigma uniformly, `0 <= LO <= HI` (`--noise` of
+/// `train`, `pairs` and `upgrade` alike).
+pub fn parse_sigma(s: &str, flag: &str) -> anyhow::Result<[f32; 2]> {
+    let r = parse_pair(s, flag)?;
+    if !(r[0].is_finite() && r[1].is_finite() && 0.0 <= r[0] && r[0] <= r[1]) {
+        bail!("{flag} {s:?}: expected SIGMA or LO,HI with 0 <= LO <= HI");
+    }
+    Ok(r)
+}
+
 /// Parses a fraction `F` or a range `LO,HI` with `0 < LO <= HI <= 1`
 /// (`--partial`, `--sparse`).
-pub fn parse_range(s: &str) -> anyhow::Result<[f32; 2]> {
-    let (a, b) = s.split_once(',').unwrap_or((s, s));
-    let (a, b): (f32, f32) = (a.trim().parse()?, b.trim().parse()?);
+pub fn parse_fraction(s: &str, flag: &str) -> anyhow::Result<[f32; 2]> {
+    let [a, b] = parse_pair(s, flag)?;
     if !(0.0 < a && a <= b && b <= 1.0) {
-        bail!("fraction range {s:?} must satisfy 0 < LO <= HI <= 1");
+        bail!("{flag} {s:?}: expected F or LO,HI with 0 < LO <= HI <= 1");
     }
     Ok([a, b])
 }
@@ -254,9 +279,21 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         pairs: PairConfig {
             max_deg: args.max_deg,
             max_t: args.max_t,
-            noise: args.noise.map(|s| [0.0, s]),
-            partial: args.partial.as_deref().map(parse_range).transpose()?,
-            sparse: args.sparse.as_deref().map(parse_range).transpose()?,
+            noise: args
+                .noise
+                .as_deref()
+                .map(|s| parse_sigma(s, "--noise"))
+                .transpose()?,
+            partial: args
+                .partial
+                .as_deref()
+                .map(|s| parse_fraction(s, "--partial"))
+                .transpose()?,
+            sparse: args
+                .sparse
+                .as_deref()
+                .map(|s| parse_fraction(s, "--sparse"))
+                .transpose()?,
             centre: !args.no_centre,
         },
         clip_norm: args.clip,
@@ -454,18 +491,17 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         Some(p) => load_template(p, trainer.train_data().points, args.template_points, seed)?,
         None => Reference::new(&trainer.train_data().clouds[0], args.template_points)?,
     };
-    let cal = args.export.then(|| {
-        exp::calibration_clouds(
-            &reference.normalised(),
-            &trainer.config.pairs,
-            64,
-            trainer.config.seed,
-        )
-    });
+    // Both blobs, as `pcrnet export` writes them.
+    let cal = exp::calibration_clouds(
+        &reference.normalised(),
+        &trainer.config.pairs,
+        64,
+        trainer.config.seed,
+    );
     for p in exp::export(
         &trainer.params,
         &reference,
-        cal.as_deref(),
+        Some(&cal),
         trained_for(&trainer.config),
         &args.out,
     )? {
@@ -489,10 +525,10 @@ pub struct UpgradeArgs {
     /// Template points stored in the blob (6 bytes of flash each).
     #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
     pub template_points: usize,
-    /// Calibration sources get Gaussian noise with sigma drawn from
-    /// U[0, NOISE] (as `train --noise`); 0 for clean sources.
-    #[arg(long, default_value_t = 0.04)]
-    pub noise: f32,
+    /// Gaussian noise on the calibration sources: a fixed SIGMA or a range
+    /// LO,HI, as `train --noise` (0 for clean sources).
+    #[arg(long, default_value = "0,0.04")]
+    pub noise: String,
     /// Seed of the template reduction and the calibration clouds.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -507,16 +543,14 @@ pub struct UpgradeArgs {
 
 /// Runs `pcrnet upgrade`: a format-2 f32 blob to current f32 and int8 blobs.
 pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
-    if !(args.noise.is_finite() && args.noise >= 0.0) {
-        bail!("--noise must be a finite number >= 0 (got {})", args.noise);
-    }
+    let noise = parse_sigma(&args.noise, "--noise")?;
     let blob =
         std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
     let (params, centre) =
         crate::upgrade::read_v2_f32(&blob).with_context(|| format!("{}", args.model.display()))?;
     let reference = load_template(&args.template, args.points, args.template_points, args.seed)?;
     let pairs = data::PairConfig {
-        noise: (args.noise > 0.0).then_some([0.0, args.noise]),
+        noise: (noise[1] > 0.0).then_some(noise),
         centre,
         ..data::PairConfig::default()
     };
@@ -564,4 +598,45 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         eprintln!("wrote {}", p.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn noise_ranges_and_fractions_name_their_flag() {
+        assert_eq!(parse_sigma("0.02", "--noise").unwrap(), [0.02, 0.02]);
+        assert_eq!(parse_sigma("0, 0.04", "--noise").unwrap(), [0.0, 0.04]);
+        for bad in ["-0.1", "0.04,0.01", "nan", "inf", "x"] {
+            let e = parse_sigma(bad, "--noise").unwrap_err();
+            assert!(format!("{e:#}").starts_with("--noise"), "{e:#}");
+        }
+        assert_eq!(parse_fraction("0.3,0.8", "--partial").unwrap(), [0.3, 0.8]);
+        assert_eq!(parse_fraction("1", "--sparse").unwrap(), [1.0, 1.0]);
+        for bad in ["0", "1.5", "0.8,0.3", "x"] {
+            let e = parse_fraction(bad, "--partial").unwrap_err();
+            assert!(format!("{e:#}").starts_with("--partial"), "{e:#}");
+        }
+    }
+
+    /// Issue 10, item 16: `--noise` means the same in `train` as in
+    /// `pairs` (a fixed sigma, or a range each pair draws from).
+    #[test]
+    fn train_noise_means_what_pairs_noise_means() {
+        #[derive(clap::Parser)]
+        struct Cmd {
+            #[command(flatten)]
+            args: TrainArgs,
+        }
+        let noise = |extra: &[&str]| {
+            let argv = ["train", "--generated", "4", "--out", "x"];
+            let cmd = <Cmd as clap::Parser>::try_parse_from(argv.iter().chain(extra)).unwrap();
+            config_from(&cmd.args).unwrap().pairs.noise
+        };
+        assert_eq!(noise(&[]), None);
+        assert_eq!(noise(&["--noise"]), Some([0.0, 0.04]));
+        assert_eq!(noise(&["--noise", "0.02"]), Some([0.02, 0.02]));
+        assert_eq!(noise(&["--noise", "0.01,0.03"]), Some([0.01, 0.03]));
+    }
 }
