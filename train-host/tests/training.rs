@@ -499,3 +499,74 @@ fn a_model_with_non_finite_weights_is_not_written() {
     assert!(e.to_string().contains("layer 1"), "{e}");
     assert!(!dir.join(export::F32_BLOB).exists());
 }
+
+/// Issue 11, items 2 and 3: single-view sources keep only what a camera
+/// sees (padded back to the template's size), identity pairs have no
+/// motion, and both are seeded like every other choice.
+#[test]
+fn single_view_and_identity_pairs() {
+    let ds = Dataset::generated(3, 512, 5);
+    let tpl = &ds.clouds[0];
+    let distinct = |c: &[[f32; 3]]| {
+        let mut v: Vec<[u32; 3]> = c.iter().map(|p| p.map(f32::to_bits)).collect();
+        v.sort_unstable();
+        v.dedup();
+        v.len()
+    };
+    let view = PairConfig {
+        single_view: true,
+        centre: false,
+        ..PairConfig::default()
+    };
+    let (src, r, t) = data::make_pair(tpl, &view, 3);
+    assert_eq!(src.len(), tpl.len());
+    let seen = distinct(&src);
+    assert!(
+        seen > 50 && seen < tpl.len() * 3 / 4,
+        "{seen} distinct points"
+    );
+    // Every source point is a template point moved by the pose's inverse.
+    for s in &src {
+        let back = apply(&r, &t, s);
+        let nearest = tpl
+            .iter()
+            .map(|p| (0..3).map(|k| (p[k] - back[k]).powi(2)).sum::<f32>())
+            .fold(f32::INFINITY, f32::min);
+        assert!(nearest < 1e-9, "{back:?}");
+    }
+    assert_eq!(data::make_pair(tpl, &view, 3).0, src);
+
+    let still = PairConfig {
+        identity_share: 1.0,
+        centre: false,
+        ..PairConfig::default()
+    };
+    let (src, r, t) = data::make_pair(tpl, &still, 4);
+    assert_eq!(&src, tpl);
+    assert_eq!(t, [0.0; 3]);
+    assert_eq!(
+        rotation_error_deg(&r, &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+        0.0
+    );
+    let half = PairConfig {
+        identity_share: 0.5,
+        ..PairConfig::default()
+    };
+    let still = (0..200)
+        .filter(|&s| data::make_pair(tpl, &half, s).2 == [0.0; 3])
+        .count();
+    assert!(
+        (70..130).contains(&still),
+        "{still} of 200 pairs without motion"
+    );
+    for bad in [1.5f32, -0.1, f32::NAN] {
+        let cfg = PairConfig {
+            identity_share: bad,
+            ..PairConfig::default()
+        };
+        assert!(
+            cfg.validate()
+                .is_err_and(|e| e.contains("--identity-share"))
+        );
+    }
+}

@@ -9,8 +9,8 @@ use clap::Args;
 use super::experiments::{self, Context, EXPERIMENTS};
 use super::methods::{Method, MethodKind};
 use super::pairs::{PairSet, PairSetSpec, Shapes};
-use crate::train::cli::{parse_fraction, parse_sigma};
-use crate::train::data::{PairConfig, Sampling};
+use crate::train::cli::PairArgs;
+use crate::train::data::Sampling;
 
 /// Arguments of `pcrnet pairs`.
 #[derive(Debug, Clone, Args)]
@@ -37,22 +37,9 @@ pub struct PairsArgs {
     /// Seed of preprocessing, template order and pairs.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Largest Euler angle per axis (degrees).
-    #[arg(long, default_value_t = 45.0)]
-    pub max_deg: f32,
-    /// Largest translation per axis.
-    #[arg(long, default_value_t = 1.0)]
-    pub max_t: f32,
-    /// Gaussian noise on the source: a fixed SIGMA or a range LO,HI each
-    /// pair draws its sigma from (as `pcrnet train --noise`).
-    #[arg(long)]
-    pub noise: Option<String>,
-    /// Partial source: fraction kept by a plane crop, FRAC or LO,HI.
-    #[arg(long)]
-    pub partial: Option<String>,
-    /// Sparse source: fraction of points kept, FRAC or LO,HI.
-    #[arg(long)]
-    pub sparse: Option<String>,
+    /// How sources are made from templates.
+    #[command(flatten)]
+    pub source: PairArgs,
     /// Resample: make each source from the shape's points the template did
     /// not keep (no shared points, as with a real sensor).
     #[arg(long)]
@@ -232,31 +219,11 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
         shapes,
         points: args.points,
         sampling: Sampling::Fps,
-        pairs: PairConfig {
-            max_deg: args.max_deg,
-            max_t: args.max_t,
-            noise: args
-                .noise
-                .as_deref()
-                .map(|s| parse_sigma(s, "--noise"))
-                .transpose()?,
-            partial: args
-                .partial
-                .as_deref()
-                .map(|s| parse_fraction(s, "--partial"))
-                .transpose()?,
-            sparse: args
-                .sparse
-                .as_deref()
-                .map(|s| parse_fraction(s, "--sparse"))
-                .transpose()?,
-            centre: false,
-        },
+        pairs: args.source.config(false)?,
         count: args.count,
         seed: args.seed,
         resample: args.resample,
     };
-    spec.pairs.validate().map_err(anyhow::Error::msg)?;
     let loaded = spec.load_shapes()?;
     let set = PairSet::generate(spec, &loaded);
     set.save(&args.out)?;

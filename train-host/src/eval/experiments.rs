@@ -1249,7 +1249,7 @@ mod tests {
                 TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))
                     .unwrap_or_else(|e| panic!("{}: {e}", r.name));
             assert_eq!(cmd.args.points, POINTS, "{}", r.name);
-            if let Some(noise) = &cmd.args.noise {
+            if let Some(noise) = &cmd.args.pairs.noise {
                 assert_eq!(noise, "0,0.04", "{}: the recorded models' noise", r.name);
             }
             assert_eq!(cmd.args.out, Path::new("/work/m"));

@@ -106,22 +106,9 @@ pub struct TrainArgs {
     /// Seed of weights and pairs.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Largest Euler angle per axis (degrees).
-    #[arg(long, default_value_t = 45.0)]
-    pub max_deg: f32,
-    /// Largest translation per axis.
-    #[arg(long, default_value_t = 1.0)]
-    pub max_t: f32,
-    /// Gaussian noise on the source: a fixed SIGMA or a range LO,HI each
-    /// pair draws its sigma from, as in `pcrnet pairs` (alone: 0,0.04).
-    #[arg(long, num_args = 0..=1, default_missing_value = "0,0.04")]
-    pub noise: Option<String>,
-    /// Partial source: plane crop keeping a fraction in LO,HI (default 0.3,0.8).
-    #[arg(long, num_args = 0..=1, default_missing_value = "0.3,0.8")]
-    pub partial: Option<String>,
-    /// Sparse source: random subset keeping a fraction in LO,HI (default 0.25,0.75).
-    #[arg(long, num_args = 0..=1, default_missing_value = "0.25,0.75")]
-    pub sparse: Option<String>,
+    /// How sources are made from templates.
+    #[command(flatten)]
+    pub pairs: PairArgs,
     /// Feed the network uncentred sources (default: sources centred on
     /// their centroid, as the reference implementation; see `train::data`).
     #[arg(long)]
@@ -164,6 +151,60 @@ pub struct TrainArgs {
     /// No progress bars.
     #[arg(long)]
     pub no_progress: bool,
+}
+
+/// How sources are made from templates: the same flags, with the same
+/// meaning, in `pcrnet train` and `pcrnet pairs` (see
+/// [`crate::train::data`] for the order they apply in).
+#[derive(Debug, Clone, Args)]
+pub struct PairArgs {
+    /// Largest Euler angle per axis (degrees).
+    #[arg(long, default_value_t = 45.0)]
+    pub max_deg: f32,
+    /// Largest translation per axis.
+    #[arg(long, default_value_t = 1.0)]
+    pub max_t: f32,
+    /// Gaussian noise on the source: a fixed SIGMA or a range LO,HI each
+    /// pair draws its sigma from (alone: 0,0.04).
+    #[arg(long, num_args = 0..=1, default_missing_value = "0,0.04")]
+    pub noise: Option<String>,
+    /// Partial source: plane crop keeping a fraction, F or LO,HI (alone: 0.3,0.8).
+    #[arg(long, num_args = 0..=1, default_missing_value = "0.3,0.8")]
+    pub partial: Option<String>,
+    /// Sparse source: random subset keeping a fraction, F or LO,HI (alone: 0.25,0.75).
+    #[arg(long, num_args = 0..=1, default_missing_value = "0.25,0.75")]
+    pub sparse: Option<String>,
+    /// Single-view source: only what a depth camera at a random viewpoint
+    /// sees of the object (a z-buffer over the points, see `train::view`).
+    #[arg(long)]
+    pub single_view: bool,
+    /// Share of pairs with no motion at all (source = template up to crops
+    /// and noise), so a network learns that f(T, T) is the identity.
+    #[arg(long, default_value_t = 0.0)]
+    pub identity_share: f32,
+}
+
+impl PairArgs {
+    /// The pair configuration, sources centred or not; every range checked
+    /// with its flag named.
+    pub fn config(&self, centre: bool) -> anyhow::Result<PairConfig> {
+        let parsed =
+            |v: &Option<String>, flag, parse: fn(&str, &str) -> anyhow::Result<[f32; 2]>| {
+                v.as_deref().map(|s| parse(s, flag)).transpose()
+            };
+        let config = PairConfig {
+            max_deg: self.max_deg,
+            max_t: self.max_t,
+            noise: parsed(&self.noise, "--noise", parse_sigma)?,
+            partial: parsed(&self.partial, "--partial", parse_fraction)?,
+            sparse: parsed(&self.sparse, "--sparse", parse_fraction)?,
+            centre,
+            single_view: self.single_view,
+            identity_share: self.identity_share,
+        };
+        config.validate().map_err(anyhow::Error::msg)?;
+        Ok(config)
+    }
 }
 
 /// Arguments of `pcrnet export`.
@@ -276,33 +317,13 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             ScheduleArg::Constant => Schedule::Constant,
         },
         seed: args.seed,
-        pairs: PairConfig {
-            max_deg: args.max_deg,
-            max_t: args.max_t,
-            noise: args
-                .noise
-                .as_deref()
-                .map(|s| parse_sigma(s, "--noise"))
-                .transpose()?,
-            partial: args
-                .partial
-                .as_deref()
-                .map(|s| parse_fraction(s, "--partial"))
-                .transpose()?,
-            sparse: args
-                .sparse
-                .as_deref()
-                .map(|s| parse_fraction(s, "--sparse"))
-                .transpose()?,
-            centre: !args.no_centre,
-        },
+        pairs: args.pairs.config(!args.no_centre)?,
         clip_norm: args.clip,
         checkpoint_every: args.checkpoint_every,
         val_pairs: args.val_pairs,
         points: args.points,
         sampling: sampling(args.sampling),
     };
-    config.pairs.validate().map_err(anyhow::Error::msg)?;
     if !(config.lr.is_finite() && config.lr > 0.0) {
         bail!("--lr must be a finite number > 0 (got {})", config.lr);
     }

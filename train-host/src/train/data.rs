@@ -10,7 +10,10 @@
 //! # Pairs
 //! Template = a preprocessed shape. Source = the template under a random
 //! rigid transform (Euler angles `U[-max_deg, max_deg]` per axis,
-//! `R = Rz Ry Rx`, translation `U[-max_t, max_t]` per axis), optionally
+//! `R = Rz Ry Rx`, translation `U[-max_t, max_t]` per axis; with
+//! `identity_share`, that share of pairs has no motion at all), optionally
+//! reduced to what a depth camera at a random viewpoint sees
+//! (`single_view`, see [`super::view`]), optionally
 //! cropped by a random plane (keeping a fraction in `partial`), optionally
 //! thinned to a random subset (a fraction in `sparse`), then padded back to
 //! `points` points by repeating random kept points (max-pooling ignores
@@ -77,6 +80,14 @@ pub struct PairConfig {
     /// Centre the source on its centroid and adjust the true pose (see the
     /// module docs; the network then sees centred sources).
     pub centre: bool,
+    /// The source is what a depth camera at a random viewpoint sees of the
+    /// object ([`super::view::visible_from`], before any crop or thinning).
+    #[serde(default)]
+    pub single_view: bool,
+    /// Share of pairs drawn at zero motion (the source is the template,
+    /// crops and noise aside), so that a network learns `f(T, T) = I`.
+    #[serde(default)]
+    pub identity_share: f32,
 }
 
 impl PairConfig {
@@ -110,6 +121,12 @@ impl PairConfig {
         range("--noise", self.noise, |lo| lo >= 0.0)?;
         range("--partial", self.partial, |lo| lo > 0.0)?;
         range("--sparse", self.sparse, |lo| lo > 0.0)?;
+        if !(0.0..=1.0).contains(&self.identity_share) {
+            return Err(format!(
+                "--identity-share must be a fraction between 0 and 1 (got {})",
+                self.identity_share
+            ));
+        }
         for (flag, r) in [("--partial", self.partial), ("--sparse", self.sparse)] {
             if r.is_some_and(|[_, hi]| hi > 1.0) {
                 return Err(format!("{flag} fractions must be at most 1"));
@@ -130,6 +147,8 @@ impl Default for PairConfig {
             partial: None,
             sparse: None,
             centre: true,
+            single_view: false,
+            identity_share: 0.0,
         }
     }
 }
@@ -355,6 +374,17 @@ fn gaussian(rng: &mut ChaCha8Rng) -> f32 {
     ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
 }
 
+/// A direction uniform on the unit sphere (a normalised Gaussian vector).
+fn random_direction(rng: &mut ChaCha8Rng) -> [f32; 3] {
+    loop {
+        let v: [f32; 3] = std::array::from_fn(|_| gaussian(rng));
+        let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if norm > 1e-6 {
+            break v.map(|x| x / norm);
+        }
+    }
+}
+
 /// One (template, source, R_gt, t_gt) pair from a preprocessed template
 /// (see the module docs). The source has as many points as the template.
 pub fn make_pair(
@@ -376,24 +406,30 @@ pub fn make_pair_with_centroid(
 ) -> (Vec<[f32; 3]>, Mat3, [f32; 3], [f32; 3]) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = template.len();
-    let angles: [f32; 3] =
+    let mut angles: [f32; 3] =
         std::array::from_fn(|_| rng.random_range(-cfg.max_deg..=cfg.max_deg).to_radians());
-    let t: [f32; 3] = std::array::from_fn(|_| rng.random_range(-cfg.max_t..=cfg.max_t));
+    let mut t: [f32; 3] = std::array::from_fn(|_| rng.random_range(-cfg.max_t..=cfg.max_t));
+    // Options draw from the generator only when on, so that the pairs of
+    // configurations without them stay what they were.
+    if cfg.identity_share > 0.0 && rng.random::<f32>() < cfg.identity_share {
+        (angles, t) = ([0.0; 3], [0.0; 3]);
+    }
     let r = euler_to_mat(angles);
     let mut pts = template.to_vec();
+    if cfg.single_view {
+        let dir = random_direction(&mut rng);
+        pts = super::view::visible_from(&pts, dir)
+            .into_iter()
+            .map(|i| pts[i])
+            .collect();
+    }
     if let Some([lo, hi]) = cfg.partial {
         let frac = if hi > lo {
             rng.random_range(lo..=hi)
         } else {
             lo
         };
-        let d: [f32; 3] = loop {
-            let v: [f32; 3] = std::array::from_fn(|_| gaussian(&mut rng));
-            let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            if norm > 1e-6 {
-                break v.map(|x| x / norm);
-            }
-        };
+        let d = random_direction(&mut rng);
         let keep = ((frac * n as f32).round() as usize).clamp(1, n);
         let mut order: Vec<(f32, usize)> = pts
             .iter()

@@ -37,6 +37,7 @@ pub mod geometry;
 pub mod loss;
 pub mod model;
 pub mod ops;
+pub mod view;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
