@@ -333,3 +333,60 @@ fn user_errors_name_the_flag_or_file_once() {
         }
     }
 }
+
+/// Issue 11, item 1: `pcrnet train --object FILE` trains for one object in
+/// its own units, end to end, and the blob it writes registers that
+/// object's clouds in those units.
+#[test]
+fn training_for_ones_own_object_end_to_end() {
+    use pcrnet_train::shapes::{Shape, sample};
+    let dir = std::env::temp_dir().join(format!("pcrnet-cli-object-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // A part 50 mm across, 2 m from the origin, in millimetres.
+    let part: String = sample(Shape::Ell, 400, 2)
+        .iter()
+        .map(|p| format!("{} {} {}\n", 2000.0 + 50.0 * p[0], 50.0 * p[1], 50.0 * p[2]))
+        .collect();
+    let object = dir.join("part.xyz");
+    std::fs::write(&object, part).unwrap();
+    let out_dir = dir.join("model");
+    let out = pcrnet()
+        .arg("train")
+        .arg("--object")
+        .arg(&object)
+        .args(["--arch", "8,16:16", "--points", "64", "--batch", "4"])
+        .args(["--epochs", "2", "--steps-per-epoch", "2", "--no-progress"])
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("1 training shapes, 1 validation shapes"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("2 steps/epoch x 2 epochs"), "{stderr}");
+    assert!(stderr.contains("epoch   2/2:"), "{stderr}");
+    for blob in ["model-int8.pcrn", "model-f32.pcrn"] {
+        assert!(out_dir.join(blob).is_file(), "{blob}: {stderr}");
+    }
+    let out = pcrnet()
+        .arg("register")
+        .arg(&object)
+        .arg("--model")
+        .arg(out_dir.join("model-int8.pcrn"))
+        .args(["--json", "-"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // The blob's frame is the part's: its own cloud is in range, nothing
+    // clipped or left out, and the untrained pose still lands near it.
+    assert_eq!(json["out_of_range"], 0, "{json}");
+    let t = &json["translation"];
+    assert!(t[0].as_f64().unwrap().abs() < 2000.0, "{json}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

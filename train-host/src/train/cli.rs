@@ -58,8 +58,14 @@ pub struct TrainArgs {
     #[arg(long, conflicts_with = "generated")]
     pub data: Option<PathBuf>,
     /// Train on this many generated shapes instead (validation: a quarter as many).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "object")]
     pub generated: Option<usize>,
+    /// Train for one object of your own: a point cloud file, or an OFF mesh
+    /// (sampled by area), in any unit. It is also the template (unless
+    /// --template), so the blobs record its frame; validation draws other
+    /// poses of it. Defaults for it: 64 steps per epoch, 64 validation pairs.
+    #[arg(long, conflicts_with_all = ["data", "single_model", "classes"])]
+    pub object: Option<PathBuf>,
     /// Only these classes (comma-separated): single- or few-category training.
     #[arg(long, value_delimiter = ',')]
     pub classes: Option<Vec<String>>,
@@ -88,7 +94,7 @@ pub struct TrainArgs {
     /// Epochs.
     #[arg(long, default_value_t = 10)]
     pub epochs: usize,
-    /// Steps per epoch (default: training shapes / batch).
+    /// Steps per epoch (default: training shapes / batch; 64 with --object).
     #[arg(long)]
     pub steps_per_epoch: Option<usize>,
     /// Base learning rate (Adam).
@@ -116,7 +122,7 @@ pub struct TrainArgs {
     /// Clip the gradient's global norm.
     #[arg(long)]
     pub clip: Option<f32>,
-    /// Validation pairs (0: one per validation shape).
+    /// Validation pairs (0: one per validation shape; 64 with --object).
     #[arg(long, default_value_t = 0)]
     pub val_pairs: usize,
     /// Also checkpoint every this many steps (0: at epoch ends only).
@@ -141,7 +147,8 @@ pub struct TrainArgs {
     /// in RESULTS.md before that still run.
     #[arg(long, hide = true)]
     pub export: bool,
-    /// Template embedded in the blobs (default: the first training shape).
+    /// Template embedded in the blobs (default: the --object, or the first
+    /// training shape).
     #[arg(long)]
     pub template: Option<PathBuf>,
     /// Template points stored in the blob for checking and refining poses
@@ -229,6 +236,14 @@ pub struct ExportArgs {
     pub out: PathBuf,
 }
 
+/// Steps per epoch of `train --object` unless given: one shape makes
+/// `shapes / batch` a single step.
+const OBJECT_STEPS: usize = 64;
+
+/// Validation pairs of `train --object` unless given (other poses of the
+/// same object).
+const OBJECT_VAL_PAIRS: usize = 64;
+
 /// Parses `embedded`, `paper`, `ipcrnet` or `E1,E2:H1,H2` into widths.
 pub fn parse_arch(s: &str) -> anyhow::Result<(Vec<u16>, Vec<u16>)> {
     use pcrnet_core::arch::{IPCRNET_HEAD, PAPER_ENCODER, PCRNET_HEAD};
@@ -306,7 +321,9 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         },
         batch: args.batch,
         epochs: args.epochs,
-        steps_per_epoch: args.steps_per_epoch,
+        steps_per_epoch: args
+            .steps_per_epoch
+            .or(args.object.as_ref().map(|_| OBJECT_STEPS)),
         lr: args.lr,
         schedule: match args.schedule {
             ScheduleArg::Cosine => Schedule::Cosine { min_factor: 0.01 },
@@ -320,7 +337,10 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         pairs: args.pairs.config(!args.no_centre)?,
         clip_norm: args.clip,
         checkpoint_every: args.checkpoint_every,
-        val_pairs: args.val_pairs,
+        val_pairs: match (args.val_pairs, &args.object) {
+            (0, Some(_)) => OBJECT_VAL_PAIRS,
+            (n, _) => n,
+        },
         points: args.points,
         sampling: sampling(args.sampling),
     };
@@ -350,12 +370,15 @@ fn load_data(args: &TrainArgs, seed: u64) -> anyhow::Result<(Dataset, Dataset)> 
         let train = Dataset::load_modelnet(root, Split::Train, classes, args.points, s, seed)?;
         let val = Dataset::load_modelnet(root, Split::Test, classes, args.points, s, seed ^ 1)?;
         (train, val)
+    } else if let Some(object) = &args.object {
+        let train = Dataset::object(object, args.points, sampling(args.sampling), seed)?;
+        (train.clone(), train)
     } else if let Some(n) = args.generated {
         let train = Dataset::generated(n, args.points, seed);
         let val = Dataset::generated(n.div_ceil(4), args.points, seed ^ 0xABCD);
         (train, val)
     } else {
-        bail!("give --data PATH or --generated COUNT");
+        bail!("give --data PATH, --object FILE or --generated COUNT");
     };
     if let Some(i) = args.single_model {
         if i >= train.len() {
@@ -508,7 +531,7 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         eprintln!("stopped before the end (--max-steps): no export");
         return Ok(());
     }
-    let reference = match &args.template {
+    let reference = match args.template.as_ref().or(args.object.as_ref()) {
         Some(p) => load_template(p, trainer.train_data().points, args.template_points, seed)?,
         None => Reference::new(&trainer.train_data().clouds[0], args.template_points)?,
     };

@@ -651,6 +651,35 @@ impl Dataset {
         }
     }
 
+    /// One object of one's own (`pcrnet train --object`): a cloud file, or
+    /// an OFF mesh sampled by area with 8 x `points` points, preprocessed
+    /// as loaded data; the points the reduction leaves are the object's
+    /// `rest`, to resample sources from.
+    pub fn object(
+        path: &Path,
+        points: usize,
+        sampling: Sampling,
+        seed: u64,
+    ) -> Result<Self, DataError> {
+        let raw = match io::Format::from_path(path) {
+            Some(io::Format::Off) => io::read_off_sampled(path, points.saturating_mul(8), seed)?,
+            _ => io::read_cloud(path)?,
+        };
+        let (cloud, rest) = preprocess_split(&raw, points, sampling, mix_seed(seed, 0x0B1E, 0))
+            .ok_or_else(|| DataError::Empty(format!("{}: no finite point", path.display())))?;
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        Ok(Dataset {
+            clouds: vec![cloud],
+            rest: vec![rest],
+            labels: vec!["object".to_string()],
+            names: vec![name],
+            points,
+        })
+    }
+
     /// Only the shape at `index` (single-model training).
     pub fn single_model(mut self, index: usize) -> Self {
         let i = index.min(self.clouds.len().saturating_sub(1));
