@@ -388,5 +388,49 @@ fn training_for_ones_own_object_end_to_end() {
     assert_eq!(json["out_of_range"], 0, "{json}");
     let t = &json["translation"];
     assert!(t[0].as_f64().unwrap().abs() < 2000.0, "{json}");
+    // Scoring it on poses of the same part, single-view and resampled.
+    let pairs = dir.join("pairs.json");
+    let out = pcrnet()
+        .arg("pairs")
+        .arg("--object")
+        .arg(&object)
+        .args([
+            "--points",
+            "64",
+            "--count",
+            "6",
+            "--single-view",
+            "--resample",
+        ])
+        .arg("--out")
+        .arg(&pairs)
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = pcrnet()
+        .arg("eval")
+        .arg("--pairs")
+        .arg(&pairs)
+        .args(["--method", "device", "--model"])
+        .arg(out_dir.join("model-int8.pcrn"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("(6 pairs)") && stdout.contains("AUC"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("failed"), "{stdout}");
     let _ = std::fs::remove_dir_all(&dir);
 }

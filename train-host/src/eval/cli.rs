@@ -20,8 +20,12 @@ pub struct PairsArgs {
     #[arg(long, conflicts_with = "generated")]
     pub data: Option<PathBuf>,
     /// Use this many generated shapes instead (no files needed).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "object")]
     pub generated: Option<usize>,
+    /// Poses of one object of your own instead (a cloud or an OFF mesh, as
+    /// `train --object`); with --count, that many pairs.
+    #[arg(long, conflicts_with_all = ["data", "classes", "train_split"])]
+    pub object: Option<PathBuf>,
     /// Take the training split instead of the test split.
     #[arg(long)]
     pub train_split: bool,
@@ -206,14 +210,17 @@ pub struct ResultsArgs {
 
 /// Runs `pcrnet pairs`.
 pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
-    let shapes = match (&args.data, args.generated) {
-        (Some(root), _) => Shapes::Folder {
+    let shapes = match (&args.data, args.generated, &args.object) {
+        (Some(root), ..) => Shapes::Folder {
             root: root.clone(),
             test_split: !args.train_split,
             classes: args.classes.clone(),
         },
-        (None, Some(count)) => Shapes::Generated { count },
-        (None, None) => anyhow::bail!("give --data FOLDER or --generated COUNT"),
+        (None, Some(count), _) => Shapes::Generated { count },
+        (None, None, Some(path)) => Shapes::Object { path: path.clone() },
+        (None, None, None) => {
+            anyhow::bail!("give --data FOLDER, --object FILE or --generated COUNT")
+        }
     };
     let spec = PairSetSpec {
         shapes,

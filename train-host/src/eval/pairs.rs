@@ -45,6 +45,12 @@ pub enum Shapes {
         /// How many shapes.
         count: usize,
     },
+    /// One object of one's own ([`Dataset::object`]): every pair is a pose
+    /// of it.
+    Object {
+        /// The cloud or OFF mesh as given.
+        path: PathBuf,
+    },
 }
 
 /// The recipe of a pair set.
@@ -173,6 +179,9 @@ impl PairSetSpec {
                 self.seed,
             )?,
             Shapes::Generated { count } => Dataset::generated(*count, self.points, self.seed),
+            Shapes::Object { path } => {
+                Dataset::object(path, self.points, self.sampling, self.seed)?
+            }
         })
     }
 
