@@ -315,8 +315,11 @@ fn register(
     ));
     say(format!("time: {:.3} ms", out.seconds * 1e3));
     say(format!("quaternion (w, x, y, z): {:?}", out.pose.rotation));
-    say(format!("translation: {:?}", pose.translation));
-    if origin != [0.0; 3] {
+    if origin == [0.0; 3] {
+        // The f32 values a device gives.
+        say(format!("translation: {:?}", out.pose.translation));
+    } else {
+        say(format!("translation: {:?}", pose.translation));
         say(format!(
             "local origin (the template's median; both clouds were moved by it before rounding to f32): {origin:?}; translation about it: {:?}",
             pose.local_translation
