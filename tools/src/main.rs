@@ -166,7 +166,7 @@ fn cores() -> Result<(), String> {
 
 /// Seconds each fuzz target runs in CI (a smoke run that also replays the
 /// corpora; campaigns: `cargo xtask fuzz 3600`).
-const CI_FUZZ_SECONDS: u64 = 10;
+const CI_FUZZ_SECONDS: u64 = 30;
 
 /// The crates built for the device, outside the host workspace.
 const FIRMWARE_CRATES: [&str; 3] = ["firmware-example", "tests/firmware", "tests/no-panic"];
