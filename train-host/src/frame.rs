@@ -22,8 +22,6 @@ use pcrnet_core::Pose;
 /// A rigid transform in the files' frame, in `f64`: `q = R p + t`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FilePose {
-    /// The local pose's unit quaternion (w, x, y, z), widened.
-    pub rotation: [f64; 4],
     /// The local pose's rotation matrix (row-major), widened: the very
     /// rotation the method applied.
     pub rotation_matrix: [[f64; 3]; 3],
@@ -44,7 +42,6 @@ impl FilePose {
         let r_origin = rotate(&rotation_matrix, origin);
         let translation = [0, 1, 2].map(|k| local_translation[k] + origin[k] - r_origin[k]);
         FilePose {
-            rotation: local.rotation.map(f64::from),
             rotation_matrix,
             translation,
             origin,

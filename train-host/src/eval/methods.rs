@@ -319,11 +319,14 @@ pub fn run(
             }
         }
         MethodKind::Pointnetlk => {
-            let blob = model()?;
-            if Int8Model::from_bytes(blob).is_ok() {
-                return Err(MethodError::NeedsF32);
-            }
-            let r = register_pointnetlk(blob, template, source, method.iterations)?;
+            let r = register_pointnetlk(model()?, template, source, method.iterations).map_err(
+                |e| match e {
+                    TemplateError::Core(pcrnet_core::Error::WrongKind { found: 0, .. }) => {
+                        MethodError::NeedsF32
+                    }
+                    e => e.into(),
+                },
+            )?;
             Outcome {
                 pose: r.pose,
                 iterations: r.iterations,

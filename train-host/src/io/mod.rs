@@ -235,15 +235,8 @@ impl Format {
         bytes: &[u8],
         max_points: usize,
     ) -> Result<Vec<[f32; 3]>, FormatError> {
-        let bytes = strip_bom(bytes);
-        match self {
-            Format::Pcd => pcd::parse_limited(bytes, max_points),
-            Format::Ply => ply::parse_limited(bytes, max_points),
-            Format::Off => {
-                off::parse_sampled_limited(bytes, DEFAULT_OFF_SAMPLES, DEFAULT_OFF_SEED, max_points)
-            }
-            Format::Xyz => xyz::parse_limited(bytes, max_points),
-        }
+        // About the origin: every point rounded to f32 where it is.
+        Ok(self.parse_local(bytes, max_points, Some([0.0; 3]))?.points)
     }
 
     /// [`Format::parse_limited`] about a local origin (see [`LocalCloud`]):
@@ -350,11 +343,7 @@ pub fn read_cloud(path: &Path) -> Result<Vec<[f32; 3]>, ReadError> {
 /// [`read_cloud`] with a limit on the points a file may declare or hold
 /// (see [`DEFAULT_MAX_POINTS`]).
 pub fn read_cloud_limited(path: &Path, max_points: usize) -> Result<Vec<[f32; 3]>, ReadError> {
-    let format = Format::from_path(path).ok_or_else(|| ReadError::UnknownFormat {
-        path: path.to_path_buf(),
-    })?;
-    let bytes = read_bytes(path)?;
-    with_path(path, format.parse_limited(&bytes, max_points))
+    Ok(read_cloud_local(path, max_points, Some([0.0; 3]))?.points)
 }
 
 /// [`read_cloud_limited`] about a local origin: see [`Format::parse_local`]

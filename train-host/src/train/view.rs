@@ -30,16 +30,13 @@ pub fn visible_from(cloud: &[[f32; 3]], dir: [f32; 3]) -> Vec<usize> {
     let finite: Vec<usize> = (0..cloud.len())
         .filter(|&i| cloud[i].iter().all(|v| v.is_finite()))
         .collect();
-    if finite.len() < 2 {
+    let points: Vec<[f32; 3]> = finite.iter().map(|&i| cloud[i]).collect();
+    if points.len() < 2 {
         return finite;
     }
-    let mut c = [0f64; 3];
-    for &i in &finite {
-        for (k, ck) in c.iter_mut().enumerate() {
-            *ck += f64::from(cloud[i][k]);
-        }
-    }
-    let c = c.map(|v| (v / finite.len() as f64) as f32);
+    let Ok(c) = pcrnet_core::pose::centroid(&points) else {
+        return finite;
+    };
     let radius = finite
         .iter()
         .map(|&i| norm(sub(cloud[i], c)))
