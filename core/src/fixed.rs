@@ -88,10 +88,11 @@ impl OutputStep {
     /// the clamp to `[act_min, 127]`.
     #[inline(always)]
     pub(crate) fn new(multiplier: i32, shift: i8, zero_point: i8, act_min: i8) -> Self {
-        let shift = shift.clamp(MIN_SHIFT, MAX_SHIFT);
-        // r - 32 = -1 - shift: the fast path needs 1 <= r - 32 <= 21.
-        let high_shift = (-1 - shift as i32).clamp(0, 31) as u32;
-        let offset = (-22..=-2).contains(&shift).then(|| {
+        // r - 32 = -1 - shift: the fast path needs 1 <= r - 32 <= 21. (The
+        // general path clamps the shift itself, see `requantize`.)
+        let fast = (-22..=-2).contains(&shift);
+        let high_shift = if fast { (-1 - shift as i32) as u32 } else { 0 };
+        let offset = fast.then(|| {
             let round = if ROUNDS_HALF_UP {
                 1i32 << (high_shift - 1)
             } else {
@@ -118,15 +119,28 @@ impl OutputStep {
                 // high_shift| <= 2^28: the sum cannot overflow.
                 let hi = ((acc as i64 * self.multiplier as i64) >> 32) as i32;
                 let v = (hi + offset) >> self.high_shift;
-                v.clamp(self.act_min as i32, i8::MAX as i32) as i8
+                // Saturate to int8 (one SSAT on Cortex-M), then the ReLU floor.
+                v.clamp(i8::MIN as i32, i8::MAX as i32)
+                    .max(self.act_min as i32) as i8
             }
-            None => to_activation(
-                requantize(acc, self.multiplier, self.shift),
+            None => general_step(
+                acc,
+                self.multiplier,
+                self.shift,
                 self.zero_point,
                 self.act_min,
             ),
         }
     }
+}
+
+/// The output step for shifts outside the fast path's range. Out of line
+/// and cold: inlined, LLVM computes its 64-bit constants ahead of the
+/// branch for every output, which is most of a head row's overhead.
+#[cold]
+#[inline(never)]
+fn general_step(acc: i32, multiplier: i32, shift: i8, zero_point: i8, act_min: i8) -> i8 {
+    to_activation(requantize(acc, multiplier, shift), zero_point, act_min)
 }
 
 /// Whether requantization rounds half up (always, but for the QEMU

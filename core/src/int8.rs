@@ -489,22 +489,30 @@ impl<'a> Int8Model<'a> {
         let mut len = 0usize;
         for (layer, &width) in self.p.head.iter().zip(self.p.arch.head.iter()) {
             let rq = requant(layer, true);
-            let mut sink = Sink::Store {
-                out: &mut *b,
-                outputs: width as usize,
-            };
+            let width = width as usize;
+            let out = b.get_mut(..width).ok_or(Error::InconsistentDimensions {
+                what: "head layer wider than its buffer",
+            })?;
             if len == 0 {
                 let parts = [template, bytes_of(source_feature)];
-                if !dense_vector(layer.weights, &parts, rq, expanded, &mut sink) {
+                if !dense_vector(layer.weights, &parts, rq, expanded, out) {
+                    let mut sink = Sink::Store {
+                        out,
+                        outputs: width,
+                    };
                     head_first_layer(layer.weights, f, rq, template, source_feature, &mut sink);
                 }
             } else {
                 let x = prefix(a, len)?;
-                if !dense_vector(layer.weights, &[bytes_of(x)], rq, expanded, &mut sink) {
+                if !dense_vector(layer.weights, &[bytes_of(x)], rq, expanded, out) {
+                    let mut sink = Sink::Store {
+                        out,
+                        outputs: width,
+                    };
                     dense_tile(layer.weights, len, rq, x, &mut sink);
                 }
             }
-            len = width as usize;
+            len = width;
             saturated += count_saturated(prefix(b, len)?);
             core::mem::swap(&mut a, &mut b);
         }

@@ -205,23 +205,32 @@ mod dsp {
     }
 
     /// The loop both kernels run around their group body (a macro giving
-    /// the assembly of one group): an odd group first, then two groups a
-    /// turn, counting `{n}` groups down; `{n}` must be at least 1.
-    macro_rules! groups_unrolled_twice {
+    /// the assembly of one group): the `{n} % 4` odd groups first (one,
+    /// then two), then four groups a turn, counting `{n}` down; `{n}` must
+    /// be at least 1. Four groups a turn make the `SUBS`/`BNE` cost 1/32
+    /// instruction per MAC.
+    macro_rules! groups_unrolled_4 {
         ($group:ident) => {
             concat!(
                 "tst {n}, #1\n",
                 "beq 2f\n",
                 $group!(),
                 "2:\n",
-                "lsrs {n}, {n}, #1\n",
-                "beq 4f\n",
+                "tst {n}, #2\n",
+                "beq 3f\n",
+                $group!(),
+                $group!(),
                 "3:\n",
+                "lsrs {n}, {n}, #2\n",
+                "beq 5f\n",
+                "4:\n",
+                $group!(),
+                $group!(),
                 $group!(),
                 $group!(),
                 "subs {n}, {n}, #1\n",
-                "bne 3b\n",
-                "4:\n",
+                "bne 4b\n",
+                "5:\n",
             )
         };
     }
@@ -281,7 +290,7 @@ mod dsp {
     /// acts.len() / 8)` groups of four inputs (the bias rides in as `init`).
     ///
     /// Register plan, per group (13 instructions for 16 MACs, and a
-    /// `SUBS`/`BNE` every two groups: 0.875 instructions per MAC):
+    /// `SUBS`/`BNE` every four groups: 0.84 instructions per MAC):
     /// `LDR` the weight word (post-increment), `SXTB16` it into the even
     /// pair `we` and, rotated, the odd pair `w`; `LDM` the first two rows'
     /// four activation words into r8-r11 (LDM fills ascending registers from
@@ -295,14 +304,14 @@ mod dsp {
         if groups == 0 {
             return [init; 4];
         }
-        // SAFETY: `groups >= 1` groups run (an odd one, then pairs); each
+        // SAFETY: `groups >= 1` groups run (`groups % 4`, then fours); each
         // reads 4 bytes at `wp` and 32 bytes at `ap`, and both slices hold
         // at least `groups` such blocks (checked above). `acts` is a `u32` slice, so
         // `ap` is 4-byte aligned as LDM requires; `LDR` allows any alignment
         // on ARMv7E-M. Nothing is written; the flags are clobbered (SUBS).
         unsafe {
             asm!(
-                groups_unrolled_twice!(dot4_group),
+                groups_unrolled_4!(dot4_group),
                 wp = inout(reg) w.as_ptr() => _,
                 ap = inout(reg) acts.as_ptr() => _,
                 n = inout(reg) groups => _,
@@ -339,7 +348,7 @@ mod dsp {
     /// four rows).
     ///
     /// Register plan, per group (21 instructions for 16 MACs, and a
-    /// `SUBS`/`BNE` every two groups: 1.375 instructions per MAC): `LDRD` the
+    /// `SUBS`/`BNE` every four groups: 1.34 instructions per MAC): `LDRD` the
     /// group's two activation words; for each row, `LDR` its weight word,
     /// `SXTB16` it into the even pair `we` and, rotated, the odd pair `w`,
     /// and two `SMLAD`; `SUBS`/`BNE`. Rows 0 and 2 are addressed by `r0`
@@ -352,7 +361,7 @@ mod dsp {
         if groups == 0 || w.len() < 4 * stride {
             return init;
         }
-        // SAFETY: `groups >= 1` groups run (an odd one, then pairs); group
+        // SAFETY: `groups >= 1` groups run (`groups % 4`, then fours); group
         // `g` reads the words at `4g` bytes into rows 0..4 (each `stride >= 4 * groups`
         // bytes long, all inside `w`, checked above) and 8 bytes at `8g`
         // into `acts` (`acts.len() >= 2 * groups` words). `acts` is a `u32`
@@ -361,7 +370,7 @@ mod dsp {
         // are clobbered (SUBS).
         unsafe {
             asm!(
-                groups_unrolled_twice!(rows4_group),
+                groups_unrolled_4!(rows4_group),
                 r0 = inout(reg) w.as_ptr() => _,
                 r2 = inout(reg) w.as_ptr().wrapping_add(2 * stride) => _,
                 s = in(reg) stride,
@@ -497,9 +506,9 @@ pub(crate) fn dense_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink:
 
 /// A dense layer on one vector, the concatenation of `parts` (int8 values
 /// as bytes; the head's first layer reads the template feature from the
-/// blob and the source feature from scratch): `sink` gets row 0's
-/// activations, as [`dense_tile`] on the concatenated vector would give
-/// them (bit for bit). Returns `false`, having done nothing, where the
+/// blob and the source feature from scratch): `out[o]` gets output `o`'s
+/// activation, as [`dense_tile`] on the concatenated vector would give it
+/// (bit for bit). Returns `false`, having done nothing, where the
 /// kernel does not apply: on targets without the DSP kernel, with a part
 /// whose length is not a multiple of 4, or with `expanded` smaller than
 /// the vector's int16 copy (`inputs / 2` words).
@@ -512,7 +521,7 @@ pub(crate) fn dense_vector(
     parts: &[&[u8]],
     q: Requant<'_>,
     expanded: &mut [u32],
-    sink: &mut Sink<'_>,
+    out: &mut [i8],
 ) -> bool {
     #[cfg(pcrnet_arm_dsp)]
     {
@@ -535,17 +544,18 @@ pub(crate) fn dense_vector(
         }
         let acts = &*acts;
         // Four rows, with their four biases, multipliers and shifts.
+        // Four rows, with their four biases, multipliers, shifts and outputs.
+        let (quads, last) = out.as_chunks_mut::<4>();
         let groups = rows(weights, 4 * inputs)
             .zip(q.bias.as_chunks::<16>().0)
             .zip(q.multiplier.as_chunks::<16>().0)
-            .zip(q.shift.as_chunks::<4>().0);
+            .zip(q.shift.as_chunks::<4>().0)
+            .zip(quads);
         let mut o = 0;
-        for (((rows, bias), m), shift) in groups {
+        for ((((rows, bias), m), shift), y) in groups {
             let accs = dsp::dot_rows4(rows, inputs, acts, words4(bias));
-            let (m, shift) = (words4(m), *shift);
-            for j in 0..4 {
-                let step = OutputStep::new(m[j], shift[j] as i8, q.zero_point, q.act_min);
-                sink.take(o + j, 0, &[accs[j]], &step);
+            for (((y, acc), m), &s) in y.iter_mut().zip(accs).zip(words4(m)).zip(shift) {
+                *y = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc);
             }
             o += 4;
         }
@@ -554,8 +564,9 @@ pub(crate) fn dense_vector(
             .zip(le_i32s(q.bias))
             .zip(le_i32s(q.multiplier))
             .zip(q.shift)
-            .skip(o);
-        for (((row, b), m), &s) in rest {
+            .skip(o)
+            .zip(last);
+        for ((((row, b), m), &s), y) in rest {
             let mut acc = b;
             let mut row = row;
             for part in parts {
@@ -563,15 +574,13 @@ pub(crate) fn dense_vector(
                 acc = acc.wrapping_add(dot(w, part));
                 row = tail;
             }
-            let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
-            sink.take(o, 0, &[acc], &step);
-            o += 1;
+            *y = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc);
         }
         true
     }
     #[cfg(not(pcrnet_arm_dsp))]
     {
-        let _ = (weights, parts, q, expanded, sink);
+        let _ = (weights, parts, q, expanded, out);
         false
     }
 }
