@@ -110,6 +110,18 @@ impl OutputStep {
         }
     }
 
+    /// The fast path's constants, `(multiplier, offset, high_shift,
+    /// act_min)`, for kernels that apply the step to several accumulators
+    /// at once: the activation is `clamp((hi(acc * multiplier) + offset)
+    /// >> high_shift, act_min, 127)`, `hi` the high 32 bits of the i64
+    /// product. `None` for the general path (use [`Self::apply`]).
+    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    #[inline(always)]
+    pub(crate) fn fast_parts(&self) -> Option<(i32, i32, u32, i8)> {
+        self.offset
+            .map(|offset| (self.multiplier, offset, self.high_shift, self.act_min))
+    }
+
     /// The int8 activation of accumulator `acc`.
     #[inline(always)]
     pub(crate) fn apply(&self, acc: i32) -> i8 {

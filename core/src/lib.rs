@@ -76,6 +76,10 @@
 #![no_std]
 #![cfg_attr(docsrs, feature(doc_cfg))]
 
+// Run-time CPU feature detection for the host kernels (`std` feature).
+#[cfg(feature = "std")]
+extern crate std;
+
 pub mod arch;
 pub mod eigen;
 mod error;

@@ -1,0 +1,316 @@
+//! The x86-64 AVX2 encoder kernel, chosen at run time (`std` feature).
+//!
+//! A full tile of [`ROWS`] points: the tile's int8 activations are copied
+//! to int16 once, then for every output channel the weight row is read 16
+//! bytes at a time, sign-extended to int16 (`VPMOVSXBW`) and multiplied
+//! with each point's 16 activations by `VPMADDWD` (16 MACs, pairs summed
+//! into eight i32 lanes). Each point keeps its own vector of partial sums;
+//! a horizontal-add tree turns the eight vectors into the eight dot
+//! products. Inputs past the last multiple of 16 are added by the scalar
+//! loop.
+//!
+//! Every product and pair sum fits in i32 (|w|, |x| <= 128), and model
+//! loading bounds every partial sum (see [`super::dot`]): the result is the
+//! portable kernel's, bit for bit, whatever the order.
+
+use core::arch::x86_64::{
+    __m128i, __m256i, _mm_cvtsi32_si128, _mm_loadu_si128, _mm256_add_epi32, _mm256_blend_epi32,
+    _mm256_cvtepi8_epi16, _mm256_cvtsi256_si32, _mm256_hadd_epi32, _mm256_loadu_si256,
+    _mm256_madd_epi16, _mm256_max_epi32, _mm256_min_epi32, _mm256_mul_epi32,
+    _mm256_permute2x128_si256, _mm256_set1_epi32, _mm256_setzero_si256, _mm256_shuffle_epi32,
+    _mm256_sra_epi32, _mm256_srli_epi64, _mm256_storeu_si256,
+};
+
+use super::{OutputStep, Requant, Sink, rows, scalar_dot};
+use crate::format::le_i32s;
+
+/// Points per tile of this kernel (the int8 path's largest tile).
+const ROWS: usize = crate::arch::MAX_TILE;
+
+/// Inputs per `VPMADDWD`.
+const LANES: usize = 16;
+
+/// [`super::dense_tile`]'s contract and results for a full tile of
+/// [`ROWS`] points with at least 16 inputs, on a CPU with AVX2. Returns
+/// `false`, having done nothing, on any other tile or CPU, or when
+/// `expanded` cannot hold the tile's int16 copy.
+pub(super) fn dense_tile(
+    weights: &[u8],
+    inputs: usize,
+    q: Requant<'_>,
+    x: &[i8],
+    expanded: &mut [u32],
+    sink: &mut Sink<'_>,
+) -> bool {
+    if inputs < LANES || x.len() != ROWS * inputs || !std::is_x86_feature_detected!("avx2") {
+        return false;
+    }
+    let Some(xs) = as_i16(expanded).get_mut(..ROWS * inputs) else {
+        return false;
+    };
+    // SAFETY: the CPU has AVX2 (checked above), which is all `tile`
+    // requires of its caller.
+    #[allow(unsafe_code)]
+    unsafe {
+        tile(weights, inputs, q, x, xs, sink)
+    };
+    true
+}
+
+/// The words of `expanded` as int16 values.
+fn as_i16(words: &mut [u32]) -> &mut [i16] {
+    // SAFETY: u32's alignment is a multiple of i16's and every bit pattern
+    // is a valid i16; `align_to_mut` hands out the aligned middle only
+    // (here all of it), with `words`' lifetime.
+    #[allow(unsafe_code)]
+    let (_, halves, _) = unsafe { words.align_to_mut::<i16>() };
+    halves
+}
+
+#[target_feature(enable = "avx2")]
+fn tile(
+    weights: &[u8],
+    inputs: usize,
+    q: Requant<'_>,
+    x: &[i8],
+    xs: &mut [i16],
+    sink: &mut Sink<'_>,
+) {
+    for (d, &s) in xs.iter_mut().zip(x) {
+        *d = s as i16;
+    }
+    let full = inputs / LANES * LANES;
+    let mut points = rows(&*xs, inputs);
+    let points: [&[i16]; ROWS] = core::array::from_fn(|_| points.next().unwrap_or(&[]));
+    let mut tails = rows(x, inputs);
+    let tails: [&[i8]; ROWS] =
+        core::array::from_fn(|_| tails.next().map_or(&[][..], |r| r.split_at(full).1));
+    let channels = rows(weights, inputs)
+        .zip(le_i32s(q.bias))
+        .zip(le_i32s(q.multiplier))
+        .zip(q.shift);
+    for (o, (((row, bias), m), &s)) in channels.enumerate() {
+        let (body, tail) = row.split_at(full);
+        let mut acc = [_mm256_setzero_si256(); ROWS];
+        for (c, w) in body.chunks_exact(LANES).enumerate() {
+            // SAFETY: `w` is 16 bytes long, and every point's row holds
+            // `inputs >= full` values, so 16 values from `c * 16 < full`
+            // are in bounds; unaligned loads are allowed.
+            #[allow(unsafe_code)]
+            unsafe {
+                let w = _mm256_cvtepi8_epi16(_mm_loadu_si128(w.as_ptr().cast::<__m128i>()));
+                for (acc, p) in acc.iter_mut().zip(points) {
+                    let xv = _mm256_loadu_si256(p.as_ptr().add(c * LANES).cast::<__m256i>());
+                    *acc = _mm256_add_epi32(*acc, _mm256_madd_epi16(w, xv));
+                }
+            }
+        }
+        let mut sum = _mm256_add_epi32(reduce(acc), _mm256_set1_epi32(bias));
+        if !tail.is_empty() {
+            sum = _mm256_add_epi32(sum, load(tails.map(|t| scalar_dot(tail, t))));
+        }
+        let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
+        match sink {
+            // The output step is non-decreasing: step the largest sum only.
+            Sink::Pool(_) => sink.take(o, 0, &[max(sum)], &step),
+            Sink::Store { out, outputs } => {
+                let values = match step.fast_parts() {
+                    Some(parts) => requantize(sum, parts),
+                    None => store(sum).map(|acc| step.apply(acc) as i32),
+                };
+                for (t, v) in values.into_iter().enumerate() {
+                    if let Some(y) = out.get_mut(t * *outputs + o) {
+                        *y = v as i8;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `OutputStep::apply` on eight accumulators, given its fast path's
+/// constants ([`OutputStep::fast_parts`]): the high words of the eight
+/// i64 products (`VPMULDQ` on the even lanes, then on the odd lanes moved
+/// down), the folded offset, the arithmetic shift and the clamp. The
+/// same integer operations as the scalar step, so the same values.
+#[target_feature(enable = "avx2")]
+fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8)) -> [i32; ROWS] {
+    let m = _mm256_set1_epi32(m);
+    let even = _mm256_mul_epi32(acc, m);
+    let odd = _mm256_mul_epi32(_mm256_srli_epi64::<32>(acc), m);
+    let hi = _mm256_blend_epi32::<0b1010_1010>(_mm256_srli_epi64::<32>(even), odd);
+    let v = _mm256_sra_epi32(
+        _mm256_add_epi32(hi, _mm256_set1_epi32(offset)),
+        _mm_cvtsi32_si128(high_shift as i32),
+    );
+    let v = _mm256_min_epi32(v, _mm256_set1_epi32(i8::MAX as i32));
+    store(_mm256_max_epi32(v, _mm256_set1_epi32(act_min as i32)))
+}
+
+/// The largest of eight lanes.
+#[target_feature(enable = "avx2")]
+fn max(v: __m256i) -> i32 {
+    let v = _mm256_max_epi32(v, _mm256_permute2x128_si256::<0x01>(v, v));
+    let v = _mm256_max_epi32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
+    let v = _mm256_max_epi32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v));
+    _mm256_cvtsi256_si32(v)
+}
+
+/// Eight i32 as a vector.
+#[target_feature(enable = "avx2")]
+fn load(values: [i32; ROWS]) -> __m256i {
+    // SAFETY: `values` is 32 bytes; unaligned loads are allowed.
+    #[allow(unsafe_code)]
+    unsafe {
+        _mm256_loadu_si256(values.as_ptr().cast::<__m256i>())
+    }
+}
+
+/// A vector's eight i32.
+#[target_feature(enable = "avx2")]
+fn store(v: __m256i) -> [i32; ROWS] {
+    let mut out = [0i32; ROWS];
+    // SAFETY: `out` is 32 bytes; unaligned stores are allowed.
+    #[allow(unsafe_code)]
+    unsafe {
+        _mm256_storeu_si256(out.as_mut_ptr().cast::<__m256i>(), v)
+    };
+    out
+}
+
+/// The lane sums of eight vectors, as one: lane `t` is the sum of
+/// `acc[t]`'s eight lanes.
+#[target_feature(enable = "avx2")]
+fn reduce(acc: [__m256i; ROWS]) -> __m256i {
+    let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
+    // Per 128-bit half: pairs, then quads, of lanes.
+    let s0123 = _mm256_hadd_epi32(_mm256_hadd_epi32(a0, a1), _mm256_hadd_epi32(a2, a3));
+    let s4567 = _mm256_hadd_epi32(_mm256_hadd_epi32(a4, a5), _mm256_hadd_epi32(a6, a7));
+    // Low halves of both, plus high halves of both: [t0..t3, t4..t7].
+    _mm256_add_epi32(
+        _mm256_permute2x128_si256::<0x20>(s0123, s4567),
+        _mm256_permute2x128_si256::<0x31>(s0123, s4567),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::SplitMix64;
+    use std::vec::Vec;
+
+    /// The AVX2 tile gives the portable kernel's activations, stored and
+    /// max-pooled, on widths with and without a tail past 16, on the
+    /// fast and the general requantization paths.
+    #[test]
+    fn avx2_tile_matches_portable() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = SplitMix64(11);
+        for &(inputs, outputs) in &[
+            (16, 8),
+            (24, 64),
+            (32, 64),
+            (40, 7),
+            (64, 128),
+            (128, 33),
+            (256, 16),
+        ] {
+            for shift_range in [(-22, -2), (-31, 31)] {
+                let byte = |rng: &mut SplitMix64| rng.int(-128, 127) as i8;
+                let weights: Vec<u8> = (0..inputs * outputs)
+                    .map(|_| byte(&mut rng) as u8)
+                    .collect();
+                let x: Vec<i8> = (0..ROWS * inputs).map(|_| byte(&mut rng)).collect();
+                let words = |n: usize, rng: &mut SplitMix64, lo: i32, hi: i32| -> Vec<u8> {
+                    (0..n).flat_map(|_| rng.int(lo, hi).to_le_bytes()).collect()
+                };
+                let bias = words(outputs, &mut rng, -1 << 20, 1 << 20);
+                let multiplier = words(outputs, &mut rng, 1 << 30, i32::MAX);
+                let shift: Vec<u8> = (0..outputs)
+                    .map(|_| rng.int(shift_range.0, shift_range.1) as i8 as u8)
+                    .collect();
+                let zero_point = byte(&mut rng);
+                let q = Requant {
+                    bias: &bias,
+                    multiplier: &multiplier,
+                    shift: &shift,
+                    zero_point,
+                    act_min: zero_point,
+                };
+                let mut expanded = std::vec![0u32; ROWS * inputs / 2];
+                let (mut want, mut got) = (
+                    std::vec![0i8; ROWS * outputs],
+                    std::vec![0i8; ROWS * outputs],
+                );
+                super::super::dense_tile(
+                    &weights,
+                    inputs,
+                    q,
+                    &x,
+                    &mut Sink::Store {
+                        out: &mut want,
+                        outputs,
+                    },
+                );
+                let sink = &mut Sink::Store {
+                    out: &mut got,
+                    outputs,
+                };
+                assert!(dense_tile(&weights, inputs, q, &x, &mut expanded, sink));
+                assert_eq!(got, want, "stored, {inputs} -> {outputs}");
+                let (mut want, mut got) =
+                    (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+                super::super::dense_tile(&weights, inputs, q, &x, &mut Sink::Pool(&mut want));
+                assert!(dense_tile(
+                    &weights,
+                    inputs,
+                    q,
+                    &x,
+                    &mut expanded,
+                    &mut Sink::Pool(&mut got)
+                ));
+                assert_eq!(got, want, "pooled, {inputs} -> {outputs}");
+            }
+        }
+    }
+
+    /// Tiles the kernel does not take are left to the portable path.
+    #[test]
+    fn declines_partial_tiles_and_narrow_inputs() {
+        let (weights, x, mut expanded) = ([0u8; 64], [0i8; 64], [0u32; 64]);
+        let q = Requant {
+            bias: &[0; 16],
+            multiplier: &[0; 16],
+            shift: &[0; 4],
+            zero_point: 0,
+            act_min: 0,
+        };
+        let mut out = [0i8; 32];
+        // Eight points of 8 inputs: too narrow.
+        assert!(!dense_tile(
+            &weights,
+            8,
+            q,
+            &x,
+            &mut expanded,
+            &mut Sink::Store {
+                out: &mut out,
+                outputs: 4
+            }
+        ));
+        // Three points of 16 inputs: not a full tile.
+        assert!(!dense_tile(
+            &weights,
+            16,
+            q,
+            &x[..48],
+            &mut expanded,
+            &mut Sink::Store {
+                out: &mut out,
+                outputs: 4
+            }
+        ));
+    }
+}
