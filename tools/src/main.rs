@@ -6,6 +6,7 @@
 
 mod fuzz;
 mod no_panic;
+mod ort_bench;
 mod profile;
 
 use std::path::{Path, PathBuf};
@@ -22,7 +23,7 @@ cargo xtask <command>
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
                 the no-panic proof, the C header, the QEMU harness on
-                every core, the C example, every fuzz target for 10 s,
+                every core, the C example, every fuzz target for 30 s,
                 then the host tests
   demo          the main job: register the shipped source with the trained
                 embedded default (int8) through the device pipeline, and say
@@ -56,6 +57,13 @@ cargo xtask <command>
                 write capi/include/pcrnet.h from the C API crate (cbindgen);
                 --check fails if the committed header differs
   bench         host benchmarks (criterion): encoder throughput, training step
+  ort-bench [DATA]
+                our f32 and int8 network beside ONNX Runtime on the same
+                weights and clouds (the shipped embedded default and a
+                paper-width model; 50 ModelNet10 test clouds from DATA,
+                default ../shared/data/ModelNet10, else generated shapes),
+                one thread, printing the time ratios; installs onnxruntime,
+                onnx and numpy with pip into target/ort-venv
   results [DATA] run the paper's six experiments and `trust` on DATA (default
                 ../shared/data; trains the models they need into
                 target/experiments) and regenerate RESULTS.md
@@ -73,6 +81,7 @@ fn main() -> ExitCode {
         Some("ci") => ci(),
         Some("demo") => demo(&args[1..]),
         Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "-p", "pcrnet-train"]),
+        Some("ort-bench") => ort_bench::run(&root(), args.get(1).map(String::as_str)),
         Some("qemu-test") => qemu_test(),
         Some("cores") => cores(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),

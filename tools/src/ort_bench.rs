@@ -1,0 +1,56 @@
+//! `cargo xtask ort-bench [DATA]`: our network beside ONNX Runtime on the
+//! same weights and clouds, one thread, printing the time ratios (issue 13).
+//!
+//! ONNX Runtime, onnx and numpy are installed with pip into a virtual
+//! environment under `target/ort-venv` (pinned versions, first run only);
+//! nothing of it is on the test path. `train-host/examples/ort_bench.rs`
+//! writes the weights and clouds and times our f32 and int8 paths;
+//! `tools/ort_bench.py` rebuilds the network as an ONNX graph, checks its
+//! f32 outputs against ours, quantizes it with ONNX Runtime's static
+//! quantizer, times it the same way and prints the table.
+
+use std::path::Path;
+
+/// What pip installs (the versions measured in the README).
+const PACKAGES: [&str; 3] = ["onnxruntime==1.32.0", "onnx==1.23.2", "numpy==2.4.6"];
+
+pub fn run(root: &Path, data: Option<&str>) -> Result<(), String> {
+    let venv = root.join("target/ort-venv");
+    let python = venv.join("bin/python");
+    let python = python.to_str().ok_or("the workspace path is not UTF-8")?;
+    let ready = std::process::Command::new(python)
+        .args(["-c", "import onnxruntime, onnx, numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ready {
+        let venv = venv.to_str().ok_or("the workspace path is not UTF-8")?;
+        crate::run("python3", &["-m", "venv", venv])?;
+        let mut args = vec!["-m", "pip", "install", "--quiet"];
+        args.extend(PACKAGES);
+        crate::run(python, &args)?;
+    }
+    let out = "target/ort-bench";
+    let default_data = root.join("../shared/data/ModelNet10");
+    let data = match data {
+        Some(d) => Some(d.to_owned()),
+        None => default_data
+            .is_dir()
+            .then(|| default_data.to_string_lossy().into_owned()),
+    };
+    let mut args = vec![
+        "run",
+        "--release",
+        "-q",
+        "-p",
+        "pcrnet-train",
+        "--example",
+        "ort_bench",
+        "--",
+        out,
+    ];
+    if let Some(d) = &data {
+        args.extend(["--data", d.as_str()]);
+    }
+    crate::cargo(&args)?;
+    crate::run(python, &["tools/ort_bench.py", out])
+}

@@ -1,0 +1,247 @@
+//! Our half of the side-by-side benchmark against ONNX Runtime (`cargo
+//! xtask ort-bench` runs it, then `tools/ort_bench.py`).
+//!
+//! For the shipped embedded default and a paper-width PCRNet (seeded
+//! random weights, quantized like a trained model), it writes to `DIR/<model>/`:
+//! - `weights.f32` and `network.json`: the f32 weights (row-major,
+//!   outputs x inputs) and biases of every layer, then the template
+//!   feature, little-endian; the layer shapes, the frame and whether
+//!   sources are centred. The script rebuilds the network from them as an
+//!   ONNX graph;
+//! - `clouds.f32`: the benchmark clouds (clouds x points x 3, little-endian);
+//! - `ours.json`: our per-call times and f32 head outputs.
+//!
+//! Times: one thread, per call (network pose of one cloud: moving the
+//! points into the model frame, centring, encoder, head, quaternion),
+//! wall clock; a round is every cloud once, the figure is the median
+//! round's time per call.
+//!
+//! Usage: `ort_bench DIR [--data MODELNET10_DIR] [--clouds N] [--rounds R]`.
+//! Without `--data`, generated shapes stand in for the ModelNet10 clouds.
+
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use pcrnet_core::arch::{PAPER_ENCODER, PCRNET_HEAD};
+use pcrnet_core::float::Params;
+use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
+use pcrnet_train::shapes::{Shape, random_transform, sample};
+use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
+use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
+use serde_json::json;
+
+const POINTS: usize = 1024;
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let mut out = None;
+    let (mut data, mut count, mut rounds) = (None, 50usize, 5usize);
+    while let Some(a) = args.next() {
+        let mut value = |name: &str| args.next().with_context(|| format!("{name} needs a value"));
+        match a.as_str() {
+            "--data" => data = Some(PathBuf::from(value("--data")?)),
+            "--clouds" => count = value("--clouds")?.parse().context("--clouds")?,
+            "--rounds" => rounds = value("--rounds")?.parse().context("--rounds")?,
+            _ if out.is_none() && !a.starts_with('-') => out = Some(PathBuf::from(a)),
+            _ => bail!(
+                "unknown argument {a}; usage: ort_bench DIR [--data DIR] [--clouds N] [--rounds R]"
+            ),
+        }
+    }
+    let out = out.context("usage: ort_bench DIR [--data DIR] [--clouds N] [--rounds R]")?;
+    if count == 0 || rounds == 0 {
+        bail!("--clouds and --rounds must be at least 1");
+    }
+    let (clouds, what) = clouds(data.as_deref(), count)?;
+    println!("{} clouds of {POINTS} points ({what})", clouds.len());
+
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let f32_blob = std::fs::read(root.join("models/embedded-default-f32.pcrn"))?;
+    let int8_blob = std::fs::read(root.join("models/embedded-default-int8.pcrn"))?;
+    run("embedded", &f32_blob, &int8_blob, &clouds, rounds, &out)?;
+
+    let (f32_blob, int8_blob) = paper_blobs(&clouds)?;
+    run("paper", &f32_blob, &int8_blob, &clouds, rounds, &out)?;
+    std::fs::write(out.join("clouds.txt"), what)?;
+    Ok(())
+}
+
+/// `count` ModelNet10 test clouds (every class in turn, sorted names), each
+/// centred and scaled into the unit sphere; or generated shapes.
+fn clouds(data: Option<&Path>, count: usize) -> anyhow::Result<(Vec<Vec<[f32; 3]>>, String)> {
+    let Some(root) = data else {
+        let shapes = [Shape::Ell, Shape::Box, Shape::Torus];
+        let clouds = (0..count)
+            .map(|i| sample(shapes[i % shapes.len()], POINTS, i as u64))
+            .collect();
+        return Ok((clouds, "generated shapes".into()));
+    };
+    let mut files = Vec::new();
+    for class in sorted_dir(root)? {
+        files.push(sorted_dir(&class.join("test"))?);
+    }
+    let mut picked = Vec::new();
+    for k in 0.. {
+        let before = picked.len();
+        for class in &files {
+            if let Some(f) = class.get(k)
+                && picked.len() < count
+            {
+                picked.push(f.clone());
+            }
+        }
+        if picked.len() == count || picked.len() == before {
+            break;
+        }
+    }
+    let mut clouds = Vec::new();
+    for f in &picked {
+        let mut c = pcrnet_train::io::read_cloud(f)?;
+        c.truncate(POINTS);
+        unit_sphere(&mut c);
+        clouds.push(c);
+    }
+    Ok((clouds, format!("ModelNet10 test, {}", root.display())))
+}
+
+fn sorted_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<Result<_, _>>()?;
+    v.sort();
+    Ok(v)
+}
+
+fn unit_sphere(c: &mut [[f32; 3]]) {
+    let n = c.len().max(1) as f32;
+    let m = [0, 1, 2].map(|k| c.iter().map(|p| p[k]).sum::<f32>() / n);
+    let r = c
+        .iter()
+        .map(|p| (0..3).map(|k| (p[k] - m[k]).powi(2)).sum::<f32>().sqrt())
+        .fold(0.0f32, f32::max)
+        .max(f32::MIN_POSITIVE);
+    for p in c {
+        *p = [0, 1, 2].map(|k| (p[k] - m[k]) / r);
+    }
+}
+
+/// A paper-width PCRNet with seeded random weights, quantized with
+/// calibration clouds as a trained one would be.
+fn paper_blobs(clouds: &[Vec<[f32; 3]>]) -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
+    let params = F32Params::init(Arch::new(PAPER_ENCODER, PCRNET_HEAD)?, 7);
+    let template = sample(Shape::Ell, POINTS, 7);
+    let reference = Reference::new(&template, DEFAULT_TEMPLATE_POINTS)?;
+    let calibration: Vec<_> = clouds
+        .iter()
+        .take(16)
+        .enumerate()
+        .map(|(i, c)| random_transform(c, 45.0, 0.5, i as u64))
+        .collect();
+    let trained = TrainedFor::pcrnet(true);
+    let int8 = quantize(
+        &params,
+        &reference,
+        &calibration,
+        CalibrationRule::default(),
+        trained,
+    )?;
+    Ok((params.to_f32_blob(&reference, trained)?, int8))
+}
+
+fn run(
+    name: &str,
+    f32_blob: &[u8],
+    int8_blob: &[u8],
+    clouds: &[Vec<[f32; 3]>],
+    rounds: usize,
+    out: &Path,
+) -> anyhow::Result<()> {
+    let fmodel = F32Model::from_bytes(f32_blob)?;
+    let qmodel = Int8Model::from_bytes(int8_blob)?;
+    let net = fmodel.network();
+    let dir = out.join(name);
+    std::fs::create_dir_all(&dir)?;
+
+    // Every layer's weights then biases, then the template feature, as
+    // little-endian f32 in `weights.f32`; their shapes in `network.json`.
+    let mut weights = Vec::new();
+    let mut put = |p: pcrnet_core::float::LeF32<'_>| {
+        weights.extend((0..p.len()).flat_map(|i| p.get(i).to_le_bytes()));
+    };
+    let shapes = net.arch().encoder_layers().chain(net.arch().head_layers());
+    let mut layers = Vec::new();
+    for (l, s) in net.layers().iter().zip(shapes) {
+        put(l.weights);
+        put(l.bias);
+        layers.push(json!({"inputs": s.inputs, "outputs": s.outputs, "relu": s.relu}));
+    }
+    put(net.template());
+    std::fs::write(dir.join("weights.f32"), weights)?;
+    let frame = fmodel.frame();
+    let network = json!({
+        "encoder_layers": net.arch().encoder.len(),
+        "layers": layers,
+        "feature": net.arch().feature_dim(),
+        "frame_centre": frame.centre,
+        "frame_scale": frame.scale,
+        "centre_source": fmodel.centres_source(),
+    });
+    std::fs::write(dir.join("network.json"), serde_json::to_vec(&network)?)?;
+    let bytes: Vec<u8> = clouds
+        .iter()
+        .flatten()
+        .flatten()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    std::fs::write(dir.join("clouds.f32"), bytes)?;
+
+    // The f32 head outputs the script checks ONNX Runtime's against.
+    let mut fscratch = vec![0f32; fmodel.scratch_len()];
+    let mut outputs = Vec::new();
+    for c in clouds {
+        let model_frame: Vec<[f32; 3]> = c.iter().map(|p| frame.to_model(*p)).collect();
+        outputs.push(net.infer(&model_frame, &mut fscratch)?.to_vec());
+    }
+    let mut qscratch = vec![0i8; qmodel.scratch_len(MAX_TILE)];
+    let f32_ms = median_ms(rounds, clouds, |c| {
+        black_box(fmodel.network_pose(black_box(c), 1, 0.0, &mut fscratch)).is_ok()
+    })?;
+    let int8_ms = median_ms(rounds, clouds, |c| {
+        black_box(qmodel.network_pose(black_box(c), 1, 0.0, &mut qscratch)).is_ok()
+    })?;
+    println!("{name}: ours f32 {f32_ms:.3} ms, int8 {int8_ms:.3} ms per call");
+    let ours = json!({"f32_ms": f32_ms, "int8_ms": int8_ms, "outputs": outputs,
+        "encoder": net.arch().encoder, "head": net.arch().head});
+    std::fs::write(dir.join("ours.json"), serde_json::to_vec(&ours)?)?;
+    Ok(())
+}
+
+/// Median over `rounds` of the time per call of `call` over every cloud
+/// (one warm-up round first).
+fn median_ms(
+    rounds: usize,
+    clouds: &[Vec<[f32; 3]>],
+    mut call: impl FnMut(&[[f32; 3]]) -> bool,
+) -> anyhow::Result<f64> {
+    let mut times = Vec::new();
+    for r in 0..=rounds {
+        let t = Instant::now();
+        let ok = clouds.iter().filter(|c| call(c)).count();
+        let per_call = t.elapsed().as_secs_f64() * 1e3 / clouds.len() as f64;
+        if ok != clouds.len() {
+            bail!(
+                "{} of {} benchmark clouds failed",
+                clouds.len() - ok,
+                clouds.len()
+            );
+        }
+        if r > 0 {
+            times.push(per_call);
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    times.get(times.len() / 2).copied().context("no round")
+}
