@@ -22,6 +22,9 @@ pub const POSE_DIM: usize = 7;
 pub const MAX_LAYERS: usize = 8;
 /// Most points the int8 encoder pushes through the layers together (see [`crate::int8`]).
 pub const MAX_TILE: usize = 8;
+/// Points the f32 encoder's host kernel pushes through the layers together
+/// (see [`crate::float::F32Network::tiled_scratch_len`]).
+pub const F32_TILE: usize = 16;
 
 /// Encoder widths of the paper (PointNet 64-64-64-128-1024).
 pub const PAPER_ENCODER: &[u16] = &[64, 64, 64, 128, 1024];

@@ -95,7 +95,7 @@ pub mod template;
 #[doc(hidden)]
 pub mod testing;
 
-pub use arch::{Arch, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch_len};
+pub use arch::{Arch, F32_TILE, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch_len};
 pub use error::{Error, Result};
 pub use float::F32Model;
 pub use format::Frame;

@@ -199,7 +199,7 @@ fn run(
     std::fs::write(dir.join("clouds.f32"), bytes)?;
 
     // The f32 head outputs the script checks ONNX Runtime's against.
-    let mut fscratch = vec![0f32; fmodel.scratch_len()];
+    let mut fscratch = vec![0f32; fmodel.tiled_scratch_len()];
     let mut outputs = Vec::new();
     for c in clouds {
         let model_frame: Vec<[f32; 3]> = c.iter().map(|p| frame.to_model(*p)).collect();

@@ -94,7 +94,7 @@ impl F32Params {
     pub fn encode(&self, cloud: &[[f32; 3]]) -> pcrnet_core::Result<Vec<f32>> {
         let dummy = vec![0.0; self.arch.feature_dim()];
         let net = self.network(&dummy)?;
-        let mut scratch = vec![0.0; net.scratch_len()];
+        let mut scratch = vec![0.0; net.tiled_scratch_len()];
         Ok(net.encode(cloud, &mut scratch)?.to_vec())
     }
 

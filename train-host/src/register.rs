@@ -67,7 +67,7 @@ pub fn pipeline(
         }
         Err(pcrnet_core::Error::WrongKind { .. }) => {
             let model = F32Model::from_bytes(&blob)?;
-            let mut scratch = vec![0f32; model.scratch_len()];
+            let mut scratch = vec![0f32; model.tiled_scratch_len()];
             let options = with(model.trained_passes());
             let r = model.register(source, &options, &mut scratch)?;
             Ok((r, Precision::F32))
@@ -150,7 +150,7 @@ pub fn network(
         }
         Err(pcrnet_core::Error::WrongKind { .. }) => {
             let model = F32Model::from_bytes(&blob)?;
-            let mut scratch = vec![0f32; model.scratch_len()];
+            let mut scratch = vec![0f32; model.tiled_scratch_len()];
             (
                 model.network_pose(source, passes, tolerance, &mut scratch)?,
                 Precision::F32,

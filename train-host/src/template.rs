@@ -249,7 +249,7 @@ pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u
         ..payload.clone()
     };
     let model = F32Model::from_payload(draft.clone())?;
-    let mut scratch = vec![0f32; model.scratch_len()];
+    let mut scratch = vec![0f32; model.tiled_scratch_len()];
     let feature: Vec<u8> = model
         .network()
         .encode(&reference.normalised(), &mut scratch)?

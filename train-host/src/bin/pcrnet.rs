@@ -531,7 +531,7 @@ fn untrained(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> 
     let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
     let (pose, _) = model.network_pose(&source, 1, 0.0, &mut scratch)?;
     let fmodel = F32Model::from_bytes(&f32_blob)?;
-    let mut fscratch = vec![0f32; fmodel.scratch_len()];
+    let mut fscratch = vec![0f32; fmodel.tiled_scratch_len()];
     let (fpose, _) = fmodel.network_pose(&source, 1, 0.0, &mut fscratch)?;
     outln!("source: {} points", source.len());
     outln!(

@@ -8,12 +8,15 @@
 //! ascending order, one IEEE-754 operation at a time, so results are
 //! deterministic (but not bit-identical to the int8 path, of course).
 
-use crate::arch::{Arch, INPUT_DIM, POSE_DIM, ping_pong, prefix};
+use crate::arch::{Arch, F32_TILE, INPUT_DIM, POSE_DIM, ping_pong, prefix};
 use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, expect_len};
 use crate::pose::{self, Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
+
+#[cfg(all(target_arch = "x86_64", feature = "std"))]
+mod x86;
 
 /// Read access to an array of f32 parameters.
 pub trait Params: Copy {
@@ -25,6 +28,10 @@ pub trait Params: Copy {
     }
     /// The value at `i` (0.0 past the end; sizes are validated beforehand).
     fn get(self, i: usize) -> f32;
+    /// The `len` values from `start` (fewer past the end).
+    fn slice(self, start: usize, len: usize) -> Self;
+    /// The values in order.
+    fn values(self) -> impl Iterator<Item = f32>;
 }
 
 impl Params for &[f32] {
@@ -34,6 +41,15 @@ impl Params for &[f32] {
     #[inline(always)]
     fn get(self, i: usize) -> f32 {
         <[f32]>::get(self, i).copied().unwrap_or(0.0)
+    }
+    #[inline(always)]
+    fn slice(self, start: usize, len: usize) -> Self {
+        let rest = self.get(start..).unwrap_or(&[]);
+        rest.get(..len).unwrap_or(rest)
+    }
+    #[inline(always)]
+    fn values(self) -> impl Iterator<Item = f32> {
+        self.iter().copied()
     }
 }
 
@@ -51,6 +67,19 @@ impl Params for LeF32<'_> {
             Some(&[a, b, c, d]) => f32::from_le_bytes([a, b, c, d]),
             _ => 0.0,
         }
+    }
+    #[inline(always)]
+    fn slice(self, start: usize, len: usize) -> Self {
+        let rest = self.0.get(4 * start..).unwrap_or(&[]);
+        LeF32(rest.get(..4 * len).unwrap_or(rest))
+    }
+    #[inline(always)]
+    fn values(self) -> impl Iterator<Item = f32> {
+        self.0
+            .as_chunks::<4>()
+            .0
+            .iter()
+            .map(|&b| f32::from_le_bytes(b))
     }
 }
 
@@ -111,6 +140,12 @@ impl<'a> F32Model<'a> {
     /// Elements of f32 scratch needed.
     pub fn scratch_len(&self) -> usize {
         self.network.scratch_len()
+    }
+
+    /// Elements of f32 scratch with which a host runs the encoder
+    /// [`F32_TILE`] points at a time (see [`F32Network::tiled_scratch_len`]).
+    pub fn tiled_scratch_len(&self) -> usize {
+        self.network.tiled_scratch_len()
     }
 
     /// Whether the network sees the source centred on its centroid.
@@ -271,6 +306,16 @@ impl<P: Params> F32Network<P> {
         self.arch.f32_scratch_len()
     }
 
+    /// Elements of f32 scratch with which the encoder runs [`F32_TILE`]
+    /// points at a time where a host kernel does so (x86-64 with AVX and
+    /// the `std` feature); elsewhere the extra is unused. Results are the
+    /// same bits either way: each point's sums keep their order.
+    pub fn tiled_scratch_len(&self) -> usize {
+        let feature = self.arch.feature_dim();
+        let tiles = 2 * F32_TILE * self.arch.widest_hidden_encoder();
+        self.scratch_len().max(feature + tiles)
+    }
+
     /// Encodes the source (centred first if the network says so) and runs
     /// the head, returning the raw 7 outputs. The feature is left in
     /// `scratch[..F]`.
@@ -339,10 +384,12 @@ impl<P: Params> F32Network<P> {
     fn split<'s>(&self, scratch: &'s mut [f32]) -> Result<(&'s mut [f32], &'s mut [f32])> {
         let needed = self.scratch_len();
         let available = scratch.len();
-        let s = scratch
-            .get_mut(..needed)
-            .ok_or(Error::ScratchTooSmall { needed, available })?;
-        s.split_at_mut_checked(self.arch.feature_dim())
+        if available < needed {
+            return Err(Error::ScratchTooSmall { needed, available });
+        }
+        // All of it: a host kernel may use more than the minimum.
+        scratch
+            .split_at_mut_checked(self.arch.feature_dim())
             .ok_or(Error::ScratchTooSmall { needed, available })
     }
 
@@ -359,6 +406,10 @@ impl<P: Params> F32Network<P> {
         }
         feature.fill(f32::NEG_INFINITY);
         let encoder = self.encoder_layers()?;
+        #[cfg(all(target_arch = "x86_64", feature = "std"))]
+        if x86::encode(encoder, &self.arch, source, map, feature, work)? {
+            return Ok(());
+        }
         let (mut a, mut b) = ping_pong(work, self.arch.widest_hidden_encoder())?;
         for (index, p) in source.iter().enumerate() {
             if p.iter().any(|x| !x.is_finite()) {
@@ -477,8 +528,12 @@ fn dense_concat<P: Params, A: Params>(
     relu: bool,
     mut emit: impl FnMut(usize, f32),
 ) {
+    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    let first = x86::dense_concat(layer, a, x, outputs, relu, &mut emit);
+    #[cfg(not(all(target_arch = "x86_64", feature = "std")))]
+    let first = 0;
     let inputs = a.len() + x.len();
-    for o in 0..outputs {
+    for o in first..outputs {
         let base = o * inputs;
         let mut acc = layer.bias.get(o);
         for i in 0..a.len() {

@@ -1,0 +1,415 @@
+//! The f32 encoder's x86-64 AVX kernel, chosen at run time (`std` feature).
+//!
+//! [`F32_TILE`] points go through the layers together, one point per
+//! vector lane: the tile's activations are stored input-major (`x[i][t]`),
+//! and each output's sum is `bias`, then `+ w[i] * x[i]` for `i` in
+//! ascending order, a separate IEEE-754 multiply and add per lane (no
+//! fused multiply-add), then ReLU. That is the portable path's sequence of
+//! operations for every point, so every point gets the same bits; the
+//! max-pool compares the points in source order, as the portable path
+//! does, so signed zeros and the first of equal values come out the same.
+//!
+//! Dense layers on one vector (the head, and [`super::dense`] wherever it
+//! is called) run eight outputs at a time, one output per lane: each
+//! lane's sum still runs over the inputs in ascending order, one multiply
+//! and one add at a time, so again every output gets the portable bits;
+//! the eight sums are independent, which hides the adder's latency that
+//! bounds the one-output loop.
+
+use core::arch::x86_64::{
+    __m256, _CMP_LT_OQ, _mm256_add_ps, _mm256_andnot_ps, _mm256_cmp_ps, _mm256_loadu_ps,
+    _mm256_mul_ps, _mm256_permute2f128_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_shuffle_ps,
+    _mm256_storeu_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+};
+
+use super::{Layer, Params};
+use crate::arch::{Arch, F32_TILE, INPUT_DIM, ping_pong, prefix};
+use crate::error::{Error, Result};
+use crate::pose::PointMap;
+
+/// Lanes of one AVX vector.
+const LANES: usize = 8;
+
+/// Encodes `source` (each point moved by `map`) into `feature` as the
+/// portable path does, [`F32_TILE`] points at a time. Returns `Ok(false)`,
+/// having done nothing, without AVX or when `work` cannot hold two tiles
+/// of the widest hidden layer.
+pub(super) fn encode<P: Params>(
+    layers: &[Layer<P>],
+    arch: &Arch,
+    source: &[[f32; 3]],
+    map: &PointMap,
+    feature: &mut [f32],
+    work: &mut [f32],
+) -> Result<bool> {
+    let half = F32_TILE * arch.widest_hidden_encoder();
+    if work.len() < 2 * half || !std::is_x86_feature_detected!("avx") {
+        return Ok(false);
+    }
+    let (a, b) = ping_pong(work, half)?;
+    // SAFETY: the CPU has AVX (checked above), all `tiles` requires.
+    #[allow(unsafe_code)]
+    unsafe {
+        tiles(layers, arch, source, map, feature, a, b)?
+    };
+    Ok(true)
+}
+
+#[target_feature(enable = "avx")]
+fn tiles<'w, P: Params>(
+    layers: &[Layer<P>],
+    arch: &Arch,
+    source: &[[f32; 3]],
+    map: &PointMap,
+    feature: &mut [f32],
+    mut a: &'w mut [f32],
+    mut b: &'w mut [f32],
+) -> Result<()> {
+    let last = layers.len().saturating_sub(1);
+    for (c, chunk) in source.chunks(F32_TILE).enumerate() {
+        // The tile's points, input-major; lanes past the cloud's end
+        // repeat its first point and are never pooled.
+        let mut x0 = [[0f32; F32_TILE]; INPUT_DIM];
+        for (t, p) in chunk.iter().enumerate() {
+            if p.iter().any(|x| !x.is_finite()) {
+                return Err(Error::NonFiniteCoordinate {
+                    index: c * F32_TILE + t,
+                });
+            }
+            for (x, v) in x0.iter_mut().zip(map.apply(*p)) {
+                if let Some(lane) = x.get_mut(t) {
+                    *lane = v;
+                }
+            }
+        }
+        for x in &mut x0 {
+            let first = x[0];
+            x.iter_mut().skip(chunk.len()).for_each(|v| *v = first);
+        }
+        let mut inputs = INPUT_DIM;
+        for (l, (layer, shape)) in layers.iter().zip(arch.encoder_layers()).enumerate() {
+            let x = if l == 0 {
+                x0.as_flattened()
+            } else {
+                prefix(a, inputs * F32_TILE)?
+            };
+            let out = b.as_chunks_mut::<F32_TILE>().0.iter_mut();
+            let mut out = out.take(if l == last { 0 } else { shape.outputs });
+            let mut emit = |o: usize, v: [f32; F32_TILE]| {
+                if l == last {
+                    // The portable path's max-pool, point by point in order.
+                    if let Some(f) = feature.get_mut(o) {
+                        for &v in v.iter().take(chunk.len()) {
+                            if v > *f {
+                                *f = v;
+                            }
+                        }
+                    }
+                } else if let Some(y) = out.next() {
+                    *y = v;
+                }
+            };
+            // Four outputs at a time: eight independent sums in flight. The
+            // last block repeats its last output where there are fewer than
+            // four left; the repeats are dropped.
+            for o in (0..shape.outputs).step_by(BLOCK) {
+                let k = |k: usize| (o + k).min(shape.outputs - 1);
+                let rows = core::array::from_fn(|j| layer.weights.slice(k(j) * inputs, inputs));
+                let bias = core::array::from_fn(|j| layer.bias.get(k(j)));
+                let values = outputs(rows, bias, x);
+                for (j, v) in values.into_iter().enumerate().take(shape.outputs - o) {
+                    emit(o + j, v);
+                }
+            }
+            if l != last {
+                core::mem::swap(&mut a, &mut b);
+            }
+            inputs = shape.outputs;
+        }
+    }
+    Ok(())
+}
+
+/// Outputs per pass of the tiled encoder.
+const BLOCK: usize = 4;
+
+/// Four outputs over the tile: `relu(bias + sum_i w[i] * x[i])`, the sum
+/// in ascending `i`, for the tile's points (`x` input-major; `rows` the
+/// outputs' weight rows).
+#[target_feature(enable = "avx")]
+fn outputs<P: Params>(rows: [P; BLOCK], bias: [f32; BLOCK], x: &[f32]) -> [[f32; F32_TILE]; BLOCK] {
+    let mut acc = bias.map(|b| [_mm256_set1_ps(b); F32_TILE / LANES]);
+    // One zip over the inputs: a single trip count, no per-row end checks.
+    let [w0, w1, w2, w3] = rows;
+    let inputs = x.as_chunks::<F32_TILE>().0.iter();
+    let columns = inputs.zip(
+        w0.values()
+            .zip(w1.values())
+            .zip(w2.values())
+            .zip(w3.values()),
+    );
+    for (xi, (((w0, w1), w2), w3)) in columns {
+        let [lo, hi] = xi.as_chunks::<LANES>().0 else {
+            continue;
+        };
+        // SAFETY: `lo` and `hi` are 8 f32 each; unaligned loads are allowed.
+        #[allow(unsafe_code)]
+        let (lo, hi) = unsafe { (_mm256_loadu_ps(lo.as_ptr()), _mm256_loadu_ps(hi.as_ptr())) };
+        for (acc, w) in acc.iter_mut().zip([w0, w1, w2, w3]) {
+            let w = _mm256_set1_ps(w);
+            let [a_lo, a_hi] = acc;
+            *a_lo = _mm256_add_ps(*a_lo, _mm256_mul_ps(w, lo));
+            *a_hi = _mm256_add_ps(*a_hi, _mm256_mul_ps(w, hi));
+        }
+    }
+    acc.map(|acc| {
+        let mut out = [0f32; F32_TILE];
+        for (acc, lanes) in acc.iter().zip(out.as_chunks_mut::<LANES>().0) {
+            // ReLU as the portable path: 0.0 where the sum is below zero,
+            // the sum itself otherwise (-0.0 and NaN pass unchanged).
+            let below: __m256 = _mm256_cmp_ps::<_CMP_LT_OQ>(*acc, _mm256_setzero_ps());
+            // SAFETY: `lanes` is 8 f32; unaligned stores are allowed.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm256_storeu_ps(lanes.as_mut_ptr(), _mm256_andnot_ps(below, *acc))
+            };
+        }
+        out
+    })
+}
+
+/// [`super::dense_concat`] for the first `outputs / 8 * 8` outputs, eight
+/// at a time, each passed to `emit`; returns how many outputs were done
+/// (0 without AVX).
+pub(super) fn dense_concat<P: Params, A: Params>(
+    layer: &Layer<P>,
+    a: A,
+    x: &[f32],
+    outputs: usize,
+    relu: bool,
+    emit: &mut impl FnMut(usize, f32),
+) -> usize {
+    if outputs < LANES || !std::is_x86_feature_detected!("avx") {
+        return 0;
+    }
+    // SAFETY: the CPU has AVX (checked above), all `rows8` requires.
+    #[allow(unsafe_code)]
+    unsafe {
+        rows8(layer, a, x, outputs, relu, emit)
+    }
+}
+
+#[target_feature(enable = "avx")]
+fn rows8<P: Params, A: Params>(
+    layer: &Layer<P>,
+    a: A,
+    x: &[f32],
+    outputs: usize,
+    relu: bool,
+    emit: &mut impl FnMut(usize, f32),
+) -> usize {
+    let inputs = a.len() + x.len();
+    let blocks = outputs / LANES;
+    for block in 0..blocks {
+        let o0 = block * LANES;
+        let rows: [P; LANES] =
+            core::array::from_fn(|r| layer.weights.slice((o0 + r) * inputs, inputs));
+        let mut acc = load(core::array::from_fn(|r| layer.bias.get(o0 + r)));
+        acc = accumulate(acc, &rows, 0, a);
+        acc = accumulate(acc, &rows, a.len(), x);
+        if relu {
+            acc = _mm256_andnot_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(acc, _mm256_setzero_ps()), acc);
+        }
+        for (r, v) in store(acc).into_iter().enumerate() {
+            emit(o0 + r, v);
+        }
+    }
+    blocks * LANES
+}
+
+/// `acc[r] + sum_i rows[r][offset + i] * input[i]` for the eight rows, `i`
+/// ascending: eight inputs at a time through an 8 x 8 transpose of the
+/// rows' weights (columns: one input's weights of the eight rows), then
+/// one input at a time.
+#[target_feature(enable = "avx")]
+fn accumulate<P: Params, I: Params>(
+    mut acc: __m256,
+    rows: &[P; LANES],
+    offset: usize,
+    input: I,
+) -> __m256 {
+    let full = input.len() / LANES;
+    for c in 0..full {
+        let at = offset + c * LANES;
+        let columns = transpose(rows.map(|r| load8(r.slice(at, LANES))));
+        let xs = load8_array(input.slice(c * LANES, LANES));
+        for (w, x) in columns.into_iter().zip(xs) {
+            acc = _mm256_add_ps(acc, _mm256_mul_ps(w, _mm256_set1_ps(x)));
+        }
+    }
+    for i in full * LANES..input.len() {
+        let w = load(rows.map(|r| r.get(offset + i)));
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(w, _mm256_set1_ps(input.get(i))));
+    }
+    acc
+}
+
+/// Eight values of `p` (zeros past its end).
+#[inline(always)]
+fn load8_array<P: Params>(p: P) -> [f32; LANES] {
+    let mut out = [0f32; LANES];
+    for (o, v) in out.iter_mut().zip(p.values()) {
+        *o = v;
+    }
+    out
+}
+
+#[target_feature(enable = "avx")]
+fn load8<P: Params>(p: P) -> __m256 {
+    load(load8_array(p))
+}
+
+/// The 8 x 8 transpose: `out[j]` lane `r` is `rows[r]` lane `j`.
+#[target_feature(enable = "avx")]
+fn transpose(rows: [__m256; LANES]) -> [__m256; LANES] {
+    let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+    let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
+    let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+    let (t4, t5) = (_mm256_unpacklo_ps(r4, r5), _mm256_unpackhi_ps(r4, r5));
+    let (t6, t7) = (_mm256_unpacklo_ps(r6, r7), _mm256_unpackhi_ps(r6, r7));
+    // Per 128-bit half: columns j and j + 4 of rows 0-3 (s0-s3), 4-7 (s4-s7).
+    let s0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+    let s1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+    let s2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+    let s3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+    let s4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+    let s5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+    let s6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+    let s7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+    [
+        _mm256_permute2f128_ps::<0x20>(s0, s4),
+        _mm256_permute2f128_ps::<0x20>(s1, s5),
+        _mm256_permute2f128_ps::<0x20>(s2, s6),
+        _mm256_permute2f128_ps::<0x20>(s3, s7),
+        _mm256_permute2f128_ps::<0x31>(s0, s4),
+        _mm256_permute2f128_ps::<0x31>(s1, s5),
+        _mm256_permute2f128_ps::<0x31>(s2, s6),
+        _mm256_permute2f128_ps::<0x31>(s3, s7),
+    ]
+}
+
+#[target_feature(enable = "avx")]
+fn load(values: [f32; LANES]) -> __m256 {
+    // SAFETY: `values` is 8 f32; unaligned loads are allowed.
+    #[allow(unsafe_code)]
+    unsafe {
+        _mm256_loadu_ps(values.as_ptr())
+    }
+}
+
+#[target_feature(enable = "avx")]
+fn store(v: __m256) -> [f32; LANES] {
+    let mut out = [0f32; LANES];
+    // SAFETY: `out` is 8 f32; unaligned stores are allowed.
+    #[allow(unsafe_code)]
+    unsafe {
+        _mm256_storeu_ps(out.as_mut_ptr(), v)
+    };
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Layer;
+    use crate::F32Model;
+    use crate::testing::{SplitMix64, random_f32_blob_into};
+    use std::vec::Vec;
+
+    /// With room for tiles, the encoder and the head give the one-point
+    /// path's bits, for clouds shorter than, equal to and longer than a
+    /// tile, centred or not, with coordinates that drive sums below zero.
+    #[test]
+    fn tiled_encoder_matches_one_point_path() {
+        if !std::is_x86_feature_detected!("avx") {
+            return;
+        }
+        let (mut arena, mut out) = (std::vec![0u8; 1 << 20], std::vec![0u8; 1 << 20]);
+        for (seed, encoder, head) in [(3, &[16, 24, 64][..], &[32][..]), (4, &[8][..], &[][..])] {
+            let blob = random_f32_blob_into(seed, encoder, head, &mut arena, &mut out).unwrap();
+            let model = F32Model::from_bytes(blob).unwrap();
+            let mut rng = SplitMix64(seed);
+            for n in [1, 15, 16, 17, 100] {
+                let cloud: Vec<[f32; 3]> = (0..n)
+                    .map(|_| [0; 3].map(|_: i32| rng.uniform(-2.0, 2.0)))
+                    .collect();
+                for centre in [false, true] {
+                    let net = model.network().clone().with_centring(centre);
+                    let mut small = std::vec![0f32; net.scratch_len()];
+                    let mut tiled = std::vec![0f32; net.tiled_scratch_len()];
+                    // One layer needs no tile buffers: the kernel runs either way.
+                    assert!(tiled.len() > small.len() || encoder.len() == 1);
+                    let want = net.encode(&cloud, &mut small).unwrap().to_vec();
+                    let got = net.encode(&cloud, &mut tiled).unwrap().to_vec();
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(&want), "{n} points, centred {centre}");
+                    let want = net.infer(&cloud, &mut small).unwrap();
+                    let got = net.infer(&cloud, &mut tiled).unwrap();
+                    assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits));
+                }
+            }
+        }
+    }
+
+    /// Eight outputs a lane each give the one-output loop's bits (written
+    /// out here as the reference), over a concatenated input, with and
+    /// without ReLU, for widths around multiples of eight.
+    #[test]
+    fn rows_of_eight_match_one_output_loop() {
+        let mut rng = SplitMix64(9);
+        for (na, nx, outputs) in [(0, 3, 8), (8, 8, 17), (13, 5, 7), (64, 64, 64), (0, 1, 9)] {
+            let inputs = na + nx;
+            let w: Vec<f32> = (0..inputs * outputs)
+                .map(|_| rng.uniform(-1.0, 1.0))
+                .collect();
+            let b: Vec<f32> = (0..outputs).map(|_| rng.uniform(-0.5, 0.5)).collect();
+            let a: Vec<f32> = (0..na).map(|_| rng.uniform(-3.0, 3.0)).collect();
+            let x: Vec<f32> = (0..nx).map(|_| rng.uniform(-3.0, 3.0)).collect();
+            let layer = Layer {
+                weights: &w[..],
+                bias: &b[..],
+            };
+            for relu in [false, true] {
+                let mut got = std::vec![f32::NAN; outputs];
+                super::super::dense_concat(&layer, &a[..], &x, outputs, relu, |o, v| got[o] = v);
+                let want: Vec<f32> = (0..outputs)
+                    .map(|o| {
+                        let mut acc = b[o];
+                        for (i, v) in a.iter().chain(&x).enumerate() {
+                            acc += w[o * inputs + i] * v;
+                        }
+                        if relu && acc < 0.0 { 0.0 } else { acc }
+                    })
+                    .collect();
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&got),
+                    bits(&want),
+                    "{na} + {nx} -> {outputs}, relu {relu}"
+                );
+            }
+        }
+    }
+
+    /// The first non-finite coordinate is named as on the one-point path.
+    #[test]
+    fn names_the_non_finite_point() {
+        let (mut arena, mut out) = (std::vec![0u8; 1 << 20], std::vec![0u8; 1 << 20]);
+        let blob = random_f32_blob_into(5, &[16, 32], &[16], &mut arena, &mut out).unwrap();
+        let model = F32Model::from_bytes(blob).unwrap();
+        let mut cloud = std::vec![[0.1f32, 0.2, 0.3]; 40];
+        cloud[21][1] = f32::NAN;
+        let mut tiled = std::vec![0f32; model.tiled_scratch_len()];
+        let err = model.network().encode(&cloud, &mut tiled).unwrap_err();
+        assert_eq!(err, crate::Error::NonFiniteCoordinate { index: 21 });
+    }
+}
