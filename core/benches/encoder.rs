@@ -46,7 +46,7 @@ fn encoder(c: &mut Criterion) {
         let (mut arena, mut out) = (vec![0u8; 20 << 20], vec![0u8; 20 << 20]);
         let blob = random_f32_blob_into(2, enc, head, &mut arena, &mut out).unwrap();
         let model = F32Model::from_bytes(blob).unwrap();
-        let mut scratch = vec![0f32; model.scratch_len()];
+        let mut scratch = vec![0f32; model.tiled_scratch_len()];
         let id = BenchmarkId::new("f32", format!("{name}_{macs}mac"));
         group.bench_function(id, |b| {
             b.iter(|| {
