@@ -237,9 +237,21 @@ pub(crate) fn dense_tile_i8(
 /// three per point (`x y z`). [`dense_tile`]'s contract and results (bit for
 /// bit) for three inputs, with the per-output work done once per output
 /// and tile: the three weights, the bias and the output step are read
-/// once, then each point costs three multiply-adds.
+/// once, then each point costs three multiply-adds. On x86-64 with the
+/// `std` feature, a full tile goes through the AVX2 kernel (`x86`) when
+/// the CPU has AVX2.
 #[inline(always)]
 pub(crate) fn dense_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink: &mut Sink<'_>) {
+    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    if x86::dense_points(weights, q, points, sink) {
+        return;
+    }
+    portable_points(weights, q, points, sink)
+}
+
+/// [`dense_points`] on every target: the portable loop.
+#[inline(always)]
+fn portable_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink: &mut Sink<'_>) {
     const DIM: usize = crate::arch::INPUT_DIM;
     const MAX: usize = crate::arch::MAX_TILE;
     let rows = weights

@@ -16,7 +16,7 @@
 use core::arch::x86_64::{
     __m128i, __m256i, _mm_cvtsi32_si128, _mm_loadu_si128, _mm256_add_epi32, _mm256_blend_epi32,
     _mm256_cvtepi8_epi16, _mm256_cvtsi256_si32, _mm256_hadd_epi32, _mm256_loadu_si256,
-    _mm256_madd_epi16, _mm256_max_epi32, _mm256_min_epi32, _mm256_mul_epi32,
+    _mm256_madd_epi16, _mm256_max_epi32, _mm256_min_epi32, _mm256_mul_epi32, _mm256_mullo_epi32,
     _mm256_permute2x128_si256, _mm256_set1_epi32, _mm256_setzero_si256, _mm256_shuffle_epi32,
     _mm256_sra_epi32, _mm256_srli_epi64, _mm256_storeu_si256,
 };
@@ -85,11 +85,7 @@ fn tile(
     let mut tails = rows(x, inputs);
     let tails: [&[i8]; ROWS] =
         core::array::from_fn(|_| tails.next().map_or(&[][..], |r| r.split_at(full).1));
-    let channels = rows(weights, inputs)
-        .zip(le_i32s(q.bias))
-        .zip(le_i32s(q.multiplier))
-        .zip(q.shift);
-    for (o, (((row, bias), m), &s)) in channels.enumerate() {
+    outputs(weights, inputs, q, sink, |row| {
         let (body, tail) = row.split_at(full);
         let mut acc = [_mm256_setzero_si256(); ROWS];
         for (c, w) in body.chunks_exact(LANES).enumerate() {
@@ -105,13 +101,79 @@ fn tile(
                 }
             }
         }
-        let mut sum = _mm256_add_epi32(reduce(acc), _mm256_set1_epi32(bias));
-        if !tail.is_empty() {
-            sum = _mm256_add_epi32(sum, load(tails.map(|t| scalar_dot(tail, t))));
+        let sum = reduce(acc);
+        if tail.is_empty() {
+            sum
+        } else {
+            _mm256_add_epi32(sum, load(tails.map(|t| scalar_dot(tail, t))))
         }
+    });
+}
+
+/// [`super::dense_points`]' contract and results for a full tile of
+/// [`ROWS`] points (`points`: their int16 `x y z`) on a CPU with AVX2:
+/// per output, three `VPMULLD` over the eight points. Returns `false`,
+/// having done nothing, on any other tile or CPU.
+pub(super) fn dense_points(
+    weights: &[u8],
+    q: Requant<'_>,
+    points: &[i16],
+    sink: &mut Sink<'_>,
+) -> bool {
+    let Ok(points) = <&[i16; 3 * ROWS]>::try_from(points) else {
+        return false;
+    };
+    if !std::is_x86_feature_detected!("avx2") {
+        return false;
+    }
+    // SAFETY: the CPU has AVX2 (checked above), all `points8` requires.
+    #[allow(unsafe_code)]
+    unsafe {
+        points8(weights, q, points, sink)
+    };
+    true
+}
+
+#[target_feature(enable = "avx2")]
+fn points8(weights: &[u8], q: Requant<'_>, points: &[i16; 3 * ROWS], sink: &mut Sink<'_>) {
+    // The coordinates, one vector per axis.
+    let axes: [__m256i; 3] = core::array::from_fn(|k| {
+        load(core::array::from_fn(|t| {
+            points.as_chunks::<3>().0.get(t).map_or(0, |p| p[k] as i32)
+        }))
+    });
+    outputs(weights, 3, q, sink, |row| {
+        // |w| <= 128, |coordinate| <= 32767: no product or sum overflows.
+        let mut sum = _mm256_setzero_si256();
+        for (&w, axis) in row.iter().zip(axes) {
+            let w = _mm256_set1_epi32(w as i8 as i32);
+            sum = _mm256_add_epi32(sum, _mm256_mullo_epi32(w, axis));
+        }
+        sum
+    });
+}
+
+/// For every output channel `o` (weight row `row`): `sum(row)` gives the
+/// eight points' dot products, the bias is added, and the sums go to
+/// `sink`: the largest to a max-pool (the output step is non-decreasing),
+/// all eight through the output step to a store.
+#[target_feature(enable = "avx2")]
+#[inline]
+fn outputs(
+    weights: &[u8],
+    inputs: usize,
+    q: Requant<'_>,
+    sink: &mut Sink<'_>,
+    mut sum: impl FnMut(&[u8]) -> __m256i,
+) {
+    let channels = rows(weights, inputs)
+        .zip(le_i32s(q.bias))
+        .zip(le_i32s(q.multiplier))
+        .zip(q.shift);
+    for (o, (((row, bias), m), &s)) in channels.enumerate() {
+        let sum = _mm256_add_epi32(sum(row), _mm256_set1_epi32(bias));
         let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
         match sink {
-            // The output step is non-decreasing: step the largest sum only.
             Sink::Pool(_) => sink.take(o, 0, &[max(sum)], &step),
             Sink::Store { out, outputs } => {
                 let values = match step.fast_parts() {
@@ -133,6 +195,7 @@ fn tile(
 /// i64 products (`VPMULDQ` on the even lanes, then on the odd lanes moved
 /// down), the folded offset, the arithmetic shift and the clamp. The
 /// same integer operations as the scalar step, so the same values.
+#[inline]
 #[target_feature(enable = "avx2")]
 fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8)) -> [i32; ROWS] {
     let m = _mm256_set1_epi32(m);
@@ -148,6 +211,7 @@ fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8
 }
 
 /// The largest of eight lanes.
+#[inline]
 #[target_feature(enable = "avx2")]
 fn max(v: __m256i) -> i32 {
     let v = _mm256_max_epi32(v, _mm256_permute2x128_si256::<0x01>(v, v));
@@ -157,6 +221,7 @@ fn max(v: __m256i) -> i32 {
 }
 
 /// Eight i32 as a vector.
+#[inline]
 #[target_feature(enable = "avx2")]
 fn load(values: [i32; ROWS]) -> __m256i {
     // SAFETY: `values` is 32 bytes; unaligned loads are allowed.
@@ -167,6 +232,7 @@ fn load(values: [i32; ROWS]) -> __m256i {
 }
 
 /// A vector's eight i32.
+#[inline]
 #[target_feature(enable = "avx2")]
 fn store(v: __m256i) -> [i32; ROWS] {
     let mut out = [0i32; ROWS];
@@ -180,6 +246,7 @@ fn store(v: __m256i) -> [i32; ROWS] {
 
 /// The lane sums of eight vectors, as one: lane `t` is the sum of
 /// `acc[t]`'s eight lanes.
+#[inline]
 #[target_feature(enable = "avx2")]
 fn reduce(acc: [__m256i; ROWS]) -> __m256i {
     let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
@@ -273,6 +340,73 @@ mod tests {
                 ));
                 assert_eq!(got, want, "pooled, {inputs} -> {outputs}");
             }
+        }
+    }
+
+    /// The first layer's kernel gives the portable loop's activations,
+    /// stored and max-pooled, with extreme coordinates.
+    #[test]
+    fn avx2_points_match_portable() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = SplitMix64(12);
+        for outputs in [1, 7, 32, 64] {
+            let weights: Vec<u8> = (0..3 * outputs).map(|_| rng.int(-128, 127) as u8).collect();
+            let mut points: Vec<i16> = (0..3 * ROWS)
+                .map(|_| rng.int(-32767, 32767) as i16)
+                .collect();
+            points[0] = i16::MAX;
+            points[4] = -i16::MAX;
+            let words = |rng: &mut SplitMix64, lo: i32, hi: i32| -> Vec<u8> {
+                (0..outputs)
+                    .flat_map(|_| rng.int(lo, hi).to_le_bytes())
+                    .collect()
+            };
+            let (bias, multiplier) = (
+                words(&mut rng, -1 << 20, 1 << 20),
+                words(&mut rng, 1 << 30, i32::MAX),
+            );
+            let shift: Vec<u8> = (0..outputs).map(|_| rng.int(-31, 31) as i8 as u8).collect();
+            let q = Requant {
+                bias: &bias,
+                multiplier: &multiplier,
+                shift: &shift,
+                zero_point: -5,
+                act_min: -5,
+            };
+            let (mut want, mut got) = (
+                std::vec![0i8; ROWS * outputs],
+                std::vec![0i8; ROWS * outputs],
+            );
+            super::super::portable_points(
+                &weights,
+                q,
+                &points,
+                &mut Sink::Store {
+                    out: &mut want,
+                    outputs,
+                },
+            );
+            assert!(dense_points(
+                &weights,
+                q,
+                &points,
+                &mut Sink::Store {
+                    out: &mut got,
+                    outputs
+                }
+            ));
+            assert_eq!(got, want, "stored, 3 -> {outputs}");
+            let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+            super::super::portable_points(&weights, q, &points, &mut Sink::Pool(&mut want));
+            assert!(dense_points(
+                &weights,
+                q,
+                &points,
+                &mut Sink::Pool(&mut got)
+            ));
+            assert_eq!(got, want, "pooled, 3 -> {outputs}");
         }
     }
 
