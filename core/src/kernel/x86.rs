@@ -1,13 +1,16 @@
-//! The x86-64 AVX2 encoder kernel, chosen at run time (`std` feature).
+//! The x86-64 AVX2 encoder kernels, chosen at run time (`std` feature).
 //!
-//! A full tile of [`ROWS`] points: the tile's int8 activations are copied
+//! The first layer (three int16 coordinates): per output, three
+//! `VPMULLD` over a full tile's eight points. The other layers, on a full
+//! tile of [`ROWS`] points: the tile's int8 activations are copied
 //! to int16 once, then for every output channel the weight row is read 16
 //! bytes at a time, sign-extended to int16 (`VPMOVSXBW`) and multiplied
 //! with each point's 16 activations by `VPMADDWD` (16 MACs, pairs summed
 //! into eight i32 lanes). Each point keeps its own vector of partial sums;
 //! a horizontal-add tree turns the eight vectors into the eight dot
 //! products. Inputs past the last multiple of 16 are added by the scalar
-//! loop.
+//! loop. Both then add the bias and apply the output step to the eight
+//! sums at once (or the max-pool to their largest).
 //!
 //! Every product and pair sum fits in i32 (|w|, |x| <= 128), and model
 //! loading bounds every partial sum (see [`super::dot`]): the result is the
