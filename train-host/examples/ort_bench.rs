@@ -29,6 +29,7 @@ use pcrnet_core::float::Params;
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
+use pcrnet_train::train::data::{Dataset, Sampling, Split};
 use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
 use serde_json::json;
 
@@ -68,64 +69,18 @@ fn main() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `count` ModelNet10 test clouds (every class in turn, sorted names), each
-/// centred and scaled into the unit sphere; or generated shapes.
+/// `count` ModelNet10 test clouds, preprocessed as for training and
+/// evaluation (`Dataset::load_modelnet`: centred, in the unit box), evenly
+/// spaced over the classes' sorted files; or generated shapes.
 fn clouds(data: Option<&Path>, count: usize) -> anyhow::Result<(Vec<Vec<[f32; 3]>>, String)> {
     let Some(root) = data else {
-        let shapes = [Shape::Ell, Shape::Box, Shape::Torus];
-        let clouds = (0..count)
-            .map(|i| sample(shapes[i % shapes.len()], POINTS, i as u64))
-            .collect();
-        return Ok((clouds, "generated shapes".into()));
+        let set = Dataset::generated(count, POINTS, 1);
+        return Ok((set.clouds, "generated shapes".into()));
     };
-    let mut files = Vec::new();
-    for class in sorted_dir(root)? {
-        files.push(sorted_dir(&class.join("test"))?);
-    }
-    let mut picked = Vec::new();
-    for k in 0.. {
-        let before = picked.len();
-        for class in &files {
-            if let Some(f) = class.get(k)
-                && picked.len() < count
-            {
-                picked.push(f.clone());
-            }
-        }
-        if picked.len() == count || picked.len() == before {
-            break;
-        }
-    }
-    let mut clouds = Vec::new();
-    for f in &picked {
-        let mut c = pcrnet_train::io::read_cloud(f)?;
-        c.truncate(POINTS);
-        unit_sphere(&mut c);
-        clouds.push(c);
-    }
+    let set = Dataset::load_modelnet(root, Split::Test, None, POINTS, Sampling::Random, 1)?;
+    let step = (set.clouds.len() / count).max(1);
+    let clouds = set.clouds.into_iter().step_by(step).take(count).collect();
     Ok((clouds, format!("ModelNet10 test, {}", root.display())))
-}
-
-fn sorted_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading {}", dir.display()))?
-        .map(|e| e.map(|e| e.path()))
-        .collect::<Result<_, _>>()?;
-    v.sort();
-    Ok(v)
-}
-
-fn unit_sphere(c: &mut [[f32; 3]]) {
-    let n = c.len().max(1) as f32;
-    let m = [0, 1, 2].map(|k| c.iter().map(|p| p[k]).sum::<f32>() / n);
-    let r = c
-        .iter()
-        .map(|p| (0..3).map(|k| (p[k] - m[k]).powi(2)).sum::<f32>().sqrt())
-        .fold(0.0f32, f32::max)
-        .max(f32::MIN_POSITIVE);
-    for p in c {
-        *p = [0, 1, 2].map(|k| (p[k] - m[k]) / r);
-    }
 }
 
 /// A paper-width PCRNet with seeded random weights, quantized with

@@ -44,7 +44,7 @@ impl Params for &[f32] {
     }
     #[inline(always)]
     fn slice(self, start: usize, len: usize) -> Self {
-        let rest = self.get(start..).unwrap_or(&[]);
+        let rest = <[f32]>::get(self, start..).unwrap_or(&[]);
         rest.get(..len).unwrap_or(rest)
     }
     #[inline(always)]
@@ -421,10 +421,8 @@ impl<P: Params> F32Network<P> {
                 let x: &[f32] = if l == 0 { &p } else { prefix(a, inputs)? };
                 if l + 1 == encoder.len() {
                     dense(layer, x, shape.outputs, true, |o, v| {
-                        if let Some(f) = feature.get_mut(o)
-                            && v > *f
-                        {
-                            *f = v;
+                        if let Some(f) = feature.get_mut(o) {
+                            pool(f, v);
                         }
                     });
                 } else {
@@ -493,6 +491,17 @@ impl<P: Params> F32Network<P> {
         }
         finite(&raw)?;
         Ok(raw)
+    }
+}
+
+/// One point's step of the max-pool: `v` replaces `f` only if larger, so
+/// the first of equal values (and of `-0.0` and `0.0`) stays and a NaN
+/// never enters. Every encoder path pools point by point in source order
+/// through this, which is what keeps their bits equal.
+#[inline(always)]
+fn pool(f: &mut f32, v: f32) {
+    if v > *f {
+        *f = v;
     }
 }
 

@@ -22,7 +22,7 @@ use core::arch::x86_64::{
     _mm256_storeu_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
 };
 
-use super::{Layer, Params};
+use super::{Layer, Params, pool};
 use crate::arch::{Arch, F32_TILE, INPUT_DIM, ping_pong, prefix};
 use crate::error::{Error, Result};
 use crate::pose::PointMap;
@@ -100,9 +100,7 @@ fn tiles<'w, P: Params>(
                     // The portable path's max-pool, point by point in order.
                     if let Some(f) = feature.get_mut(o) {
                         for &v in v.iter().take(chunk.len()) {
-                            if v > *f {
-                                *f = v;
-                            }
+                            pool(f, v);
                         }
                     }
                 } else if let Some(y) = out.next() {
