@@ -177,6 +177,8 @@ fn results_markdown_shows_tables_plots_and_what_is_missing() {
     assert!(md.contains("| sigma 0.00 | 0.987 |"));
     assert!(md.contains("noise-auc.png"));
     assert!(md.contains("commit `abc`"));
-    assert!(md.contains("Not run yet: generalisation, partial, sparse, speed, iterations, trust."));
+    assert!(md.contains(
+        "Not run yet: generalisation, partial, sparse, speed, iterations, trust, resampled."
+    ));
     std::fs::remove_dir_all(dir).ok();
 }

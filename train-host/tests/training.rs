@@ -65,7 +65,7 @@ fn batched_forward_matches_core() {
     }
     let n = 100;
     let ds = Dataset::generated(3, n, 4);
-    let batch = ds.batch(&[0, 1, 2], &[1, 2, 3], &PairConfig::default());
+    let batch = ds.batch(&[0, 1, 2], &[1, 2, 3], &PairConfig::default(), false);
     let tc = model::encode(&params, batch.template.as_flattened(), 3, n, false);
     let sc = model::encode(&params, batch.source.as_flattened(), 3, n, false);
     let head = model::head_forward(&params, &tc.feature, &sc.feature, 3);
@@ -568,5 +568,65 @@ fn single_view_and_identity_pairs() {
             cfg.validate()
                 .is_err_and(|e| e.contains("--identity-share"))
         );
+    }
+}
+
+/// Issue 11: `resample` draws every training and validation source from
+/// the shape's other points (none shared with the template, same pose as
+/// without), and a data set without other points is refused by name.
+#[test]
+fn resampled_training_sources() {
+    let points = 128;
+    let ds = Dataset::generated(3, points, 6);
+    let cfg = PairConfig {
+        centre: false,
+        ..PairConfig::default()
+    };
+    let shared = ds.batch(&[0, 1, 2], &[7, 8, 9], &cfg, false);
+    let apart = ds.batch(&[0, 1, 2], &[7, 8, 9], &cfg, true);
+    assert_eq!(
+        (shared.r_gt.clone(), shared.t_gt.clone()),
+        (apart.r_gt.clone(), apart.t_gt.clone())
+    );
+    assert_eq!(apart.source.len(), 3 * points);
+    for i in 0..3 {
+        let tpl = &apart.template[i * points..(i + 1) * points];
+        let mut nearest_sum = 0.0;
+        for s in &apart.source[i * points..(i + 1) * points] {
+            let back = apply(&apart.r_gt[i], &apart.t_gt[i], s);
+            let nearest = tpl
+                .iter()
+                .map(|p| (0..3).map(|k| (p[k] - back[k]).powi(2)).sum::<f32>().sqrt())
+                .fold(f32::INFINITY, f32::min);
+            assert!(nearest > 1e-4, "a source point is a template point");
+            nearest_sum += nearest;
+        }
+        // On the same surface: about the sampling's spacing away.
+        let mean = nearest_sum / points as f32;
+        assert!(mean < 0.12, "mean distance {mean}");
+    }
+    // The same seeds give the same sources.
+    assert_eq!(
+        ds.batch(&[0, 1, 2], &[7, 8, 9], &cfg, true).source,
+        apart.source
+    );
+
+    // Training with it runs; shapes with nothing left over are refused.
+    let config = TrainConfig {
+        resample: true,
+        ..small_config()
+    };
+    let (train, val) = data_sets(64);
+    let mut trainer = Trainer::new(config.clone(), train.clone(), val.clone()).unwrap();
+    trainer.step();
+    let mut no_rest = train.clone();
+    no_rest.rest[4].clear();
+    let name = no_rest.names[4].clone();
+    match Trainer::new(config, no_rest, val) {
+        Err(e @ pcrnet_train::train::TrainError::NothingToResample(_)) => {
+            let msg = e.to_string();
+            assert!(msg.contains(&name) && msg.contains("--points"), "{msg}");
+        }
+        other => panic!("expected NothingToResample, got {:?}", other.err()),
     }
 }

@@ -201,7 +201,7 @@ fn tiny_batch(seed: u64, b: usize, n: usize) -> Batch {
         max_t: 0.3,
         ..PairConfig::default()
     };
-    ds.batch(&shapes, &seeds, &cfg)
+    ds.batch(&shapes, &seeds, &cfg, false)
 }
 
 fn flat(p: &F32Params) -> Vec<f32> {

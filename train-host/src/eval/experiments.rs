@@ -8,9 +8,11 @@
 //! | `sparse` | only 100% down to 5% of the source's points |
 //! | `speed` | the paper's Table 1: errors, time and AUC of every method on one category with noise |
 //! | `iterations` | rotation error against iteration count for i-PCRNet, PointNetLK and ICP |
+//! | `trust` | the shipped model's device pipeline: flips, refinement, and how well its residual flags bad poses |
+//! | `resampled` | the paper's protocol beside sources sampled apart from the template, clean, noisy and single-view, generic and object-specific |
 //!
 //! An experiment trains the models it needs when they are missing (the
-//! [`RECIPES`], into `<work>/models/<name>/`, resumable), makes or reloads
+//! [`super::recipes::Recipe`]s, into `<work>/models/<name>/`, resumable), makes or reloads
 //! its seeded pair sets (`<work>/pairs/<set>.json`, see [`super::pairs`]),
 //! scores every method on exactly the same pairs, and writes
 //! `<results>/<name>.json` (a [`Report`]) with PNG and SVG plots beside
@@ -24,22 +26,21 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use clap::Parser;
 use serde::{Deserialize, Serialize};
 
 use super::methods::{Method, MethodKind, run};
 use super::metrics::{self, Summary};
 use super::pairs::{Pair, PairSet, PairSetSpec, Shapes};
 use super::plot::{Chart, Corner, Series, draw};
+use super::recipes::{Model, NamedBlob, PARTIAL_RECIPE, Recipe};
 use super::{MethodScore, score};
 use crate::train::data::{PairConfig, Sampling};
-use crate::train::export::{F32_BLOB, INT8_BLOB};
 
 /// Points per cloud in every experiment (as the models are trained).
 pub const POINTS: usize = 512;
 
 /// The experiment names, in order.
-pub const EXPERIMENTS: [&str; 7] = [
+pub const EXPERIMENTS: [&str; 8] = [
     "generalisation",
     "noise",
     "partial",
@@ -47,144 +48,8 @@ pub const EXPERIMENTS: [&str; 7] = [
     "speed",
     "iterations",
     "trust",
+    "resampled",
 ];
-
-/// How a model used by the experiments is trained: `pcrnet train --data
-/// <data>/<data_dir> <args>`.
-#[derive(Debug, Clone, Copy)]
-pub struct Recipe {
-    /// Folder below `<work>/models/`.
-    pub name: &'static str,
-    /// Data folder below the data root.
-    pub data_dir: &'static str,
-    /// The remaining `pcrnet train` arguments.
-    pub args: &'static [&'static str],
-}
-
-/// Every model the experiments use.
-pub const RECIPES: [Recipe; 6] = [
-    // The shipped embedded default (models/README.md).
-    Recipe {
-        name: "mn10-pcrnet",
-        data_dir: "ModelNet10",
-        args: &[
-            "--arch", "embedded", "--model", "pcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "30", "--noise", "--seed", "1",
-        ],
-    },
-    Recipe {
-        name: "mn10-ipcrnet",
-        data_dir: "ModelNet10",
-        args: &[
-            "--arch", "embedded", "--model", "ipcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "20", "--noise", "--seed", "1",
-        ],
-    },
-    Recipe {
-        name: "mn10-seen5-ipcrnet",
-        data_dir: "ModelNet10",
-        args: &[
-            "--classes",
-            "bathtub,bed,chair,desk,dresser",
-            "--arch",
-            "embedded",
-            "--model",
-            "ipcrnet",
-            "--points",
-            "512",
-            "--batch",
-            "32",
-            "--epochs",
-            "20",
-            "--seed",
-            "1",
-        ],
-    },
-    Recipe {
-        name: "mn10-toilet-ipcrnet",
-        data_dir: "ModelNet10",
-        args: &[
-            "--classes",
-            "toilet",
-            "--arch",
-            "embedded",
-            "--model",
-            "ipcrnet",
-            "--points",
-            "512",
-            "--batch",
-            "32",
-            "--epochs",
-            "40",
-            "--seed",
-            "1",
-        ],
-    },
-    Recipe {
-        name: "air-pcrnet",
-        data_dir: "ModelNet40-airplane",
-        args: &[
-            "--arch", "embedded", "--model", "pcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "40", "--noise", "--seed", "1",
-        ],
-    },
-    Recipe {
-        name: "air-ipcrnet",
-        data_dir: "ModelNet40-airplane",
-        args: &[
-            "--arch", "embedded", "--model", "ipcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "40", "--noise", "--seed", "1",
-        ],
-    },
-];
-
-/// The partial-data airplane model (kept apart: it is the one recipe with `--partial`).
-pub const PARTIAL_RECIPE: Recipe = Recipe {
-    name: "air-partial-ipcrnet",
-    data_dir: "ModelNet40-airplane",
-    args: &[
-        "--arch",
-        "embedded",
-        "--model",
-        "ipcrnet",
-        "--points",
-        "512",
-        "--batch",
-        "32",
-        "--epochs",
-        "40",
-        "--noise",
-        "--partial",
-        "--seed",
-        "1",
-    ],
-};
-
-impl Recipe {
-    /// The recipe of a model name.
-    pub fn named(name: &str) -> Option<Recipe> {
-        RECIPES
-            .iter()
-            .chain(std::iter::once(&PARTIAL_RECIPE))
-            .find(|r| r.name == name)
-            .copied()
-    }
-
-    /// The command line that trains it.
-    pub fn command(&self, data: &Path, out: &Path) -> Vec<String> {
-        let mut v = vec![
-            "--data".to_string(),
-            data.join(self.data_dir).display().to_string(),
-        ];
-        v.extend(self.args.iter().map(|s| s.to_string()));
-        v.extend([
-            "--no-progress".to_string(),
-            "--out".to_string(),
-            out.display().to_string(),
-        ]);
-        v
-    }
-}
 
 /// Where an experiment reads and writes.
 #[derive(Debug, Clone)]
@@ -199,53 +64,6 @@ pub struct Context {
     pub pairs: usize,
     /// Seed of every pair set.
     pub seed: u64,
-}
-
-/// A model blob with its name.
-pub(super) type NamedBlob<'a> = (&'a str, &'a [u8]);
-
-/// A trained model's two blobs.
-pub(super) struct Model {
-    name: String,
-    int8: Vec<u8>,
-    f32: Vec<u8>,
-}
-
-impl Model {
-    pub(super) fn int8(&self) -> Option<NamedBlob<'_>> {
-        Some((&self.name, &self.int8))
-    }
-    fn f32(&self) -> Option<NamedBlob<'_>> {
-        Some((&self.name, &self.f32))
-    }
-}
-
-#[derive(Parser)]
-struct TrainCommand {
-    #[command(flatten)]
-    args: crate::train::cli::TrainArgs,
-}
-
-/// Loads model `name` from `<work>/models/`, training it first (by its
-/// [`Recipe`]) when its blobs are missing.
-fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
-    let recipe = Recipe::named(name).with_context(|| format!("no recipe for model {name}"))?;
-    let dir = ctx.work.join("models").join(name);
-    let (i8p, f32p) = (dir.join(INT8_BLOB), dir.join(F32_BLOB));
-    if !(i8p.is_file() && f32p.is_file()) {
-        let args = recipe.command(&ctx.data, &dir);
-        eprintln!("training {name}: pcrnet train {}", args.join(" "));
-        let cmd = TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))?;
-        let mut train_args = cmd.args;
-        train_args.resume = dir.join(crate::train::CHECKPOINT_FILE).is_file();
-        crate::train::cli::train(train_args)?;
-    }
-    let read = |p: &Path| std::fs::read(p).with_context(|| format!("reading {}", p.display()));
-    Ok(Model {
-        name: name.to_string(),
-        int8: read(&i8p)?,
-        f32: read(&f32p)?,
-    })
 }
 
 /// Makes (or reloads and checks) pair set `name`.
@@ -397,7 +215,7 @@ impl<'a> Recorder<'a> {
     }
 
     pub(super) fn model(&mut self, name: &str) -> anyhow::Result<Model> {
-        let m = model(self.ctx, name)?;
+        let m = super::recipes::model(self.ctx, name)?;
         if let Some(r) = Recipe::named(name) {
             let cmd = r.command(&self.ctx.data, &self.ctx.work.join("models").join(name));
             self.models
@@ -663,6 +481,7 @@ pub fn run_experiment(ctx: &Context, name: &str) -> anyhow::Result<Report> {
         "speed" => speed(ctx),
         "iterations" => iterations(ctx),
         "trust" => super::trust::trust(ctx),
+        "resampled" => super::resampled::resampled(ctx),
         other => anyhow::bail!(
             "unknown experiment {other} (one of {})",
             EXPERIMENTS.join(", ")
@@ -1233,28 +1052,4 @@ pub fn render_results(results: &Path) -> anyhow::Result<String> {
         md.push_str(&format!("Not run yet: {}.\n", missing.join(", ")));
     }
     Ok(md)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every recipe is a valid `pcrnet train` command line (the experiments
-    /// train missing models through it), at the experiments' point count.
-    #[test]
-    fn recipes_parse_as_train_commands() {
-        for r in RECIPES.iter().chain(std::iter::once(&PARTIAL_RECIPE)) {
-            let args = r.command(Path::new("/data"), Path::new("/work/m"));
-            let cmd =
-                TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))
-                    .unwrap_or_else(|e| panic!("{}: {e}", r.name));
-            assert_eq!(cmd.args.points, POINTS, "{}", r.name);
-            if let Some(noise) = &cmd.args.pairs.noise {
-                assert_eq!(noise, "0,0.04", "{}: the recorded models' noise", r.name);
-            }
-            assert_eq!(cmd.args.out, Path::new("/work/m"));
-            assert_eq!(Recipe::named(r.name).map(|x| x.name), Some(r.name));
-        }
-        assert!(Recipe::named("nope").is_none());
-    }
 }

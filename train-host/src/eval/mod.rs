@@ -11,6 +11,8 @@ pub mod metrics;
 pub mod pairs;
 pub mod plot;
 pub mod pointnetlk;
+pub mod recipes;
+pub mod resampled;
 pub mod trust;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};

@@ -281,17 +281,12 @@ impl PairSet {
                         index,
                         what: "template file",
                     })?;
-                let base = if self.spec.resample {
-                    let rest = shapes.rest.get(rec.template).map_or(&[][..], Vec::as_slice);
-                    data::reduce(rest, self.spec.points, Sampling::Random, rec.seed).ok_or(
-                        PairSetError::Mismatch {
-                            index,
-                            what: "the shape's other points (--resample needs shapes with more points than --points)",
-                        },
-                    )?
-                } else {
-                    template.clone()
-                };
+                let base = shapes
+                    .source_points(rec.template, self.spec.resample, rec.seed)
+                    .ok_or(PairSetError::Mismatch {
+                        index,
+                        what: "the shape's other points (--resample needs shapes with more points than --points)",
+                    })?;
                 let (source, r_gt, t_gt) = data::make_pair(&base, &cfg, rec.seed);
                 if r_gt != rec.rotation || t_gt != rec.translation {
                     return Err(PairSetError::Mismatch {

@@ -20,7 +20,7 @@ pub const SHIPPED_INT8: &str = "models/embedded-default-int8.pcrn";
 /// Noise sigma of both sets (the target protocol).
 const SIGMA: f32 = 0.01;
 
-fn device(hypotheses: usize) -> Method {
+pub(super) fn device(hypotheses: usize) -> Method {
     Method {
         hypotheses,
         ..Method::new(MethodKind::Device)
@@ -122,7 +122,28 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
     let runs: Vec<&MethodScore> = rec.raw[first..].iter().map(|r| &r.1).collect();
     let chart = success_chart(&format!("Device pipeline: {set}"), &runs, 90.0);
     rec.plot("ModelNet10-heldout", &chart)?;
-    let table = Table {
+    let table = table(&rec.raw);
+
+    rec.finish(
+        "A pose the device can trust",
+        vec![
+            format!(
+                "The shipped model (`{SHIPPED_INT8}`, trained on all ten ModelNet10 classes), 200 test pairs per set, Gaussian noise sigma {SIGMA}, Euler angles U[-45°, 45°], translation U[-1, 1]; airplanes (ModelNet40) are a category the model never saw."
+            ),
+            "PCRNet: the network alone; + ICP: host point-to-point ICP (f64, k-d tree, all template points, 100 iterations); device K=k: `pcrnet-core`'s register (what the firmware runs, bit for bit): k starting poses (the network's, then half and quarter turns about the template's principal axes), each refined 10 ICP iterations against the 512 stored template points, the network's and the best turned one continued to 50, a turn wins only below 0.7 x the network's residual; point-to-plane ICP unless marked point-to-point; `K=1, scored, no ICP` is the network's pose scored, unrefined (where the residual has many bad poses to tell apart).".into(),
+            "Resampled: each source is made from the shape's points that the template did not keep (no point shared with the template, as with a real sensor).".into(),
+            format!("Held-out classes: {} with `mn10-seen5-ipcrnet`, the generalisation experiment's i-PCRNet trained on the other five ModelNet10 classes (its blob records 8 passes, which the device pipeline runs; i-PCRNet alone: up to 20 passes).", UNSEEN.join(", ")),
+            "Plane / point residual AUROC: the probability that a good pose has a lower plane (point-to-plane) / point (point-to-point) residual than a bad one; the verdict is judged on the plane residual; bad / good flagged: shares marked not reliable.".into(),
+        ],
+        vec![table],
+        started,
+    )
+}
+
+/// The table of every scored run: errors, success and, for the device
+/// pipeline, how well its residual tells good poses from bad ones.
+pub(super) fn table(raw: &[(String, MethodScore)]) -> Table {
+    Table {
         caption: format!(
             "Errors, success and confidence per method; a pose is good below {GOOD_BELOW_DEG}° rotation error; the device pipeline's verdict is `reliable` (relative plane residual <= {})",
             pcrnet_core::Options::default().max_residual
@@ -144,22 +165,8 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
         .iter()
         .map(|s| s.to_string())
         .collect(),
-        rows: rec.raw.iter().map(|(set, s)| row(set, s)).collect(),
-    };
-    rec.finish(
-        "A pose the device can trust",
-        vec![
-            format!(
-                "The shipped model (`{SHIPPED_INT8}`, trained on all ten ModelNet10 classes), 200 test pairs per set, Gaussian noise sigma {SIGMA}, Euler angles U[-45°, 45°], translation U[-1, 1]; airplanes (ModelNet40) are a category the model never saw."
-            ),
-            "PCRNet: the network alone; + ICP: host point-to-point ICP (f64, k-d tree, all template points, 100 iterations); device K=k: `pcrnet-core`'s register (what the firmware runs, bit for bit): k starting poses (the network's, then half and quarter turns about the template's principal axes), each refined 10 ICP iterations against the 512 stored template points, the network's and the best turned one continued to 50, a turn wins only below 0.7 x the network's residual; point-to-plane ICP unless marked point-to-point; `K=1, scored, no ICP` is the network's pose scored, unrefined (where the residual has many bad poses to tell apart).".into(),
-            "Resampled: each source is made from the shape's points that the template did not keep (no point shared with the template, as with a real sensor).".into(),
-            format!("Held-out classes: {} with `mn10-seen5-ipcrnet`, the generalisation experiment's i-PCRNet trained on the other five ModelNet10 classes (its blob records 8 passes, which the device pipeline runs; i-PCRNet alone: up to 20 passes).", UNSEEN.join(", ")),
-            "Plane / point residual AUROC: the probability that a good pose has a lower plane (point-to-plane) / point (point-to-point) residual than a bad one; the verdict is judged on the plane residual; bad / good flagged: shares marked not reliable.".into(),
-        ],
-        vec![table],
-        started,
-    )
+        rows: raw.iter().map(|(set, s)| row(set, s)).collect(),
+    }
 }
 
 fn row(set: &str, s: &MethodScore) -> Vec<String> {

@@ -18,8 +18,9 @@ use super::TrainConfig;
 use super::adam::Adam;
 use crate::F32Params;
 
-/// Version 2: [`super::PairConfig::centre`] added to the configuration.
-const MAGIC: &[u8; 8] = b"PCRNCKP3";
+/// The layout version. 3: `points` and `sampling` in the configuration;
+/// 4: `resample` (and the pair options `single_view`, `identity_share`).
+const MAGIC: &[u8; 8] = b"PCRNCKP4";
 
 /// Where a run is.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -121,7 +122,9 @@ impl Checkpoint {
         };
         let body = bytes
             .strip_prefix(MAGIC.as_slice())
-            .ok_or_else(|| invalid("bad magic (or a checkpoint of an older version)".into()))?;
+            .ok_or_else(|| invalid(
+                "bad magic, or a checkpoint of an older version: its blobs were exported when its run ended; to resume or re-export it, use the pcrnet build that wrote it".into(),
+            ))?;
         let ck: Checkpoint = postcard::from_bytes(body).map_err(|e| invalid(e.to_string()))?;
         let shapes: Vec<_> = ck
             .arch

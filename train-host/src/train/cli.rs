@@ -115,6 +115,12 @@ pub struct TrainArgs {
     /// How sources are made from templates.
     #[command(flatten)]
     pub pairs: PairArgs,
+    /// Make each source from the shape's other points (those the
+    /// reduction to --points did not keep), none shared with the template,
+    /// as a sensor samples a surface anew; as `pcrnet pairs --resample`.
+    /// Needs shapes with more points than --points.
+    #[arg(long)]
+    pub resample: bool,
     /// Feed the network uncentred sources (default: sources centred on
     /// their centroid, as the reference implementation; see `train::data`).
     #[arg(long)]
@@ -343,6 +349,7 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         },
         points: args.points,
         sampling: sampling(args.sampling),
+        resample: args.resample,
     };
     if !(config.lr.is_finite() && config.lr > 0.0) {
         bail!("--lr must be a finite number > 0 (got {})", config.lr);

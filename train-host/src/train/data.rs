@@ -700,15 +700,51 @@ impl Dataset {
         self.clouds.is_empty()
     }
 
+    /// The points the source of a pair on shape `shape` is made from: the
+    /// template itself, or with `resample` a random `points`-point subset
+    /// of the shape's other points ([`Dataset::rest`], drawn with the
+    /// pair's `seed`), so that template and source share no point. `None`
+    /// for an index out of range, or with `resample` when the shape has no
+    /// other point ([`Dataset::cannot_resample`]).
+    pub fn source_points(&self, shape: usize, resample: bool, seed: u64) -> Option<Vec<[f32; 3]>> {
+        if resample {
+            reduce(self.rest.get(shape)?, self.points, Sampling::Random, seed)
+        } else {
+            self.clouds.get(shape).cloned()
+        }
+    }
+
+    /// The first shape without other points to resample sources from
+    /// (its name), if any: files with no more points than `points`.
+    pub fn cannot_resample(&self) -> Option<&str> {
+        self.rest
+            .iter()
+            .zip(&self.names)
+            .find(|(rest, _)| !rest.iter().any(|p| p.iter().all(|v| v.is_finite())))
+            .map(|(_, name)| name.as_str())
+    }
+
     /// Builds the batch of pairs: shape `shapes[k]` with pair seed
-    /// `seeds[k]`, in parallel (each pair depends on its seed only).
-    pub fn batch(&self, shapes: &[usize], seeds: &[u64], cfg: &PairConfig) -> Batch {
+    /// `seeds[k]`, in parallel (each pair depends on its seed only). With
+    /// `resample`, sources come from the shapes' other points
+    /// ([`Dataset::source_points`]); the caller checks
+    /// [`Dataset::cannot_resample`] first (a shape without them would get
+    /// its template's points).
+    pub fn batch(
+        &self,
+        shapes: &[usize],
+        seeds: &[u64],
+        cfg: &PairConfig,
+        resample: bool,
+    ) -> Batch {
         let pairs: Vec<_> = shapes
             .par_iter()
             .zip(seeds.par_iter())
             .map(|(&s, &seed)| {
-                let tpl = &self.clouds[s];
-                let (src, r, t, c) = make_pair_with_centroid(tpl, cfg, seed);
+                let base = self
+                    .source_points(s, resample, seed)
+                    .unwrap_or_else(|| self.clouds[s].clone());
+                let (src, r, t, c) = make_pair_with_centroid(&base, cfg, seed);
                 (s, src, r, t, c)
             })
             .collect();

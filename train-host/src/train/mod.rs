@@ -102,6 +102,10 @@ pub struct TrainConfig {
     pub points: usize,
     /// How clouds were reduced to `points`.
     pub sampling: Sampling,
+    /// Make each source from the shape's other points, none shared with
+    /// the template ([`Dataset::source_points`]), in training and
+    /// validation pairs alike.
+    pub resample: bool,
 }
 
 impl Default for TrainConfig {
@@ -125,6 +129,7 @@ impl Default for TrainConfig {
             val_pairs: 0,
             points: 1024,
             sampling: Sampling::Fps,
+            resample: false,
         }
     }
 }
@@ -133,6 +138,15 @@ impl TrainConfig {
     /// The network shape.
     pub fn arch(&self) -> pcrnet_core::Result<Arch> {
         Arch::new(&self.encoder, &self.head)
+    }
+}
+
+/// With `resample`, every training and validation shape must have other
+/// points to draw sources from.
+fn check_resample(resample: bool, train: &Dataset, val: &Dataset) -> Result<(), TrainError> {
+    match (resample, train.cannot_resample().or(val.cannot_resample())) {
+        (true, Some(name)) => Err(TrainError::NothingToResample(name.to_string())),
+        _ => Ok(()),
     }
 }
 
@@ -223,6 +237,11 @@ pub enum TrainError {
     /// The batch size is 0.
     #[error("batch size must be at least 1")]
     ZeroBatch,
+    /// `resample` is on but a shape has no other points to draw sources from.
+    #[error(
+        "{0}: no points left to resample sources from (--resample needs shapes with more points than --points; lower --points)"
+    )]
+    NothingToResample(String),
     /// The checkpoint's data set or configuration does not fit.
     #[error("checkpoint mismatch: {0}")]
     Mismatch(String),
@@ -249,6 +268,7 @@ impl Trainer {
         if config.batch == 0 {
             return Err(TrainError::ZeroBatch);
         }
+        check_resample(config.resample, &train, &val)?;
         let params = initial_params(arch, config.seed);
         let adam = Adam::new(&params);
         Ok(Trainer {
@@ -275,6 +295,7 @@ impl Trainer {
                 "architecture differs from the configuration".into(),
             ));
         }
+        check_resample(ck.config.resample, &train, &val)?;
         let params = ck.params();
         Ok(Trainer {
             config: ck.config,
@@ -344,7 +365,8 @@ impl Trainer {
             .iter()
             .map(|&s| data::mix_seed(self.config.seed, epoch as u64 + 1, s as u64))
             .collect();
-        self.train.batch(&shapes, &seeds, &self.config.pairs)
+        self.train
+            .batch(&shapes, &seeds, &self.config.pairs, self.config.resample)
     }
 
     /// One optimisation step at the current position; advances the position
@@ -389,7 +411,8 @@ impl Trainer {
                     .iter()
                     .map(|&i| data::mix_seed(self.config.seed, u64::MAX, i as u64))
                     .collect();
-                self.val.batch(&shapes, &seeds, &self.config.pairs)
+                self.val
+                    .batch(&shapes, &seeds, &self.config.pairs, self.config.resample)
             })
             .collect()
     }
