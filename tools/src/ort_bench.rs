@@ -8,11 +8,19 @@
 //! `tools/ort_bench.py` rebuilds the network as an ONNX graph, checks its
 //! f32 outputs against ours, quantizes it with ONNX Runtime's static
 //! quantizer, times it the same way and prints the table.
+//!
+//! Then ICP: Open3D (`open3d-cpu`, pinned) is installed into the same
+//! environment when its wheel installs here, and `tools/icp_bench.py`
+//! runs its point-to-point ICP on the pairs our side registered (see the
+//! example's docs). Without Open3D that comparison is skipped, saying so.
 
 use std::path::Path;
 
 /// What pip installs (the versions measured in the README).
 const PACKAGES: [&str; 3] = ["onnxruntime==1.32.0", "onnx==1.23.2", "numpy==2.4.6"];
+
+/// Open3D, for the ICP comparison (its CPU-only wheel).
+const OPEN3D: &str = "open3d-cpu==0.19.0";
 
 pub fn run(root: &Path, data: Option<&str>) -> Result<(), String> {
     let venv = root.join("target/ort-venv");
@@ -52,5 +60,27 @@ pub fn run(root: &Path, data: Option<&str>) -> Result<(), String> {
         args.extend(["--data", d.as_str()]);
     }
     crate::cargo(&args)?;
-    crate::run(python, &["tools/ort_bench.py", out])
+    crate::run(python, &["tools/ort_bench.py", out])?;
+    let has_open3d = |python: &str| {
+        std::process::Command::new(python)
+            .args(["-c", "import open3d"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if !has_open3d(python) {
+        let installed = crate::run(
+            python,
+            &["-m", "pip", "install", "--quiet", OPEN3D, PACKAGES[2]],
+        );
+        if let Err(e) = installed.and_then(|()| {
+            has_open3d(python)
+                .then_some(())
+                .ok_or_else(|| "installed but does not import".to_string())
+        }) {
+            eprintln!("Open3D ({OPEN3D}) is not available here ({e}): ICP comparison skipped");
+            return Ok(());
+        }
+    }
+    println!();
+    crate::run(python, &["tools/icp_bench.py", out])
 }

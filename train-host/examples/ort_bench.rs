@@ -16,6 +16,14 @@
 //! wall clock; a round is every cloud once, the figure is the median
 //! round's time per call.
 //!
+//! For ICP (issue 13's third target), `DIR/icp/` gets each cloud as a
+//! template and a source made from it by the experiments' pairs (Euler
+//! angles U[-45°, 45°], translation U[-1, 1], noise 0.01), `truth.json`
+//! with the true poses, and `ours.json` with our point-to-point ICP's
+//! poses and times (`pcrnet_train::eval::icp`), run for a fixed 50
+//! iterations and with its own stop rule; the script runs Open3D's
+//! `registration_icp` on the same pairs when Open3D is installed.
+//!
 //! Usage: `ort_bench DIR [--data MODELNET10_DIR] [--clouds N] [--rounds R]`.
 //! Without `--data`, generated shapes stand in for the ModelNet10 clouds.
 
@@ -29,7 +37,9 @@ use pcrnet_core::float::Params;
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
-use pcrnet_train::train::data::{Dataset, Sampling, Split};
+use pcrnet_train::eval::{self, icp::IcpConfig};
+use pcrnet_train::train::data::{self, Dataset, PairConfig, Sampling, Split};
+use pcrnet_train::train::geometry::{Mat3, quat_to_mat};
 use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
 use serde_json::json;
 
@@ -65,7 +75,72 @@ fn main() -> anyhow::Result<()> {
 
     let (f32_blob, int8_blob) = paper_blobs(&clouds)?;
     run("paper", &f32_blob, &int8_blob, &clouds, rounds, &out)?;
+    icp(&clouds, rounds, &out)?;
     std::fs::write(out.join("clouds.txt"), what)?;
+    Ok(())
+}
+
+/// Iterations of the fixed-work ICP comparison.
+const ICP_ITERATIONS: usize = 50;
+
+/// Our ICP on pairs made from the clouds, for `fixed` iterations (no stop
+/// rule) and with our stop rule; writes the pairs, the true poses and our
+/// poses and times to `DIR/icp/`.
+fn icp(clouds: &[Vec<[f32; 3]>], rounds: usize, out: &Path) -> anyhow::Result<()> {
+    let cfg = PairConfig {
+        noise: Some([0.01, 0.01]),
+        centre: false,
+        ..PairConfig::default()
+    };
+    let pairs: Vec<(Vec<[f32; 3]>, Mat3, [f32; 3])> = clouds
+        .iter()
+        .enumerate()
+        .map(|(i, c)| data::make_pair(c, &cfg, data::mix_seed(1, 0x1C9, i as u64)))
+        .collect();
+    let dir = out.join("icp");
+    std::fs::create_dir_all(&dir)?;
+    let floats = |v: &mut dyn Iterator<Item = &[f32; 3]>| -> Vec<u8> {
+        v.flatten().flat_map(|x| x.to_le_bytes()).collect()
+    };
+    std::fs::write(dir.join("template.f32"), floats(&mut clouds.iter().flatten()))?;
+    std::fs::write(
+        dir.join("source.f32"),
+        floats(&mut pairs.iter().flat_map(|p| &p.0)),
+    )?;
+    let truth: Vec<_> = pairs.iter().map(|p| json!({"r": p.1, "t": p.2})).collect();
+    std::fs::write(dir.join("truth.json"), serde_json::to_vec(&truth)?)?;
+
+    let mut results = serde_json::Map::new();
+    for (name, config) in [
+        (
+            "fixed",
+            IcpConfig {
+                max_iterations: ICP_ITERATIONS,
+                tolerance: 0.0,
+            },
+        ),
+        ("stop rule", IcpConfig::default()),
+    ] {
+        let mut poses = Vec::new();
+        let mut iterations = Vec::new();
+        for (c, p) in clouds.iter().zip(&pairs) {
+            let r = eval::icp::icp(c, &p.0, config)?;
+            poses.push(json!({"r": quat_to_mat(r.pose.rotation), "t": r.pose.translation}));
+            iterations.push(r.iterations);
+        }
+        let jobs: Vec<(&Vec<[f32; 3]>, &Vec<[f32; 3]>)> =
+            clouds.iter().zip(pairs.iter().map(|p| &p.0)).collect();
+        let ms = median_ms(rounds, &jobs, |(c, source)| {
+            black_box(eval::icp::icp(c, source, config)).is_ok()
+        })?;
+        println!("ICP ({name}): ours {ms:.3} ms per registration");
+        results.insert(
+            name.into(),
+            json!({"ms": ms, "poses": poses, "iterations": iterations}),
+        );
+    }
+    results.insert("fixed_iterations".into(), json!(ICP_ITERATIONS));
+    std::fs::write(dir.join("ours.json"), serde_json::to_vec(&results)?)?;
     Ok(())
 }
 
@@ -174,12 +249,12 @@ fn run(
     Ok(())
 }
 
-/// Median over `rounds` of the time per call of `call` over every cloud
+/// Median over `rounds` of the time per call of `call` over every item
 /// (one warm-up round first).
-fn median_ms(
+fn median_ms<T>(
     rounds: usize,
-    clouds: &[Vec<[f32; 3]>],
-    mut call: impl FnMut(&[[f32; 3]]) -> bool,
+    clouds: &[T],
+    mut call: impl FnMut(&T) -> bool,
 ) -> anyhow::Result<f64> {
     let mut times = Vec::new();
     for r in 0..=rounds {
