@@ -35,9 +35,9 @@ use anyhow::{Context, bail};
 use pcrnet_core::arch::{PAPER_ENCODER, PCRNET_HEAD};
 use pcrnet_core::float::Params;
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
+use pcrnet_train::eval::{self, icp::IcpConfig};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
-use pcrnet_train::eval::{self, icp::IcpConfig};
 use pcrnet_train::train::data::{self, Dataset, PairConfig, Sampling, Split};
 use pcrnet_train::train::geometry::{Mat3, quat_to_mat};
 use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
@@ -80,6 +80,8 @@ fn main() -> anyhow::Result<()> {
     Ok(())
 }
 
+type Cloud = Vec<[f32; 3]>;
+
 /// Iterations of the fixed-work ICP comparison.
 const ICP_ITERATIONS: usize = 50;
 
@@ -92,7 +94,7 @@ fn icp(clouds: &[Vec<[f32; 3]>], rounds: usize, out: &Path) -> anyhow::Result<()
         centre: false,
         ..PairConfig::default()
     };
-    let pairs: Vec<(Vec<[f32; 3]>, Mat3, [f32; 3])> = clouds
+    let pairs: Vec<(Cloud, Mat3, [f32; 3])> = clouds
         .iter()
         .enumerate()
         .map(|(i, c)| data::make_pair(c, &cfg, data::mix_seed(1, 0x1C9, i as u64)))
@@ -102,7 +104,10 @@ fn icp(clouds: &[Vec<[f32; 3]>], rounds: usize, out: &Path) -> anyhow::Result<()
     let floats = |v: &mut dyn Iterator<Item = &[f32; 3]>| -> Vec<u8> {
         v.flatten().flat_map(|x| x.to_le_bytes()).collect()
     };
-    std::fs::write(dir.join("template.f32"), floats(&mut clouds.iter().flatten()))?;
+    std::fs::write(
+        dir.join("template.f32"),
+        floats(&mut clouds.iter().flatten()),
+    )?;
     std::fs::write(
         dir.join("source.f32"),
         floats(&mut pairs.iter().flat_map(|p| &p.0)),
@@ -128,8 +133,7 @@ fn icp(clouds: &[Vec<[f32; 3]>], rounds: usize, out: &Path) -> anyhow::Result<()
             poses.push(json!({"r": quat_to_mat(r.pose.rotation), "t": r.pose.translation}));
             iterations.push(r.iterations);
         }
-        let jobs: Vec<(&Vec<[f32; 3]>, &Vec<[f32; 3]>)> =
-            clouds.iter().zip(pairs.iter().map(|p| &p.0)).collect();
+        let jobs: Vec<(&Cloud, &Cloud)> = clouds.iter().zip(pairs.iter().map(|p| &p.0)).collect();
         let ms = median_ms(rounds, &jobs, |(c, source)| {
             black_box(eval::icp::icp(c, source, config)).is_ok()
         })?;

@@ -1,11 +1,12 @@
-//! Point-to-point ICP (Besl & McKay), the paper's baseline: nearest
-//! neighbours from a k-d tree (`kiddo`), the rigid update by the Kabsch /
-//! SVD method (`nalgebra`), in f64.
+//! Point-to-point ICP (Besl & McKay), the paper's baseline: exact nearest
+//! neighbours ([`super::nearest`]: a grid, a `kiddo` k-d tree for far
+//! queries), the rigid update by the Kabsch / SVD method (`nalgebra`), in
+//! f64.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Vector3};
 use pcrnet_core::Pose;
 
+use super::nearest::NearestSearch;
 use super::pose_from_matrix;
 
 /// ICP settings.
@@ -90,25 +91,22 @@ pub fn icp(
     {
         return Err(IcpError::NonFinite);
     }
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(
-        &template
-            .iter()
-            .map(|p| [p[0] as f64, p[1] as f64, p[2] as f64])
-            .collect::<Vec<_>>(),
-    );
-    let targets: Vec<Vector3<f64>> = template.iter().map(to_vec).collect();
+    let search = NearestSearch::new(template.iter().map(|p| p.map(f64::from)).collect());
     let mut moved: Vec<Vector3<f64>> = source.iter().map(to_vec).collect();
     let (mut r, mut t) = (Matrix3::identity(), Vector3::zeros());
     let mut previous = f64::INFINITY;
     let mut mse = f64::INFINITY;
     let mut trajectory = Vec::new();
     let mut matched = vec![Vector3::zeros(); moved.len()];
+    // Each source point's match of the previous iteration (none yet).
+    let mut hints = vec![usize::MAX; moved.len()];
     for iteration in 1..=config.max_iterations {
         let mut sum = 0.0;
-        for (m, p) in matched.iter_mut().zip(&moved) {
-            let nn = tree.nearest_one::<SquaredEuclidean>(&[p.x, p.y, p.z]);
-            sum += nn.distance;
-            *m = targets[nn.item as usize];
+        for ((m, h), p) in matched.iter_mut().zip(&mut hints).zip(&moved) {
+            let nn = search.nearest(&[p.x, p.y, p.z], (*h != usize::MAX).then_some(*h));
+            sum += nn.squared;
+            *h = nn.index;
+            *m = Vector3::from(search.point(nn.index));
         }
         let (dr, dt) = kabsch(&moved, &matched);
         for p in &mut moved {

@@ -8,6 +8,7 @@ pub mod experiments;
 pub mod icp;
 pub mod methods;
 pub mod metrics;
+pub mod nearest;
 pub mod pairs;
 pub mod plot;
 pub mod pointnetlk;
