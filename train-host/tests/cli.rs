@@ -357,6 +357,7 @@ fn training_for_ones_own_object_end_to_end() {
         .arg(&object)
         .args(["--arch", "8,16:16", "--points", "64", "--batch", "4"])
         .args(["--epochs", "2", "--steps-per-epoch", "2", "--no-progress"])
+        .args(["--single-view", "--resample"])
         .arg("--out")
         .arg(&out_dir)
         .output()
@@ -432,5 +433,33 @@ fn training_for_ones_own_object_end_to_end() {
         "{stdout}"
     );
     assert!(!stdout.contains("failed"), "{stdout}");
+    // Without --points, an object's pairs take train --object's 1,024.
+    let out = pcrnet()
+        .arg("pairs")
+        .arg("--object")
+        .arg(&object)
+        .args(["--count", "2", "--out"])
+        .arg(&pairs)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let set: serde_json::Value = serde_json::from_slice(&std::fs::read(&pairs).unwrap()).unwrap();
+    assert_eq!(set["spec"]["points"], 1024, "{}", set["spec"]);
+    // Training from resampled sources needs points left over.
+    let out = pcrnet()
+        .arg("train")
+        .arg("--object")
+        .arg(&object)
+        .args(["--points", "400", "--resample", "--epochs", "1", "--out"])
+        .arg(dir.join("no-rest"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("part.xyz: no points left to resample")
+            && stderr.contains("lower --points"),
+        "{stderr}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

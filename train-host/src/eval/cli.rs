@@ -32,9 +32,10 @@ pub struct PairsArgs {
     /// Only these classes (comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub classes: Option<Vec<String>>,
-    /// Points per cloud.
-    #[arg(long, default_value_t = experiments::POINTS)]
-    pub points: usize,
+    /// Points per cloud (default: 512, as the experiments and the shipped
+    /// model; with --object 1,024, as `train --object`).
+    #[arg(long)]
+    pub points: Option<usize>,
     /// Number of pairs (0: one per shape).
     #[arg(long, default_value_t = 0)]
     pub count: usize,
@@ -224,7 +225,10 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
     };
     let spec = PairSetSpec {
         shapes,
-        points: args.points,
+        points: args.points.unwrap_or(match args.object {
+            Some(_) => crate::train::cli::DEFAULT_POINTS,
+            None => experiments::POINTS,
+        }),
         sampling: Sampling::Fps,
         pairs: args.source.config(false)?,
         count: args.count,

@@ -83,7 +83,7 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 8)]
     pub iterations: usize,
     /// Points per cloud.
-    #[arg(long, default_value_t = 1024)]
+    #[arg(long, default_value_t = DEFAULT_POINTS)]
     pub points: usize,
     /// How clouds are reduced to --points.
     #[arg(long, value_enum, default_value_t = SamplingArg::Fps)]
@@ -241,6 +241,10 @@ pub struct ExportArgs {
     #[arg(long)]
     pub out: PathBuf,
 }
+
+/// Points per cloud of `train` unless given (and of `pairs --object`, so
+/// that an object's test pairs match its training).
+pub const DEFAULT_POINTS: usize = 1024;
 
 /// Steps per epoch of `train --object` unless given: one shape makes
 /// `shapes / batch` a single step.
