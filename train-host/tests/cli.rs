@@ -463,3 +463,69 @@ fn training_for_ones_own_object_end_to_end() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 11, item 6: several `--data` roots and generated shapes train as
+/// one set, `--classes` naming classes of any root (a one-class root is
+/// named after its folder).
+#[test]
+fn training_on_several_roots_and_generated_shapes() {
+    use pcrnet_train::shapes::{Shape, sample};
+    let dir = std::env::temp_dir().join(format!("pcrnet-cli-roots-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let write = |path: std::path::PathBuf, seed: u64| {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        let text: String = sample(Shape::Torus, 80, seed)
+            .iter()
+            .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+            .collect();
+        std::fs::write(path, text).unwrap();
+    };
+    // Root A: classes "cup" (2 train, 1 test) and "pot" (1 train, 1 test).
+    let a = dir.join("A");
+    write(a.join("cup/train/c1.xyz"), 1);
+    write(a.join("cup/train/c2.xyz"), 2);
+    write(a.join("cup/test/c3.xyz"), 3);
+    write(a.join("pot/train/p1.xyz"), 4);
+    write(a.join("pot/test/p2.xyz"), 5);
+    // Root B: one class named after the folder (3 train, 1 test).
+    let b = dir.join("B");
+    for i in 0..3 {
+        write(b.join(format!("train/b{i}.xyz")), 10 + i);
+    }
+    write(b.join("test/b9.xyz"), 19);
+    let out = pcrnet()
+        .arg("train")
+        .arg("--data")
+        .arg(&a)
+        .arg("--data")
+        .arg(&b)
+        .args([
+            "--generated",
+            "4",
+            "--classes",
+            "cup,B",
+            "--arch",
+            "8,16:16",
+        ])
+        .args([
+            "--points",
+            "64",
+            "--batch",
+            "4",
+            "--epochs",
+            "1",
+            "--no-progress",
+        ])
+        .arg("--out")
+        .arg(dir.join("model"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    // 2 cups + 3 of B + 4 generated; validation 1 + 1 + 1.
+    assert!(
+        stderr.contains("9 training shapes, 3 validation shapes"),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

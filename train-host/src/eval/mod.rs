@@ -5,6 +5,7 @@
 
 pub mod cli;
 pub mod experiments;
+pub mod heldout;
 pub mod icp;
 pub mod methods;
 pub mod metrics;

@@ -53,11 +53,14 @@ pub enum SamplingArg {
 /// Arguments of `pcrnet train`.
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
-    /// ModelNet-style root (`<root>/<class>/{train,test}/*.pcd`); the test
-    /// split is the validation set.
-    #[arg(long, conflicts_with = "generated")]
-    pub data: Option<PathBuf>,
-    /// Train on this many generated shapes instead (validation: a quarter as many).
+    /// ModelNet-style root (`<root>/<class>/{train,test}/*.pcd`, or
+    /// `<root>/{train,test}/*` for one class named after the root); the
+    /// test split is the validation set. Repeat it to train on several
+    /// roots at once (`--classes` then names classes of any of them).
+    #[arg(long)]
+    pub data: Vec<PathBuf>,
+    /// Train on this many generated shapes (validation: a quarter as many),
+    /// alone or added to the --data roots.
     #[arg(long, conflicts_with = "object")]
     pub generated: Option<usize>,
     /// Train for one object of your own: a point cloud file, or an OFF mesh
@@ -375,21 +378,37 @@ fn sampling(a: SamplingArg) -> Sampling {
 }
 
 fn load_data(args: &TrainArgs, seed: u64) -> anyhow::Result<(Dataset, Dataset)> {
-    let (mut train, mut val) = if let Some(root) = &args.data {
-        let s = sampling(args.sampling);
-        let classes = args.classes.as_deref();
-        let train = Dataset::load_modelnet(root, Split::Train, classes, args.points, s, seed)?;
-        let val = Dataset::load_modelnet(root, Split::Test, classes, args.points, s, seed ^ 1)?;
-        (train, val)
-    } else if let Some(object) = &args.object {
+    let (mut train, mut val) = if let Some(object) = &args.object {
         let train = Dataset::object(object, args.points, sampling(args.sampling), seed)?;
         (train.clone(), train)
-    } else if let Some(n) = args.generated {
-        let train = Dataset::generated(n, args.points, seed);
-        let val = Dataset::generated(n.div_ceil(4), args.points, seed ^ 0xABCD);
-        (train, val)
     } else {
-        bail!("give --data PATH, --object FILE or --generated COUNT");
+        let s = sampling(args.sampling);
+        let classes = args.classes.as_deref();
+        let mut sets: Vec<(Dataset, Dataset)> = Vec::new();
+        for (i, root) in args.data.iter().enumerate() {
+            // The first root keeps the seed of a one-root run.
+            let seed = match i {
+                0 => seed,
+                _ => data::mix_seed(seed, 0xDA7A, i as u64),
+            };
+            let train = Dataset::load_modelnet(root, Split::Train, classes, args.points, s, seed)?;
+            let val = Dataset::load_modelnet(root, Split::Test, classes, args.points, s, seed ^ 1)?;
+            sets.push((train, val));
+        }
+        if let Some(n) = args.generated {
+            let train = Dataset::generated(n, args.points, seed);
+            let val = Dataset::generated(n.div_ceil(4), args.points, seed ^ 0xABCD);
+            sets.push((train, val));
+        }
+        let mut sets = sets.into_iter();
+        let Some((mut train, mut val)) = sets.next() else {
+            bail!("give --data PATH (repeatable), --generated COUNT, or --object FILE");
+        };
+        for (t, v) in sets {
+            train.append(t);
+            val.append(v);
+        }
+        (train, val)
     };
     if let Some(i) = args.single_model {
         if i >= train.len() {

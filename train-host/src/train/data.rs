@@ -680,6 +680,15 @@ impl Dataset {
         })
     }
 
+    /// Adds `other`'s shapes after these (both reduced to the same
+    /// `points`: one training run's sets).
+    pub fn append(&mut self, other: Dataset) {
+        self.clouds.extend(other.clouds);
+        self.rest.extend(other.rest);
+        self.labels.extend(other.labels);
+        self.names.extend(other.names);
+    }
+
     /// Only the shape at `index` (single-model training).
     pub fn single_model(mut self, index: usize) -> Self {
         let i = index.min(self.clouds.len().saturating_sub(1));
