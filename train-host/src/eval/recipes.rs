@@ -30,6 +30,9 @@ pub struct Recipe {
     pub input: Input,
     /// The remaining `pcrnet train` arguments.
     pub args: &'static [&'static str],
+    /// Arguments after `args` (what sets a recipe apart from another
+    /// sharing its `args`).
+    pub more: &'static [&'static str],
 }
 
 /// Every model the experiments use.
@@ -38,6 +41,7 @@ pub const RECIPES: [Recipe; 6] = [
     Recipe {
         name: "mn10-pcrnet",
         input: Input::Data("ModelNet10"),
+        more: &[],
         args: &[
             "--arch", "embedded", "--model", "pcrnet", "--points", "512", "--batch", "32",
             "--epochs", "30", "--noise", "--seed", "1",
@@ -46,6 +50,7 @@ pub const RECIPES: [Recipe; 6] = [
     Recipe {
         name: "mn10-ipcrnet",
         input: Input::Data("ModelNet10"),
+        more: &[],
         args: &[
             "--arch", "embedded", "--model", "ipcrnet", "--points", "512", "--batch", "32",
             "--epochs", "20", "--noise", "--seed", "1",
@@ -54,6 +59,7 @@ pub const RECIPES: [Recipe; 6] = [
     Recipe {
         name: "mn10-seen5-ipcrnet",
         input: Input::Data("ModelNet10"),
+        more: &[],
         args: &[
             "--classes",
             "bathtub,bed,chair,desk,dresser",
@@ -74,6 +80,7 @@ pub const RECIPES: [Recipe; 6] = [
     Recipe {
         name: "mn10-toilet-ipcrnet",
         input: Input::Data("ModelNet10"),
+        more: &[],
         args: &[
             "--classes",
             "toilet",
@@ -94,6 +101,7 @@ pub const RECIPES: [Recipe; 6] = [
     Recipe {
         name: "air-pcrnet",
         input: Input::Data("ModelNet40-airplane"),
+        more: &[],
         args: &[
             "--arch", "embedded", "--model", "pcrnet", "--points", "512", "--batch", "32",
             "--epochs", "40", "--noise", "--seed", "1",
@@ -102,6 +110,7 @@ pub const RECIPES: [Recipe; 6] = [
     Recipe {
         name: "air-ipcrnet",
         input: Input::Data("ModelNet40-airplane"),
+        more: &[],
         args: &[
             "--arch", "embedded", "--model", "ipcrnet", "--points", "512", "--batch", "32",
             "--epochs", "40", "--noise", "--seed", "1",
@@ -113,6 +122,7 @@ pub const RECIPES: [Recipe; 6] = [
 pub const PARTIAL_RECIPE: Recipe = Recipe {
     name: "air-partial-ipcrnet",
     input: Input::Data("ModelNet40-airplane"),
+    more: &[],
     args: &[
         "--arch",
         "embedded",
@@ -146,50 +156,36 @@ pub const OBJECT_RECIPES: [Recipe; 2] = [
     Recipe {
         name: "air0001-pose",
         input: Input::Object(OBJECT_FILE),
-        args: &[
-            "--arch",
-            "embedded",
-            "--model",
-            "ipcrnet",
-            "--points",
-            "1024",
-            "--loss",
-            "pose",
-            "--single-view",
-            "--noise",
-            "0,0.01",
-            "--identity-share",
-            "0.05",
-            "--epochs",
-            "30",
-            "--seed",
-            "1",
-        ],
+        more: &[],
+        args: OBJECT_ARGS,
     },
     Recipe {
         name: "air0001-pose-resampled",
         input: Input::Object(OBJECT_FILE),
-        args: &[
-            "--arch",
-            "embedded",
-            "--model",
-            "ipcrnet",
-            "--points",
-            "1024",
-            "--loss",
-            "pose",
-            "--single-view",
-            "--noise",
-            "0,0.01",
-            "--identity-share",
-            "0.05",
-            "--resample",
-            "--epochs",
-            "30",
-            "--seed",
-            "1",
-        ],
+        more: &["--resample"],
+        args: OBJECT_ARGS,
     },
+];
+
+/// The `train --object` arguments both object recipes share.
+const OBJECT_ARGS: &[&str] = &[
+    "--arch",
+    "embedded",
+    "--model",
+    "ipcrnet",
+    "--points",
+    "1024",
+    "--loss",
+    "pose",
+    "--single-view",
+    "--noise",
+    "0,0.01",
+    "--identity-share",
+    "0.05",
+    "--epochs",
+    "30",
+    "--seed",
+    "1",
 ];
 
 /// Issue 11, item 6: the generalisation experiment's five-class model
@@ -199,6 +195,7 @@ pub const OBJECT_RECIPES: [Recipe; 2] = [
 pub const HELDOUT_RECIPE: Recipe = Recipe {
     name: "mn10-seen5-plus-ipcrnet",
     input: Input::Several(&["ModelNet10", "ModelNet40-airplane"]),
+    more: &[],
     args: &[
         "--classes",
         "bathtub,bed,chair,desk,dresser,ModelNet40-airplane",
@@ -246,7 +243,7 @@ impl Recipe {
         for path in paths {
             v.extend([flag.to_string(), data.join(path).display().to_string()]);
         }
-        v.extend(self.args.iter().map(|s| s.to_string()));
+        v.extend(self.args.iter().chain(self.more).map(|s| s.to_string()));
         v.extend([
             "--no-progress".to_string(),
             "--out".to_string(),
