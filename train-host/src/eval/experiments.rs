@@ -106,19 +106,33 @@ pub(super) fn modelnet10(
     folder(ctx, "ModelNet10", classes, pairs)
 }
 
+/// The test split of `<data>/<dir>` (only `classes` when given), at the
+/// experiments' [`POINTS`].
 pub(super) fn folder(
     ctx: &Context,
     dir: &str,
     classes: Option<&[&str]>,
     pairs: PairConfig,
 ) -> PairSetSpec {
+    let shapes = Shapes::Folder {
+        root: ctx.data.join(dir),
+        test_split: true,
+        classes: classes.map(|c| c.iter().map(|s| s.to_string()).collect()),
+    };
+    pair_spec(ctx, shapes, POINTS, pairs)
+}
+
+/// An experiment's pair set of `shapes` at `points` per cloud: the
+/// context's pair count and seed, sources not centred or resampled.
+pub(super) fn pair_spec(
+    ctx: &Context,
+    shapes: Shapes,
+    points: usize,
+    pairs: PairConfig,
+) -> PairSetSpec {
     PairSetSpec {
-        shapes: Shapes::Folder {
-            root: ctx.data.join(dir),
-            test_split: true,
-            classes: classes.map(|c| c.iter().map(|s| s.to_string()).collect()),
-        },
-        points: POINTS,
+        shapes,
+        points,
         sampling: Sampling::Fps,
         pairs: PairConfig {
             centre: false,

@@ -11,7 +11,6 @@ use super::experiments::{
     Context, Recorder, Report, SEEN, UNSEEN, folder, pair_set, success_chart,
 };
 use super::methods::{Method, MethodKind};
-use super::pairs::{PairSetSpec, Shapes};
 use super::recipes::HELDOUT_RECIPES;
 use super::trust::{device, table};
 use crate::train::data::PairConfig;
@@ -35,17 +34,14 @@ pub fn heldout(ctx: &Context) -> anyhow::Result<Report> {
     let recommended = pcrnet_core::Options::default().hypotheses;
     // The held-out file name is the trust experiment's: the same pairs.
     for (set, file, classes) in [
-        ("ModelNet10 held-out classes", "trust-mn10-heldout", &UNSEEN),
-        ("ModelNet10 seen classes", "heldout-mn10-seen", &SEEN),
+        (
+            "ModelNet10 held-out classes",
+            "trust-mn10-heldout",
+            &UNSEEN[..],
+        ),
+        ("ModelNet10 seen classes", "heldout-mn10-seen", &SEEN[..]),
     ] {
-        let spec = PairSetSpec {
-            shapes: Shapes::Folder {
-                root: ctx.data.join("ModelNet10"),
-                test_split: true,
-                classes: Some(classes.iter().map(|c| c.to_string()).collect()),
-            },
-            ..folder(ctx, "ModelNet10", None, noisy)
-        };
+        let spec = folder(ctx, "ModelNet10", Some(classes), noisy);
         let pairs = pair_set(ctx, file, spec)?;
         let first = rec.raw.len();
         for model in &models {

@@ -7,13 +7,13 @@
 
 use anyhow::Context as _;
 
-use super::experiments::{Context, Recorder, Report, folder, pair_set, success_chart};
+use super::experiments::{Context, Recorder, Report, folder, pair_set, pair_spec, success_chart};
 use super::methods::{Method, MethodKind};
 use super::pairs::{PairSetSpec, Shapes};
 use super::recipes::{OBJECT_FILE, OBJECT_POINTS, OBJECT_RECIPES};
 use super::trust::{SHIPPED_INT8, device, table};
 use super::{MethodScore, pairs::Pair};
-use crate::train::data::{PairConfig, Sampling};
+use crate::train::data::PairConfig;
 
 /// Noise sigma of the noisy and single-view sets.
 const SIGMA: f32 = 0.01;
@@ -72,6 +72,10 @@ pub fn resampled(ctx: &Context) -> anyhow::Result<Report> {
     plot_last(&mut rec, "ModelNet10")?;
 
     // One airplane of the training split, with its own models.
+    let every_point = Method {
+        max_points: OBJECT_POINTS,
+        ..device(recommended)
+    };
     let models = OBJECT_RECIPES
         .iter()
         .map(|r| rec.model(r.name))
@@ -79,22 +83,16 @@ pub fn resampled(ctx: &Context) -> anyhow::Result<Report> {
     for (name, slug, cfg) in protocols() {
         for resample in [false, true] {
             let set = set_name("airplane_0001", name, resample);
+            let object = Shapes::Object {
+                path: ctx.data.join(OBJECT_FILE),
+            };
             let spec = PairSetSpec {
-                shapes: Shapes::Object {
-                    path: ctx.data.join(OBJECT_FILE),
-                },
-                points: OBJECT_POINTS,
-                sampling: Sampling::Fps,
                 resample,
-                ..folder(ctx, "ModelNet10", None, cfg)
+                ..pair_spec(ctx, object, OBJECT_POINTS, cfg)
             };
             let pairs: Vec<Pair> = pair_set(ctx, &file_name("air0001", slug, resample), spec)?;
             rec.score(&set, Method::new(MethodKind::Icp), None, &pairs, true)?;
             for model in &models {
-                let every_point = Method {
-                    max_points: OBJECT_POINTS,
-                    ..device(recommended)
-                };
                 for method in [
                     Method::new(MethodKind::Ipcrnet),
                     device(recommended),

@@ -100,14 +100,7 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
     // the other five.
     let gen5 = rec.model("mn10-seen5-ipcrnet")?;
     let set = "ModelNet10 held-out classes";
-    let spec = PairSetSpec {
-        shapes: super::pairs::Shapes::Folder {
-            root: ctx.data.join("ModelNet10"),
-            test_split: true,
-            classes: Some(UNSEEN.iter().map(|c| c.to_string()).collect()),
-        },
-        ..folder(ctx, "ModelNet10", None, noisy)
-    };
+    let spec = folder(ctx, "ModelNet10", Some(&UNSEEN), noisy);
     let pairs = pair_set(ctx, "trust-mn10-heldout", spec)?;
     let first = rec.raw.len();
     for method in [

@@ -42,6 +42,7 @@
 //! only on (seed, epoch, slot): batches can be built in parallel and a run
 //! resumes at any step without replaying a generator.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use rand::{Rng, SeedableRng};
@@ -715,11 +716,16 @@ impl Dataset {
     /// pair's `seed`), so that template and source share no point. `None`
     /// for an index out of range, or with `resample` when the shape has no
     /// other point ([`Dataset::cannot_resample`]).
-    pub fn source_points(&self, shape: usize, resample: bool, seed: u64) -> Option<Vec<[f32; 3]>> {
+    pub fn source_points(
+        &self,
+        shape: usize,
+        resample: bool,
+        seed: u64,
+    ) -> Option<Cow<'_, [[f32; 3]]>> {
         if resample {
-            reduce(self.rest.get(shape)?, self.points, Sampling::Random, seed)
+            reduce(self.rest.get(shape)?, self.points, Sampling::Random, seed).map(Cow::Owned)
         } else {
-            self.clouds.get(shape).cloned()
+            self.clouds.get(shape).map(|c| Cow::Borrowed(c.as_slice()))
         }
     }
 
@@ -752,7 +758,7 @@ impl Dataset {
             .map(|(&s, &seed)| {
                 let base = self
                     .source_points(s, resample, seed)
-                    .unwrap_or_else(|| self.clouds[s].clone());
+                    .unwrap_or(Cow::Borrowed(&self.clouds[s]));
                 let (src, r, t, c) = make_pair_with_centroid(&base, cfg, seed);
                 (s, src, r, t, c)
             })
