@@ -43,6 +43,12 @@ fn encoder(c: &mut Criterion) {
                 })
             });
         }
+        // The host's scratch: the x86-64 block kernel where it runs.
+        let mut scratch = vec![0i8; model.host_scratch_len()];
+        let id = BenchmarkId::new("int8_host", format!("{name}_{macs}mac"));
+        group.bench_function(id, |b| {
+            b.iter(|| model.encode(black_box(&cloud), &mut scratch).map(|f| f[0]))
+        });
         let (mut arena, mut out) = (vec![0u8; 20 << 20], vec![0u8; 20 << 20]);
         let blob = random_f32_blob_into(2, enc, head, &mut arena, &mut out).unwrap();
         let model = F32Model::from_bytes(blob).unwrap();

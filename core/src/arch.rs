@@ -22,6 +22,10 @@ pub const POSE_DIM: usize = 7;
 pub const MAX_LAYERS: usize = 8;
 /// Most points the int8 encoder pushes through the layers together (see [`crate::int8`]).
 pub const MAX_TILE: usize = 8;
+/// Points the int8 encoder's x86-64 host kernel pushes through the layers
+/// together, given [`Arch::host_block_len`] more bytes of scratch (see
+/// [`crate::Int8Model::host_scratch_len`]).
+pub const HOST_BLOCK: usize = 48;
 /// Points the f32 encoder's host kernel pushes through the layers together
 /// (see [`crate::float::F32Network::tiled_scratch_len`]).
 pub const F32_TILE: usize = 16;
@@ -159,6 +163,24 @@ impl Arch {
     /// Bytes of int8 scratch the int8 path needs with `tile` points per pass.
     pub fn int8_scratch_len(&self, tile: usize) -> usize {
         int8_scratch_len(&self.encoder, &self.head, tile)
+    }
+
+    /// Bytes of scratch the int8 encoder's x86-64 host kernel uses past
+    /// [`Self::int8_scratch_len`]: the encoder's weights as int16 (each
+    /// row padded to an even length) and two buffers of [`HOST_BLOCK`]
+    /// points x the widest layer input as int16 (the coordinates count as
+    /// four), plus 3 for alignment.
+    pub fn host_block_len(&self) -> usize {
+        let weights: usize = self
+            .encoder_layers()
+            .map(|l| l.outputs * l.inputs.div_ceil(2))
+            .sum();
+        let widest = self
+            .encoder_layers()
+            .map(|l| l.inputs.div_ceil(2))
+            .max()
+            .unwrap_or(0);
+        4 * (weights + 2 * HOST_BLOCK * widest) + 3
     }
 
     /// Elements of f32 scratch the f32 path needs.

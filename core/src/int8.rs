@@ -20,6 +20,15 @@
 //! tile size (bit for bit).
 
 use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong, prefix};
+#[cfg(all(target_arch = "x86_64", feature = "std"))]
+use crate::{arch::HOST_BLOCK, kernel::block::BlockEncoder};
+
+/// Points collected before they go through the encoder: a host block
+/// where the block kernel exists, a tile elsewhere.
+#[cfg(all(target_arch = "x86_64", feature = "std"))]
+const COLLECT: usize = HOST_BLOCK;
+#[cfg(not(all(target_arch = "x86_64", feature = "std")))]
+const COLLECT: usize = MAX_TILE;
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, OutputStep, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
@@ -161,6 +170,15 @@ impl<'a> Int8Model<'a> {
         self.p.arch.int8_scratch_len(tile)
     }
 
+    /// Bytes of scratch with which an x86-64 host with AVX2 (`std`
+    /// feature) encodes [`crate::arch::HOST_BLOCK`] points at a time
+    /// (several times faster; same results, bit for bit): a full tile's
+    /// [`Self::scratch_len`] plus [`Arch::host_block_len`]. Elsewhere the
+    /// extra bytes go unused.
+    pub fn host_scratch_len(&self) -> usize {
+        self.scratch_len(MAX_TILE) + self.p.arch.host_block_len()
+    }
+
     /// The largest tile (up to [`MAX_TILE`]) that fits `available` bytes.
     fn tile_for(&self, available: usize) -> Result<usize> {
         (1..=MAX_TILE)
@@ -257,8 +275,8 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &mut [i8],
     ) -> Result<(Pose, PassCounts)> {
-        let (feature, work) = self.split_scratch(tile, scratch)?;
-        let out_of_range = self.encode_into(source, map, tile, feature, work)?;
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        let out_of_range = self.encode_into(source, map, tile, feature, work, extra)?;
         let (head, saturated) = self.head_counted(feature, work)?;
         let counts = PassCounts {
             saturated,
@@ -286,8 +304,8 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &'s mut [i8],
     ) -> Result<Int8Inference<'s>> {
-        let (feature, work) = self.split_scratch(tile, scratch)?;
-        let (centring, out_of_range) = self.encode_centred(source, tile, feature, work)?;
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        let (centring, out_of_range) = self.encode_centred(source, tile, feature, work, extra)?;
         let (head, saturated) = self.head_counted(feature, work)?;
         Ok(Int8Inference {
             feature,
@@ -313,8 +331,8 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &'s mut [i8],
     ) -> Result<&'s [i8]> {
-        let (feature, work) = self.split_scratch(tile, scratch)?;
-        self.encode_centred(source, tile, feature, work)?;
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        self.encode_centred(source, tile, feature, work, extra)?;
         Ok(feature)
     }
 
@@ -326,18 +344,21 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         feature: &mut [i8],
         work: &mut [i8],
+        extra: &mut [i8],
     ) -> Result<(Pose, u32)> {
         let centring = pose::centring(source, self.centring(), &self.p.frame)?;
         let map = PointMap::new(self.p.frame, &centring);
-        let out_of_range = self.encode_into(source, &map, tile, feature, work)?;
+        let out_of_range = self.encode_into(source, &map, tile, feature, work, extra)?;
         Ok((centring, out_of_range))
     }
 
+    /// The scratch as the feature, the encoder's and head's work area (for
+    /// `tile` points), and what lies past them (the host kernel's room).
     fn split_scratch<'s>(
         &self,
         tile: usize,
         scratch: &'s mut [i8],
-    ) -> Result<(&'s mut [i8], &'s mut [i8])> {
+    ) -> Result<(&'s mut [i8], &'s mut [i8], &'s mut [i8])> {
         if !(1..=MAX_TILE).contains(&tile) {
             return Err(Error::InvalidParameter {
                 what: "tile outside 1..=MAX_TILE",
@@ -345,12 +366,12 @@ impl<'a> Int8Model<'a> {
         }
         let needed = self.scratch_len(tile);
         let available = scratch.len();
-        let scratch = scratch
-            .get_mut(..needed)
-            .ok_or(Error::ScratchTooSmall { needed, available })?;
-        scratch
+        let too_small = Error::ScratchTooSmall { needed, available };
+        let (scratch, extra) = scratch.split_at_mut_checked(needed).ok_or(too_small)?;
+        let (feature, work) = scratch
             .split_at_mut_checked(self.p.arch.feature_dim())
-            .ok_or(Error::ScratchTooSmall { needed, available })
+            .ok_or(too_small)?;
+        Ok((feature, work, extra))
     }
 
     /// Quantizes point `index` to the model's int16 input grid, after
@@ -379,6 +400,11 @@ impl<'a> Int8Model<'a> {
     /// left out; returns how many. Those inside are packed into tiles of
     /// `tile` points in source order, so the feature does not depend on the
     /// tile size. No point inside the range: [`Error::NoPointInRange`].
+    ///
+    /// On x86-64 with the `std` feature, when `extra` holds
+    /// [`Arch::host_block_len`] bytes and the CPU has AVX2, every full
+    /// block of [`HOST_BLOCK`] points goes through the block kernel
+    /// instead ([`crate::kernel::block`]; same values, bit for bit).
     fn encode_into(
         &self,
         source: &[[f32; 3]],
@@ -386,6 +412,7 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         feature: &mut [i8],
         work: &mut [i8],
+        extra: &mut [i8],
     ) -> Result<u32> {
         if source.is_empty() {
             return Err(Error::EmptyCloud);
@@ -396,7 +423,13 @@ impl<'a> Int8Model<'a> {
         let (pairs, spare) = work.split_at_mut((2 * half).min(work.len()));
         let mut pairs = ping_pong(pairs, half)?;
         let expanded = as_words(spare);
-        let mut points = [[0i16; INPUT_DIM]; MAX_TILE];
+        #[cfg(all(target_arch = "x86_64", feature = "std"))]
+        let mut block = BlockEncoder::new(&self.p.arch, &self.p.encoder, extra);
+        #[cfg(all(target_arch = "x86_64", feature = "std"))]
+        let batch = if block.is_some() { HOST_BLOCK } else { tile };
+        #[cfg(not(all(target_arch = "x86_64", feature = "std")))]
+        let (batch, _) = (tile, extra);
+        let mut points = [[0i16; INPUT_DIM]; COLLECT];
         let (mut filled, mut encoded, mut left_out) = (0usize, 0usize, 0u32);
         for (index, p) in source.iter().enumerate() {
             let Some(q) = self.quantize_point(index, p, map)? else {
@@ -407,16 +440,30 @@ impl<'a> Int8Model<'a> {
                 *slot = q;
                 filled += 1;
             }
-            if filled == tile {
-                self.encode_tile(&points[..filled], &mut pairs, expanded, feature)?;
+            if filled < batch {
+                continue;
+            }
+            #[cfg(all(target_arch = "x86_64", feature = "std"))]
+            if let Some(block) = block.as_mut() {
+                let layers = self.p.arch.encoder_layers().zip(self.p.encoder.iter());
+                let layers = layers.map(|(s, l)| (s.inputs, s.outputs, requant(l, true)));
+                block.encode(&points, layers, feature);
                 encoded += filled;
                 filled = 0;
+                continue;
             }
-        }
-        if filled > 0 {
             self.encode_tile(prefix(&points, filled)?, &mut pairs, expanded, feature)?;
             encoded += filled;
+            filled = 0;
         }
+        // The last points, in tiles (fewer than a block).
+        let mut rest = prefix(&points, filled)?;
+        while !rest.is_empty() {
+            let (now, later) = rest.split_at(tile.min(rest.len()));
+            self.encode_tile(now, &mut pairs, expanded, feature)?;
+            rest = later;
+        }
+        encoded += filled;
         if encoded == 0 {
             return Err(Error::NoPointInRange);
         }

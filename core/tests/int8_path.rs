@@ -90,16 +90,22 @@ fn matches_plain_reference_for_many_sizes() {
         (1u64, SMALL_ENC, SMALL_HEAD),
         (2, &[8][..], &[][..]),
         (3, &[32, 32, 128, 256][..], &[64][..]),
+        (4, &[7, 33, 65][..], &[16][..]),
     ] {
         let b = blob(seed, enc, head);
         let model = Int8Model::from_bytes(&b).unwrap();
-        let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
-        for n in [1usize, 2, 7, 8, 9, 33, 1000] {
+        // A full tile's scratch, and the host's (with the x86-64 block
+        // kernel, where the CPU has AVX2).
+        let mut tiles = vec![0i8; model.scratch_len(MAX_TILE)];
+        let mut host = vec![0i8; model.host_scratch_len()];
+        for n in [1usize, 2, 7, 8, 9, 32, 33, 64, 95, 1000] {
             let pts = cloud(seed * 100 + n as u64, n, 1.5);
-            let got = model.infer(&pts, &mut scratch).unwrap();
             let (feature, raw) = reference(&model, &pts);
-            assert_eq!(got.feature, &feature[..], "feature, seed {seed}, n {n}");
-            assert_eq!(got.head, raw, "head, seed {seed}, n {n}");
+            for scratch in [&mut tiles, &mut host] {
+                let got = model.infer(&pts, scratch).unwrap();
+                assert_eq!(got.feature, &feature[..], "feature, seed {seed}, n {n}");
+                assert_eq!(got.head, raw, "head, seed {seed}, n {n}");
+            }
             // The activations must not be degenerate for the test to mean anything.
             if n < 33 {
                 continue;

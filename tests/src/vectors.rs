@@ -1,7 +1,7 @@
 //! Test models, clouds and the container the device reads.
 
 use pcrnet_core::testing::{SplitMix64, random_int8_blob_with};
-use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options, POSE_DIM, Registration};
+use pcrnet_core::{Frame, Int8Model, Metric, Options, POSE_DIM, Registration};
 
 /// Container format version (the device checks it).
 pub const CONTAINER_VERSION: u32 = 4;
@@ -168,7 +168,8 @@ pub fn expected_iterative(model: &[u8], case: &Case) -> Option<Iterative> {
         return None;
     }
     let m = Int8Model::from_bytes(model).expect("test models are valid");
-    let mut scratch = vec![0i8; m.scratch_len(MAX_TILE)];
+    // The host's fastest kernels (the x86-64 block kernel where it runs).
+    let mut scratch = vec![0i8; m.host_scratch_len()];
     Some(
         m.network_pose(&case.cloud, case.iterations, 0.0, &mut scratch)
             .map(|(p, n)| (n, pose_bits(&p)))
@@ -313,7 +314,9 @@ fn clouds_in_model_units(model: &[u8], seed: u64, sizes: &[usize]) -> Vec<(Strin
 /// What the host's `pcrnet-core` computes for a case (the same calls the device makes).
 pub fn expected(model: &[u8], case: &Case) -> Expected {
     let m = Int8Model::from_bytes(model).expect("test models are valid");
-    let mut scratch = vec![0i8; 64 * 1024];
+    // Room for any tile and for the host's block kernel (x86-64), so
+    // the device is compared with the host's fastest path.
+    let mut scratch = vec![0i8; m.host_scratch_len()];
     let encoded = m.encode_tiled(&case.cloud, case.tile, &mut scratch).is_ok();
     match m.infer_tiled(&case.cloud, case.tile, &mut scratch) {
         Ok(r) => Expected::Ok {

@@ -34,7 +34,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use pcrnet_core::arch::{PAPER_ENCODER, PCRNET_HEAD};
 use pcrnet_core::float::Params;
-use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
+use pcrnet_core::{Arch, F32Model, Int8Model};
 use pcrnet_train::eval::{self, icp::IcpConfig};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
@@ -239,7 +239,7 @@ fn run(
         let model_frame: Vec<[f32; 3]> = c.iter().map(|p| frame.to_model(*p)).collect();
         outputs.push(net.infer(&model_frame, &mut fscratch)?.to_vec());
     }
-    let mut qscratch = vec![0i8; qmodel.scratch_len(MAX_TILE)];
+    let mut qscratch = vec![0i8; qmodel.host_scratch_len()];
     let f32_ms = median_ms(rounds, clouds, |c| {
         black_box(fmodel.network_pose(black_box(c), 1, 0.0, &mut fscratch)).is_ok()
     })?;

@@ -12,7 +12,7 @@
 //! All take and return user units: the frame is the blob's (or the bound
 //! template's), `p_template = R p_source + t`.
 
-use pcrnet_core::{F32Model, Int8Model, MAX_TILE, Options, Pose, Registration};
+use pcrnet_core::{F32Model, Int8Model, Options, Pose, Registration};
 
 use crate::eval::pointnetlk::{LkResult, PointNetLk};
 use crate::net::F32Params;
@@ -60,7 +60,7 @@ pub fn pipeline(
     };
     match Int8Model::from_bytes(&blob) {
         Ok(model) => {
-            let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+            let mut scratch = vec![0i8; model.host_scratch_len()];
             let options = with(model.trained_passes());
             let r = model.register(source, &options, &mut scratch)?;
             Ok((r, Precision::Int8))
@@ -142,7 +142,7 @@ pub fn network(
     let blob = model_for(blob, template)?;
     let ((pose, passes), precision) = match Int8Model::from_bytes(&blob) {
         Ok(model) => {
-            let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+            let mut scratch = vec![0i8; model.host_scratch_len()];
             (
                 model.network_pose(source, passes, tolerance, &mut scratch)?,
                 Precision::Int8,

@@ -11,7 +11,7 @@ use pcrnet_core::format::{
     self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, TemplateCloud, write_blob,
 };
 use pcrnet_core::template::{self, MAX_GRID};
-use pcrnet_core::{F32Model, Frame, Int8Model, MAX_TILE};
+use pcrnet_core::{F32Model, Frame, Int8Model};
 
 use crate::shapes::frame_of;
 use crate::train::data::farthest_point_sampling;
@@ -223,7 +223,7 @@ pub fn int8_blob(
         ..payload.clone()
     };
     let model = Int8Model::from_payload(draft.clone())?;
-    let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+    let mut scratch = vec![0i8; model.host_scratch_len()];
     let feature: Vec<u8> = model
         .encode(&reference.points, &mut scratch)?
         .iter()

@@ -147,6 +147,9 @@ mod dsp;
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
 mod x86;
 
+#[cfg(all(target_arch = "x86_64", feature = "std"))]
+pub(crate) mod block;
+
 /// int8 values as the bytes they are stored in.
 pub(crate) fn bytes_of(x: &[i8]) -> &[u8] {
     // SAFETY: i8 and u8 have the same size and alignment, and every bit
@@ -176,6 +179,16 @@ pub(crate) fn rows<T>(values: &[T], len: usize) -> core::slice::ChunksExact<'_, 
     match core::num::NonZeroUsize::new(len) {
         Some(len) => values.chunks_exact(len.get()),
         None => values.chunks_exact(1),
+    }
+}
+
+/// [`rows`] for a mutable slice.
+#[cfg(all(target_arch = "x86_64", feature = "std"))]
+#[inline(always)]
+pub(crate) fn rows_mut<T>(values: &mut [T], len: usize) -> core::slice::ChunksExactMut<'_, T> {
+    match core::num::NonZeroUsize::new(len) {
+        Some(len) => values.chunks_exact_mut(len.get()),
+        None => values.chunks_exact_mut(1),
     }
 }
 
@@ -282,13 +295,15 @@ fn portable_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink: &mut Si
 /// as bytes; the head's first layer reads the template feature from the
 /// blob and the source feature from scratch): `out[o]` gets output `o`'s
 /// activation, as [`dense_tile`] on the concatenated vector would give it
-/// (bit for bit). Returns `false`, having done nothing, where the
-/// kernel does not apply: on targets without the DSP kernel, with a part
-/// whose length is not a multiple of 4, or with `expanded` smaller than
-/// the vector's int16 copy (`inputs / 2` words).
+/// (bit for bit). Returns `false`, having done nothing, where no kernel
+/// applies: on targets with neither kernel below, or where the kernel's
+/// conditions are not met (then [`dense_tile`] runs on the vector).
 ///
-/// On thumbv7em the vector is expanded to int16 pairs once and four weight
-/// rows share each pair of activation words (`dsp::dot_rows4`).
+/// On thumbv7em (parts of multiples of 4, `expanded` holding the vector's
+/// `inputs / 2` words) the vector is expanded to int16 pairs once and four
+/// weight rows share each pair of activation words (`dsp::dot_rows4`). On
+/// x86-64 with the `std` feature and AVX2 (at least 16 inputs) the AVX2
+/// kernel runs, four rows at a time (`x86::dense_vector`).
 #[inline(always)]
 pub(crate) fn dense_vector(
     weights: &[u8],
@@ -352,7 +367,11 @@ pub(crate) fn dense_vector(
         }
         true
     }
-    #[cfg(not(pcrnet_arm_dsp))]
+    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    {
+        x86::dense_vector(weights, parts, q, expanded, out)
+    }
+    #[cfg(not(any(pcrnet_arm_dsp, all(target_arch = "x86_64", feature = "std"))))]
     {
         let _ = (weights, parts, q, expanded, out);
         false

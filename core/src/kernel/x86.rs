@@ -61,7 +61,7 @@ pub(super) fn dense_tile(
 }
 
 /// The words of `expanded` as int16 values.
-fn as_i16(words: &mut [u32]) -> &mut [i16] {
+pub(super) fn as_i16(words: &mut [u32]) -> &mut [i16] {
     // SAFETY: u32's alignment is a multiple of i16's and every bit pattern
     // is a valid i16; `align_to_mut` hands out the aligned middle only
     // (here all of it), with `words`' lifetime.
@@ -156,6 +156,84 @@ fn points8(weights: &[u8], q: Requant<'_>, points: &[i16; 3 * ROWS], sink: &mut 
     });
 }
 
+/// [`super::dense_vector`]'s contract and results for a vector of at
+/// least 16 inputs (the concatenation of `parts`) on a CPU with AVX2: the
+/// vector is copied to int16 once, then each weight row is read 16 bytes at
+/// a time, sign-extended (`VPMOVSXBW`) and multiplied with the vector by
+/// `VPMADDWD`, four rows at once; lane sums, the scalar tail past the last
+/// multiple of 16, the bias and the output step follow. Returns `false`,
+/// having done nothing, on any other vector or CPU, or when `expanded`
+/// cannot hold the int16 copy.
+pub(super) fn dense_vector(
+    weights: &[u8],
+    parts: &[&[u8]],
+    q: Requant<'_>,
+    expanded: &mut [u32],
+    out: &mut [i8],
+) -> bool {
+    let inputs: usize = parts.iter().map(|p| p.len()).sum();
+    if inputs < LANES || !std::is_x86_feature_detected!("avx2") {
+        return false;
+    }
+    let Some(xs) = as_i16(expanded).get_mut(..inputs) else {
+        return false;
+    };
+    for (d, &s) in xs.iter_mut().zip(parts.iter().flat_map(|p| p.iter())) {
+        *d = s as i8 as i16;
+    }
+    // SAFETY: the CPU has AVX2 (checked above), all `vector` requires.
+    #[allow(unsafe_code)]
+    unsafe {
+        vector(weights, inputs, q, xs, out)
+    };
+    true
+}
+
+#[target_feature(enable = "avx2")]
+fn vector(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i16], out: &mut [i8]) {
+    let full = inputs / LANES * LANES;
+    let (body, tail) = xs.split_at(full.min(xs.len()));
+    let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
+    let mut channels = rows(weights, inputs).zip(params).zip(out.iter_mut());
+    loop {
+        let group: [_; 4] = core::array::from_fn(|_| channels.next());
+        let Some(((first, _), _)) = &group[0] else {
+            return;
+        };
+        // Missing rows (past the last) read the first row's weights; their
+        // sums are dropped.
+        let rs = group
+            .each_ref()
+            .map(|g| g.as_ref().map_or(*first, |((r, _), _)| *r));
+        let mut acc = [_mm256_setzero_si256(); ROWS];
+        for (c, x) in body.chunks_exact(LANES).enumerate() {
+            // SAFETY: `x` is 16 values (32 bytes) and every row holds
+            // `inputs >= full` bytes, so 16 from `c * 16 < full` are in
+            // bounds; unaligned loads are allowed.
+            #[allow(unsafe_code)]
+            unsafe {
+                let x = _mm256_loadu_si256(x.as_ptr().cast::<__m256i>());
+                for (acc, r) in acc.iter_mut().zip(rs) {
+                    let w = _mm_loadu_si128(r.as_ptr().add(c * LANES).cast::<__m128i>());
+                    *acc = _mm256_add_epi32(*acc, _mm256_madd_epi16(_mm256_cvtepi8_epi16(w), x));
+                }
+            }
+        }
+        let sums = store(reduce(acc));
+        for ((channel, row), sum) in group.into_iter().zip(rs).zip(sums) {
+            let Some(((_, ((bias, m), &s)), y)) = channel else {
+                continue;
+            };
+            let rest = row.get(full..).unwrap_or(&[]).iter().zip(tail);
+            let rest = rest.fold(0i32, |a, (&w, &x)| {
+                a.wrapping_add(w as i8 as i32 * x as i32)
+            });
+            let acc = bias.wrapping_add(sum).wrapping_add(rest);
+            *y = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc);
+        }
+    }
+}
+
 /// For every output channel `o` (weight row `row`): `sum(row)` gives the
 /// eight points' dot products, the bias is added, and the sums go to
 /// `sink`: the largest to a max-pool (the output step is non-decreasing),
@@ -200,7 +278,17 @@ fn outputs(
 /// same integer operations as the scalar step, so the same values.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8)) -> [i32; ROWS] {
+fn requantize(acc: __m256i, parts: (i32, i32, u32, i8)) -> [i32; ROWS] {
+    store(requantize_lanes(acc, parts))
+}
+
+/// [`requantize`] as a vector.
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(super) fn requantize_lanes(
+    acc: __m256i,
+    (m, offset, high_shift, act_min): (i32, i32, u32, i8),
+) -> __m256i {
     let m = _mm256_set1_epi32(m);
     let even = _mm256_mul_epi32(acc, m);
     let odd = _mm256_mul_epi32(_mm256_srli_epi64::<32>(acc), m);
@@ -210,13 +298,13 @@ fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8
         _mm_cvtsi32_si128(high_shift as i32),
     );
     let v = _mm256_min_epi32(v, _mm256_set1_epi32(i8::MAX as i32));
-    store(_mm256_max_epi32(v, _mm256_set1_epi32(act_min as i32)))
+    _mm256_max_epi32(v, _mm256_set1_epi32(act_min as i32))
 }
 
 /// The largest of eight lanes.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn max(v: __m256i) -> i32 {
+pub(super) fn max(v: __m256i) -> i32 {
     let v = _mm256_max_epi32(v, _mm256_permute2x128_si256::<0x01>(v, v));
     let v = _mm256_max_epi32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
     let v = _mm256_max_epi32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v));
@@ -226,7 +314,7 @@ fn max(v: __m256i) -> i32 {
 /// Eight i32 as a vector.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn load(values: [i32; ROWS]) -> __m256i {
+pub(super) fn load(values: [i32; ROWS]) -> __m256i {
     // SAFETY: `values` is 32 bytes; unaligned loads are allowed.
     #[allow(unsafe_code)]
     unsafe {
@@ -237,7 +325,7 @@ fn load(values: [i32; ROWS]) -> __m256i {
 /// A vector's eight i32.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn store(v: __m256i) -> [i32; ROWS] {
+pub(super) fn store(v: __m256i) -> [i32; ROWS] {
     let mut out = [0i32; ROWS];
     // SAFETY: `out` is 32 bytes; unaligned stores are allowed.
     #[allow(unsafe_code)]
@@ -410,6 +498,48 @@ mod tests {
                 &mut Sink::Pool(&mut got)
             ));
             assert_eq!(got, want, "pooled, 3 -> {outputs}");
+        }
+    }
+
+    /// The head's vector kernel gives the portable kernel's activations,
+    /// with one part or two, with and without a tail past 16, for row
+    /// counts that are and are not multiples of four.
+    #[test]
+    fn avx2_vector_matches_portable() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = SplitMix64(13);
+        for &(split, inputs, outputs) in &[(8, 16, 4), (0, 40, 7), (256, 512, 256), (20, 41, 9)] {
+            let byte = |rng: &mut SplitMix64| rng.int(-128, 127) as i8 as u8;
+            let weights: Vec<u8> = (0..inputs * outputs).map(|_| byte(&mut rng)).collect();
+            let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng)).collect();
+            let words = |rng: &mut SplitMix64, lo: i32, hi: i32| -> Vec<u8> {
+                (0..outputs)
+                    .flat_map(|_| rng.int(lo, hi).to_le_bytes())
+                    .collect()
+            };
+            let bias = words(&mut rng, -1 << 20, 1 << 20);
+            let multiplier = words(&mut rng, 1 << 30, i32::MAX);
+            let shift: Vec<u8> = (0..outputs).map(|_| rng.int(-31, 31) as i8 as u8).collect();
+            let q = Requant {
+                bias: &bias,
+                multiplier: &multiplier,
+                shift: &shift,
+                zero_point: 3,
+                act_min: 3,
+            };
+            let mut want = std::vec![0i8; outputs];
+            let sink = &mut Sink::Store {
+                out: &mut want,
+                outputs,
+            };
+            super::super::dense_tile(&weights, inputs, q, &x, sink);
+            let (a, b) = x.split_at(split);
+            let mut expanded = std::vec![0u32; inputs.div_ceil(2)];
+            let mut got = std::vec![0i8; outputs];
+            assert!(dense_vector(&weights, &[a, b], q, &mut expanded, &mut got));
+            assert_eq!(got, want, "{inputs} -> {outputs}");
         }
     }
 

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
-use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE};
+use pcrnet_core::{Arch, F32Model, Int8Model};
 use pcrnet_train::eval::cli::MethodOptions;
 use pcrnet_train::eval::methods::{self, MethodKind};
 use pcrnet_train::frame::FilePose;
@@ -528,7 +528,7 @@ fn untrained(arch: Arch, seed: u64, out: Option<PathBuf>) -> anyhow::Result<()> 
     write_stdout(&inspect::describe(&int8_blob)?);
 
     let model = Int8Model::from_bytes(&int8_blob)?;
-    let mut scratch = vec![0i8; model.scratch_len(MAX_TILE)];
+    let mut scratch = vec![0i8; model.host_scratch_len()];
     let (pose, _) = model.network_pose(&source, 1, 0.0, &mut scratch)?;
     let fmodel = F32Model::from_bytes(&f32_blob)?;
     let mut fscratch = vec![0f32; fmodel.tiled_scratch_len()];

@@ -1,0 +1,307 @@
+//! The x86-64 AVX2 block encoder (`std` feature): [`HOST_BLOCK`] points
+//! through every encoder layer, each layer a small matrix product.
+//!
+//! The tile kernel ([`super::x86`]) multiplies one weight row with eight
+//! points' activations along the input axis and must add each point's
+//! eight partial sums horizontally, for every output. Here the vector
+//! lanes run along the points instead, so no lane sum is ever needed:
+//!
+//! - the weights of every encoder layer are copied once per call into
+//!   int16 rows padded to an even length (input `2j` in the low half of
+//!   word `j`, input `2j + 1` in the high half);
+//! - a layer's input is kept as int16 pairs *by point*: word `j * BLOCK +
+//!   p` holds point `p`'s inputs `2j` and `2j + 1`. The first layer's
+//!   input is the coordinates: `(x, y)` then `(z, 0)`;
+//! - for two outputs at a time and every input pair, the two weight words
+//!   are broadcast and `VPMADDWD` multiplies them with the pairs of eight
+//!   points at once (16 multiplies, pairs summed into eight i32 lanes),
+//!   four vectors of points per weight word; the eight accumulators start
+//!   from the biases;
+//! - the output step runs on eight points at once, and the two outputs'
+//!   activations are interleaved straight into the next layer's pairs; the
+//!   last layer takes the largest accumulator of each output for the
+//!   max-pool (the output step is non-decreasing, see [`Sink::Pool`]).
+//!
+//! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`),
+//! and model loading bounds every partial sum (see [`super::dot`]), so the
+//! result is the portable kernel's, bit for bit, in any order.
+
+use core::arch::x86_64::{
+    __m256i, _mm256_add_epi32, _mm256_and_si256, _mm256_loadu_si256, _mm256_madd_epi16,
+    _mm256_max_epi32, _mm256_or_si256, _mm256_set1_epi32, _mm256_slli_epi32, _mm256_storeu_si256,
+};
+
+use super::x86::{as_i16, load, max, requantize_lanes, store};
+use super::{Requant, Sink, as_words};
+use crate::arch::{Arch, HOST_BLOCK as BLOCK, INPUT_DIM};
+use crate::fixed::OutputStep;
+use crate::format::{Int8Layer, le_i32s};
+
+/// Vectors of eight points in a block.
+const VECTORS: usize = BLOCK / 8;
+
+/// A block encoder over a caller's scratch: the int16 weights and two
+/// activation buffers.
+pub(crate) struct BlockEncoder<'w> {
+    weights: &'w [u32],
+    acts: (&'w mut [u32], &'w mut [u32]),
+}
+
+impl<'w> BlockEncoder<'w> {
+    /// Copies the encoder weights into `area` (at least
+    /// [`Arch::host_block_len`] bytes) and returns the encoder; `None`,
+    /// having done nothing that matters, without AVX2 or room.
+    pub(crate) fn new(arch: &Arch, layers: &[Int8Layer<'_>], area: &'w mut [i8]) -> Option<Self> {
+        if !std::is_x86_feature_detected!("avx2") || area.len() < arch.host_block_len() {
+            return None;
+        }
+        let words = as_words(area);
+        let total: usize = arch
+            .encoder_layers()
+            .map(|l| l.outputs * l.inputs.div_ceil(2))
+            .sum();
+        let widest = arch.encoder_layers().map(|l| l.inputs.div_ceil(2)).max()?;
+        let (weights, rest) = words.split_at_mut_checked(total)?;
+        let (a, rest) = rest.split_at_mut_checked(BLOCK * widest)?;
+        let b = rest.get_mut(..BLOCK * widest)?;
+        let mut free = &mut *weights;
+        for (shape, layer) in arch.encoder_layers().zip(layers) {
+            let (out, tail) =
+                free.split_at_mut_checked(shape.outputs * shape.inputs.div_ceil(2))?;
+            widen(layer.weights, shape.inputs, out);
+            free = tail;
+        }
+        Some(BlockEncoder {
+            weights,
+            acts: (a, b),
+        })
+    }
+
+    /// Encodes a block of quantized points and max-pools the last layer
+    /// into `feature`. `layers` holds each encoder layer's input and output
+    /// widths and requantization, first to last, as in [`Self::new`].
+    pub(crate) fn encode<'q>(
+        &mut self,
+        points: &[[i16; INPUT_DIM]; BLOCK],
+        layers: impl Iterator<Item = (usize, usize, Requant<'q>)>,
+        feature: &mut [i8],
+    ) {
+        let (a, b) = (&mut *self.acts.0, &mut *self.acts.1);
+        let (xy, z) = a.split_at_mut(BLOCK.min(a.len()));
+        for ((xy, z), &[x, y, zc]) in xy.iter_mut().zip(z.iter_mut()).zip(points) {
+            *xy = pair(x, y);
+            *z = pair(zc, 0);
+        }
+        let (mut input, mut output) = (a, b);
+        let mut weights = self.weights;
+        let mut layers = layers.peekable();
+        while let Some((inputs, outputs, q)) = layers.next() {
+            let pairs = inputs.div_ceil(2);
+            let (w, rest) = weights.split_at(weights.len().min(outputs * pairs));
+            weights = rest;
+            let dest = if layers.peek().is_none() {
+                Dest::Pool(&mut *feature)
+            } else {
+                Dest::Pairs(&mut *output)
+            };
+            // SAFETY: `BlockEncoder::new` found AVX2, all `layer` requires.
+            #[allow(unsafe_code)]
+            unsafe {
+                layer(w, pairs, q, input, dest)
+            };
+            core::mem::swap(&mut input, &mut output);
+        }
+    }
+}
+
+/// Sign-extends a layer's int8 weight rows of `inputs` values into int16
+/// pair words, each row padded with a zero to an even length.
+fn widen(weights: &[u8], inputs: usize, out: &mut [u32]) {
+    let pairs = inputs.div_ceil(2);
+    if inputs.is_multiple_of(2) {
+        // Row-major int16 is already the pair layout.
+        for (h, &w) in as_i16(out).iter_mut().zip(weights) {
+            *h = w as i8 as i16;
+        }
+        return;
+    }
+    for (row, out) in super::rows(weights, inputs).zip(super::rows_mut(out, pairs)) {
+        for (j, word) in out.iter_mut().enumerate() {
+            let w = |k: usize| row.get(k).map_or(0, |&b| b as i8 as i16);
+            *word = pair(w(2 * j), w(2 * j + 1));
+        }
+    }
+}
+
+/// Two int16 values as one word, `lo` in the low half.
+fn pair(lo: i16, hi: i16) -> u32 {
+    (lo as u16 as u32) | ((hi as u16 as u32) << 16)
+}
+
+/// Where a layer's results go.
+enum Dest<'a> {
+    /// The next layer's input pairs.
+    Pairs(&'a mut [u32]),
+    /// The max-pooled feature.
+    Pool(&'a mut [i8]),
+}
+
+/// One layer on a block: `weights` holds `outputs` rows of `pairs` words,
+/// `input` the block's input pairs (`pairs x BLOCK` words).
+#[target_feature(enable = "avx2")]
+fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], dest: Dest<'_>) {
+    let Some(input) = input.get(..pairs * BLOCK) else {
+        return;
+    };
+    let mut params = le_i32s(q.bias)
+        .zip(le_i32s(q.multiplier))
+        .zip(q.shift)
+        .map(|((b, m), &s)| (b, OutputStep::new(m, s as i8, q.zero_point, q.act_min)));
+    let mut rows = super::rows(weights, pairs);
+    let (mut out, mut pool) = match dest {
+        Dest::Pairs(output) => (Some(super::rows_mut(output, BLOCK)), None),
+        Dest::Pool(feature) => (None, Some(Sink::Pool(feature))),
+    };
+    let mut o = 0;
+    while let (Some(r0), Some((b0, s0))) = (rows.next(), params.next()) {
+        let second = rows.next().zip(params.next());
+        let (r1, b1) = second.as_ref().map_or((r0, 0), |&(r, (b, _))| (r, b));
+        let mut acc0 = [_mm256_set1_epi32(b0); VECTORS];
+        let mut acc1 = [_mm256_set1_epi32(b1); VECTORS];
+        for ((&w0, &w1), x) in r0.iter().zip(r1).zip(super::rows(input, BLOCK)) {
+            let (w0, w1) = (_mm256_set1_epi32(w0 as i32), _mm256_set1_epi32(w1 as i32));
+            for ((a0, a1), x) in acc0.iter_mut().zip(&mut acc1).zip(x.as_chunks::<8>().0) {
+                // SAFETY: `x` is eight words (32 bytes); unaligned loads
+                // are allowed.
+                #[allow(unsafe_code)]
+                let x = unsafe { _mm256_loadu_si256(x.as_ptr().cast::<__m256i>()) };
+                *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(x, w0));
+                *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(x, w1));
+            }
+        }
+        if let Some(sink) = &mut pool {
+            sink.take(o, 0, &[largest(acc0)], &s0);
+            if let Some((_, (_, s1))) = &second {
+                sink.take(o + 1, 0, &[largest(acc1)], s1);
+            }
+        } else if let Some(out) = out.as_mut().and_then(|rows| rows.next()) {
+            let s1 = second.as_ref().map(|(_, (_, s))| s);
+            for ((a0, a1), out) in acc0.into_iter().zip(acc1).zip(out.as_chunks_mut::<8>().0) {
+                let lo = activations(a0, &s0);
+                let hi = s1.map_or(_mm256_set1_epi32(0), |s| activations(a1, s));
+                let words = _mm256_or_si256(
+                    _mm256_and_si256(lo, _mm256_set1_epi32(0xFFFF)),
+                    _mm256_slli_epi32::<16>(hi),
+                );
+                // SAFETY: `out` is eight words (32 bytes); unaligned
+                // stores are allowed.
+                #[allow(unsafe_code)]
+                unsafe {
+                    _mm256_storeu_si256(out.as_mut_ptr().cast::<__m256i>(), words)
+                };
+            }
+        }
+        o += 2;
+    }
+}
+
+/// The largest lane of the block's accumulators.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn largest(acc: [__m256i; VECTORS]) -> i32 {
+    max(acc.into_iter().fold(acc[0], |m, v| _mm256_max_epi32(m, v)))
+}
+
+/// The eight activations of one output's accumulators.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn activations(acc: __m256i, step: &OutputStep) -> __m256i {
+    match step.fast_parts() {
+        Some(parts) => requantize_lanes(acc, parts),
+        None => load(store(acc).map(|a| step.apply(a) as i32)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::SplitMix64;
+    use std::vec::Vec;
+
+    /// One layer of the block kernel gives the portable kernel's
+    /// activations, stored and max-pooled, on even and odd widths, on the
+    /// fast and the general requantization paths.
+    #[test]
+    fn block_layer_matches_portable() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = SplitMix64(21);
+        for &(inputs, outputs) in &[(2, 3), (16, 8), (33, 64), (64, 7), (128, 256), (7, 1)] {
+            for shift_range in [(-22, -2), (-31, 31)] {
+                let byte = |rng: &mut SplitMix64| rng.int(-128, 127) as i8;
+                let weights: Vec<u8> = (0..inputs * outputs)
+                    .map(|_| byte(&mut rng) as u8)
+                    .collect();
+                let x: Vec<i8> = (0..BLOCK * inputs).map(|_| byte(&mut rng)).collect();
+                let words = |rng: &mut SplitMix64, lo: i32, hi: i32| -> Vec<u8> {
+                    (0..outputs)
+                        .flat_map(|_| rng.int(lo, hi).to_le_bytes())
+                        .collect()
+                };
+                let bias = words(&mut rng, -1 << 20, 1 << 20);
+                let multiplier = words(&mut rng, 1 << 30, i32::MAX);
+                let shift: Vec<u8> = (0..outputs)
+                    .map(|_| rng.int(shift_range.0, shift_range.1) as i8 as u8)
+                    .collect();
+                let zero_point = byte(&mut rng);
+                let q = Requant {
+                    bias: &bias,
+                    multiplier: &multiplier,
+                    shift: &shift,
+                    zero_point,
+                    act_min: zero_point,
+                };
+                let pairs = inputs.div_ceil(2);
+                let mut wide = std::vec![0u32; outputs * pairs];
+                widen(&weights, inputs, &mut wide);
+                // The block's inputs as pairs by point.
+                let mut input = std::vec![0u32; pairs * BLOCK];
+                for (p, row) in x.chunks(inputs).enumerate() {
+                    for j in 0..pairs {
+                        let v = |k: usize| row.get(k).map_or(0, |&v| v as i16);
+                        input[j * BLOCK + p] = pair(v(2 * j), v(2 * j + 1));
+                    }
+                }
+                let mut want = std::vec![0i8; BLOCK * outputs];
+                let sink = &mut Sink::Store {
+                    out: &mut want,
+                    outputs,
+                };
+                super::super::dense_tile(&weights, inputs, q, &x, sink);
+                let mut out = std::vec![0u32; outputs.div_ceil(2) * BLOCK];
+                // SAFETY: the CPU has AVX2 (checked above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    layer(&wide, pairs, q, &input, Dest::Pairs(&mut out))
+                };
+                let got: Vec<i8> = (0..BLOCK * outputs)
+                    .map(|i| {
+                        let (p, o) = (i / outputs, i % outputs);
+                        (out[o / 2 * BLOCK + p] >> (16 * (o % 2))) as i16 as i8
+                    })
+                    .collect();
+                assert_eq!(got, want, "stored, {inputs} -> {outputs}");
+                let (mut want, mut got) =
+                    (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+                super::super::dense_tile(&weights, inputs, q, &x, &mut Sink::Pool(&mut want));
+                // SAFETY: as above.
+                #[allow(unsafe_code)]
+                unsafe {
+                    layer(&wide, pairs, q, &input, Dest::Pool(&mut got))
+                };
+                assert_eq!(got, want, "pooled, {inputs} -> {outputs}");
+            }
+        }
+    }
+}
