@@ -16,8 +16,10 @@
 //!   are the raw head output.
 //!
 //! Points go through the encoder in tiles of up to [`MAX_TILE`] points; a
-//! weight row is then read once per tile. The result does not depend on the
-//! tile size (bit for bit).
+//! weight row is then read once per tile. On an x86-64 host with AVX2 and
+//! [`Int8Model::host_scratch_len`] bytes of scratch, blocks of
+//! [`crate::arch::HOST_BLOCK`] points take the block kernel instead. The
+//! result depends on neither (bit for bit).
 
 use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong, prefix};
 #[cfg(all(target_arch = "x86_64", feature = "std"))]

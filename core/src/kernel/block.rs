@@ -15,7 +15,7 @@
 //! - for two outputs at a time and every input pair, the two weight words
 //!   are broadcast and `VPMADDWD` multiplies them with the pairs of eight
 //!   points at once (16 multiplies, pairs summed into eight i32 lanes),
-//!   four vectors of points per weight word; the eight accumulators start
+//!   six vectors of points per weight word; the twelve accumulators start
 //!   from the biases;
 //! - the output step runs on eight points at once, and the two outputs'
 //!   activations are interleaved straight into the next layer's pairs; the
