@@ -32,6 +32,15 @@ pub trait Params: Copy {
     fn slice(self, start: usize, len: usize) -> Self;
     /// The values in order.
     fn values(self) -> impl Iterator<Item = f32>;
+    /// The first eight values (zeros past the end).
+    #[inline(always)]
+    fn first8(self) -> [f32; 8] {
+        let mut out = [0f32; 8];
+        for (o, v) in out.iter_mut().zip(self.values()) {
+            *o = v;
+        }
+        out
+    }
 }
 
 impl Params for &[f32] {
@@ -58,8 +67,27 @@ impl Params for &[f32] {
 pub struct LeF32<'a>(pub &'a [u8]);
 
 impl Params for LeF32<'_> {
+    #[inline(always)]
     fn len(self) -> usize {
         self.0.len() / 4
+    }
+    #[inline(always)]
+    fn first8(self) -> [f32; 8] {
+        let mut out = [0f32; 8];
+        match self.0.first_chunk::<32>() {
+            // A whole chunk: one 32-byte copy, no per-value end checks.
+            Some(bytes) => {
+                for (o, w) in out.iter_mut().zip(bytes.as_chunks::<4>().0) {
+                    *o = f32::from_le_bytes(*w);
+                }
+            }
+            None => {
+                for (o, v) in out.iter_mut().zip(self.values()) {
+                    *o = v;
+                }
+            }
+        }
+        out
     }
     #[inline(always)]
     fn get(self, i: usize) -> f32 {

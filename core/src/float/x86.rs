@@ -230,45 +230,41 @@ fn rows8<P: Params, A: Params>(
 /// rows' weights (columns: one input's weights of the eight rows), then
 /// one input at a time.
 #[target_feature(enable = "avx")]
+#[inline]
 fn accumulate<P: Params, I: Params>(
     mut acc: __m256,
     rows: &[P; LANES],
     offset: usize,
     input: I,
 ) -> __m256 {
+    // Plain loops, no closures: a closure has no AVX of its own, so the
+    // helpers called from it would not be inlined and every vector would
+    // go through memory.
     let full = input.len() / LANES;
     for c in 0..full {
         let at = offset + c * LANES;
-        let columns = transpose(rows.map(|r| load8(r.slice(at, LANES))));
-        let xs = load8_array(input.slice(c * LANES, LANES));
-        for (w, x) in columns.into_iter().zip(xs) {
+        let mut block = [_mm256_setzero_ps(); LANES];
+        for (b, r) in block.iter_mut().zip(rows) {
+            *b = load(r.slice(at, LANES).first8());
+        }
+        let xs = input.slice(c * LANES, LANES).first8();
+        for (w, x) in transpose(block).into_iter().zip(xs) {
             acc = _mm256_add_ps(acc, _mm256_mul_ps(w, _mm256_set1_ps(x)));
         }
     }
     for i in full * LANES..input.len() {
-        let w = load(rows.map(|r| r.get(offset + i)));
-        acc = _mm256_add_ps(acc, _mm256_mul_ps(w, _mm256_set1_ps(input.get(i))));
+        let mut w = [0f32; LANES];
+        for (v, r) in w.iter_mut().zip(rows) {
+            *v = r.get(offset + i);
+        }
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(load(w), _mm256_set1_ps(input.get(i))));
     }
     acc
 }
 
-/// Eight values of `p` (zeros past its end).
-#[inline(always)]
-fn load8_array<P: Params>(p: P) -> [f32; LANES] {
-    let mut out = [0f32; LANES];
-    for (o, v) in out.iter_mut().zip(p.values()) {
-        *o = v;
-    }
-    out
-}
-
-#[target_feature(enable = "avx")]
-fn load8<P: Params>(p: P) -> __m256 {
-    load(load8_array(p))
-}
-
 /// The 8 x 8 transpose: `out[j]` lane `r` is `rows[r]` lane `j`.
 #[target_feature(enable = "avx")]
+#[inline]
 fn transpose(rows: [__m256; LANES]) -> [__m256; LANES] {
     let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
     let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
@@ -297,6 +293,7 @@ fn transpose(rows: [__m256; LANES]) -> [__m256; LANES] {
 }
 
 #[target_feature(enable = "avx")]
+#[inline]
 fn load(values: [f32; LANES]) -> __m256 {
     // SAFETY: `values` is 8 f32; unaligned loads are allowed.
     #[allow(unsafe_code)]
@@ -306,6 +303,7 @@ fn load(values: [f32; LANES]) -> __m256 {
 }
 
 #[target_feature(enable = "avx")]
+#[inline]
 fn store(v: __m256) -> [f32; LANES] {
     let mut out = [0f32; LANES];
     // SAFETY: `out` is 8 f32; unaligned stores are allowed.

@@ -106,16 +106,14 @@ pub fn resampled(ctx: &Context) -> anyhow::Result<Report> {
     plot_last(&mut rec, "airplane_0001")?;
 
     let table = table(&rec.raw);
-    let object = OBJECT_RECIPES
-        .map(|r| format!("`{}`", r.name))
-        .join(" and ");
+    let object = OBJECT_RECIPES.map(|r| format!("`{}`", r.name)).join(", ");
     rec.finish(
         "Sources sampled apart from the template",
         vec![
             "The paper's protocol makes each source from the template's own points; resampled: from the shape's points the template did not keep (no point shared with the template, as a sensor samples the surface anew). The transform, noise and view of a pair are the same with and without resampling.".into(),
             format!("Noisy: Gaussian noise sigma {SIGMA} per coordinate; single view: only the points a depth camera at a random viewpoint sees (a point z-buffer), then the noise. Euler angles U[-45°, 45°], translation U[-1, 1]."),
             format!("ModelNet10: the test split at 512 points, the shipped model (`{SHIPPED_INT8}`, PCRNet, trained on all ten classes with the paper's protocol)."),
-            format!("airplane_0001: one ModelNet40 airplane of the training split (2,048 points: {OBJECT_POINTS} for the template, the other {OBJECT_POINTS} for resampled sources, split by the same seed as in training), every pair a pose of it, with {object} (i-PCRNet, pose loss, single-view noisy training pairs, the second from resampled sources; trained on this airplane's points, as `train --object` is meant to be used: the file holds no others)."),
+            format!("airplane_0001: one ModelNet40 airplane of the training split (2,048 points: {OBJECT_POINTS} for the template, the other {OBJECT_POINTS} for resampled sources, split by the same seed as in training), every pair a pose of it, with {object} (i-PCRNet, pose loss, single-view noisy training pairs; the second and third from resampled sources, the third for 60 epochs instead of 30; trained on this airplane's points, as `train --object` is meant to be used: the file holds no others)."),
             "i-PCRNet: up to 20 passes, the paper's stop rule; device K=10: `pcrnet-core`'s register as in the `trust` experiment (the blob's passes, 10 starting poses, on-device point-to-plane ICP, residual), scoring and refining 256 source points (the default) or every one.".into(),
         ],
         vec![table],
