@@ -148,9 +148,10 @@ fn icp(clouds: &[Vec<[f32; 3]>], rounds: usize, out: &Path) -> anyhow::Result<()
     Ok(())
 }
 
-/// `count` ModelNet10 test clouds, preprocessed as for training and
-/// evaluation (`Dataset::load_modelnet`: centred, in the unit box), evenly
-/// spaced over the classes' sorted files; or generated shapes.
+/// `count` test clouds of a ModelNet-layout root (ModelNet10 by default),
+/// preprocessed as for training and evaluation (`Dataset::load_modelnet`:
+/// centred, in the unit box), evenly spaced over the classes' sorted
+/// files, labelled with the classes they came from; or generated shapes.
 fn clouds(data: Option<&Path>, count: usize) -> anyhow::Result<(Vec<Vec<[f32; 3]>>, String)> {
     let Some(root) = data else {
         let set = Dataset::generated(count, POINTS, 1);
@@ -158,8 +159,11 @@ fn clouds(data: Option<&Path>, count: usize) -> anyhow::Result<(Vec<Vec<[f32; 3]
     };
     let set = Dataset::load_modelnet(root, Split::Test, None, POINTS, Sampling::Random, 1)?;
     let step = (set.clouds.len() / count).max(1);
+    let mut classes: Vec<&str> = set.labels.iter().map(String::as_str).collect();
+    classes.dedup();
+    let label = format!("test split of {}, {}", classes.join(" "), root.display());
     let clouds = set.clouds.into_iter().step_by(step).take(count).collect();
-    Ok((clouds, format!("ModelNet10 test, {}", root.display())))
+    Ok((clouds, label))
 }
 
 /// A paper-width PCRNet with seeded random weights, quantized with
