@@ -224,6 +224,7 @@ fn activations(acc: __m256i, step: &OutputStep) -> __m256i {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_layer::{TestLayer, byte};
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
@@ -239,32 +240,12 @@ mod tests {
         let mut rng = SplitMix64(21);
         for &(inputs, outputs) in &[(2, 3), (16, 8), (33, 64), (64, 7), (128, 256), (7, 1)] {
             for shift_range in [(-22, -2), (-31, 31)] {
-                let byte = |rng: &mut SplitMix64| rng.int(-128, 127) as i8;
-                let weights: Vec<u8> = (0..inputs * outputs)
-                    .map(|_| byte(&mut rng) as u8)
-                    .collect();
+                let random = TestLayer::new(&mut rng, inputs, outputs, shift_range);
+                let (weights, q) = (&random.weights, random.requant());
                 let x: Vec<i8> = (0..BLOCK * inputs).map(|_| byte(&mut rng)).collect();
-                let words = |rng: &mut SplitMix64, lo: i32, hi: i32| -> Vec<u8> {
-                    (0..outputs)
-                        .flat_map(|_| rng.int(lo, hi).to_le_bytes())
-                        .collect()
-                };
-                let bias = words(&mut rng, -1 << 20, 1 << 20);
-                let multiplier = words(&mut rng, 1 << 30, i32::MAX);
-                let shift: Vec<u8> = (0..outputs)
-                    .map(|_| rng.int(shift_range.0, shift_range.1) as i8 as u8)
-                    .collect();
-                let zero_point = byte(&mut rng);
-                let q = Requant {
-                    bias: &bias,
-                    multiplier: &multiplier,
-                    shift: &shift,
-                    zero_point,
-                    act_min: zero_point,
-                };
                 let pairs = inputs.div_ceil(2);
                 let mut wide = std::vec![0u32; outputs * pairs];
-                widen(&weights, inputs, &mut wide);
+                widen(weights, inputs, &mut wide);
                 // The block's inputs as pairs by point.
                 let mut input = std::vec![0u32; pairs * BLOCK];
                 for (p, row) in x.chunks(inputs).enumerate() {
@@ -278,7 +259,7 @@ mod tests {
                     out: &mut want,
                     outputs,
                 };
-                super::super::dense_tile(&weights, inputs, q, &x, sink);
+                super::super::dense_tile(weights, inputs, q, &x, sink);
                 let mut out = std::vec![0u32; outputs.div_ceil(2) * BLOCK];
                 // SAFETY: the CPU has AVX2 (checked above).
                 #[allow(unsafe_code)]
@@ -294,7 +275,7 @@ mod tests {
                 assert_eq!(got, want, "stored, {inputs} -> {outputs}");
                 let (mut want, mut got) =
                     (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
-                super::super::dense_tile(&weights, inputs, q, &x, &mut Sink::Pool(&mut want));
+                super::super::dense_tile(weights, inputs, q, &x, &mut Sink::Pool(&mut want));
                 // SAFETY: as above.
                 #[allow(unsafe_code)]
                 unsafe {

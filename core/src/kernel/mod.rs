@@ -150,6 +150,9 @@ mod x86;
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
 pub(crate) mod block;
 
+#[cfg(all(test, target_arch = "x86_64", feature = "std"))]
+mod test_layer;
+
 /// int8 values as the bytes they are stored in.
 pub(crate) fn bytes_of(x: &[i8]) -> &[u8] {
     // SAFETY: i8 and u8 have the same size and alignment, and every bit

@@ -353,6 +353,7 @@ fn reduce(acc: [__m256i; ROWS]) -> __m256i {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_layer::{TestLayer, byte};
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
@@ -376,34 +377,16 @@ mod tests {
             (256, 16),
         ] {
             for shift_range in [(-22, -2), (-31, 31)] {
-                let byte = |rng: &mut SplitMix64| rng.int(-128, 127) as i8;
-                let weights: Vec<u8> = (0..inputs * outputs)
-                    .map(|_| byte(&mut rng) as u8)
-                    .collect();
+                let layer = TestLayer::new(&mut rng, inputs, outputs, shift_range);
+                let (weights, q) = (&layer.weights, layer.requant());
                 let x: Vec<i8> = (0..ROWS * inputs).map(|_| byte(&mut rng)).collect();
-                let words = |n: usize, rng: &mut SplitMix64, lo: i32, hi: i32| -> Vec<u8> {
-                    (0..n).flat_map(|_| rng.int(lo, hi).to_le_bytes()).collect()
-                };
-                let bias = words(outputs, &mut rng, -1 << 20, 1 << 20);
-                let multiplier = words(outputs, &mut rng, 1 << 30, i32::MAX);
-                let shift: Vec<u8> = (0..outputs)
-                    .map(|_| rng.int(shift_range.0, shift_range.1) as i8 as u8)
-                    .collect();
-                let zero_point = byte(&mut rng);
-                let q = Requant {
-                    bias: &bias,
-                    multiplier: &multiplier,
-                    shift: &shift,
-                    zero_point,
-                    act_min: zero_point,
-                };
                 let mut expanded = std::vec![0u32; ROWS * inputs / 2];
                 let (mut want, mut got) = (
                     std::vec![0i8; ROWS * outputs],
                     std::vec![0i8; ROWS * outputs],
                 );
                 super::super::dense_tile(
-                    &weights,
+                    weights,
                     inputs,
                     q,
                     &x,
@@ -416,13 +399,13 @@ mod tests {
                     out: &mut got,
                     outputs,
                 };
-                assert!(dense_tile(&weights, inputs, q, &x, &mut expanded, sink));
+                assert!(dense_tile(weights, inputs, q, &x, &mut expanded, sink));
                 assert_eq!(got, want, "stored, {inputs} -> {outputs}");
                 let (mut want, mut got) =
                     (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
-                super::super::dense_tile(&weights, inputs, q, &x, &mut Sink::Pool(&mut want));
+                super::super::dense_tile(weights, inputs, q, &x, &mut Sink::Pool(&mut want));
                 assert!(dense_tile(
-                    &weights,
+                    weights,
                     inputs,
                     q,
                     &x,
@@ -511,34 +494,19 @@ mod tests {
         }
         let mut rng = SplitMix64(13);
         for &(split, inputs, outputs) in &[(8, 16, 4), (0, 40, 7), (256, 512, 256), (20, 41, 9)] {
-            let byte = |rng: &mut SplitMix64| rng.int(-128, 127) as i8 as u8;
-            let weights: Vec<u8> = (0..inputs * outputs).map(|_| byte(&mut rng)).collect();
-            let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng)).collect();
-            let words = |rng: &mut SplitMix64, lo: i32, hi: i32| -> Vec<u8> {
-                (0..outputs)
-                    .flat_map(|_| rng.int(lo, hi).to_le_bytes())
-                    .collect()
-            };
-            let bias = words(&mut rng, -1 << 20, 1 << 20);
-            let multiplier = words(&mut rng, 1 << 30, i32::MAX);
-            let shift: Vec<u8> = (0..outputs).map(|_| rng.int(-31, 31) as i8 as u8).collect();
-            let q = Requant {
-                bias: &bias,
-                multiplier: &multiplier,
-                shift: &shift,
-                zero_point: 3,
-                act_min: 3,
-            };
+            let layer = TestLayer::new(&mut rng, inputs, outputs, (-31, 31));
+            let (weights, q) = (&layer.weights, layer.requant());
+            let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng) as u8).collect();
             let mut want = std::vec![0i8; outputs];
             let sink = &mut Sink::Store {
                 out: &mut want,
                 outputs,
             };
-            super::super::dense_tile(&weights, inputs, q, &x, sink);
+            super::super::dense_tile(weights, inputs, q, &x, sink);
             let (a, b) = x.split_at(split);
             let mut expanded = std::vec![0u32; inputs.div_ceil(2)];
             let mut got = std::vec![0i8; outputs];
-            assert!(dense_vector(&weights, &[a, b], q, &mut expanded, &mut got));
+            assert!(dense_vector(weights, &[a, b], q, &mut expanded, &mut got));
             assert_eq!(got, want, "{inputs} -> {outputs}");
         }
     }

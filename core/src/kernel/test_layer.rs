@@ -1,0 +1,62 @@
+//! A random int8 layer for the kernels' bit-exactness tests.
+
+use super::Requant;
+use crate::testing::SplitMix64;
+use std::vec::Vec;
+
+/// Random weights, biases and output steps of one layer.
+pub(crate) struct TestLayer {
+    pub weights: Vec<u8>,
+    bias: Vec<u8>,
+    multiplier: Vec<u8>,
+    shift: Vec<u8>,
+    zero_point: i8,
+}
+
+/// A random int8 value.
+pub(crate) fn byte(rng: &mut SplitMix64) -> i8 {
+    rng.int(-128, 127) as i8
+}
+
+impl TestLayer {
+    /// `outputs` rows of `inputs` random weights, biases up to 2^20,
+    /// multipliers in [2^30, 2^31), shifts in `shifts` (inclusive; beyond
+    /// -22..=-2 the output step takes its general path) and a random zero
+    /// point.
+    pub(crate) fn new(
+        rng: &mut SplitMix64,
+        inputs: usize,
+        outputs: usize,
+        shifts: (i32, i32),
+    ) -> Self {
+        let weights = (0..inputs * outputs).map(|_| byte(rng) as u8).collect();
+        let mut words = |lo: i32, hi: i32| -> Vec<u8> {
+            (0..outputs)
+                .flat_map(|_| rng.int(lo, hi).to_le_bytes())
+                .collect()
+        };
+        let bias = words(-1 << 20, 1 << 20);
+        let multiplier = words(1 << 30, i32::MAX);
+        let shift = (0..outputs)
+            .map(|_| rng.int(shifts.0, shifts.1) as i8 as u8)
+            .collect();
+        TestLayer {
+            weights,
+            bias,
+            multiplier,
+            shift,
+            zero_point: byte(rng),
+        }
+    }
+
+    /// Its requantization, ReLU on (the zero point as the floor).
+    pub(crate) fn requant(&self) -> Requant<'_> {
+        Requant {
+            bias: &self.bias,
+            multiplier: &self.multiplier,
+            shift: &self.shift,
+            zero_point: self.zero_point,
+            act_min: self.zero_point,
+        }
+    }
+}
