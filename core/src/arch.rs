@@ -66,6 +66,11 @@ impl LayerShape {
     pub const fn macs(&self) -> usize {
         self.inputs * self.outputs
     }
+    /// Words of its weights as int16 pairs, each row padded to an even
+    /// length (the x86-64 host block kernel's copy).
+    pub(crate) const fn pair_words(&self) -> usize {
+        self.outputs * self.inputs.div_ceil(2)
+    }
     /// Number of weights plus biases.
     pub const fn parameters(&self) -> usize {
         self.inputs * self.outputs + self.outputs
@@ -171,16 +176,21 @@ impl Arch {
     /// points x the widest layer input as int16 (the coordinates count as
     /// four), plus 3 for alignment.
     pub fn host_block_len(&self) -> usize {
-        let weights: usize = self
-            .encoder_layers()
-            .map(|l| l.outputs * l.inputs.div_ceil(2))
-            .sum();
+        let (weights, buffer) = self.host_block_words();
+        4 * (weights + 2 * buffer) + 3
+    }
+
+    /// The host block kernel's words: the encoder's weights as int16
+    /// pairs ([`LayerShape::pair_words`]), and one activation buffer
+    /// ([`HOST_BLOCK`] points x the widest layer input, in pairs).
+    pub(crate) fn host_block_words(&self) -> (usize, usize) {
+        let weights = self.encoder_layers().map(|l| l.pair_words()).sum();
         let widest = self
             .encoder_layers()
             .map(|l| l.inputs.div_ceil(2))
             .max()
             .unwrap_or(0);
-        4 * (weights + 2 * HOST_BLOCK * widest) + 3
+        (weights, HOST_BLOCK * widest)
     }
 
     /// Elements of f32 scratch the f32 path needs.

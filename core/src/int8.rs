@@ -22,15 +22,6 @@
 //! result depends on neither (bit for bit).
 
 use crate::arch::{Arch, INPUT_DIM, MAX_TILE, POSE_DIM, ping_pong, prefix};
-#[cfg(all(target_arch = "x86_64", feature = "std"))]
-use crate::{arch::HOST_BLOCK, kernel::block::BlockEncoder};
-
-/// Points collected before they go through the encoder: a host block
-/// where the block kernel exists, a tile elsewhere.
-#[cfg(all(target_arch = "x86_64", feature = "std"))]
-const COLLECT: usize = HOST_BLOCK;
-#[cfg(not(all(target_arch = "x86_64", feature = "std")))]
-const COLLECT: usize = MAX_TILE;
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT, OutputStep, quantize_coordinate};
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind, expect_len, le_f32s, le_i32s};
@@ -41,6 +32,15 @@ use crate::kernel::{
 use crate::pose::{self, Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
+#[cfg(all(target_arch = "x86_64", feature = "std"))]
+use crate::{arch::HOST_BLOCK, kernel::block::BlockEncoder};
+
+/// Points collected before they go through the encoder: a host block
+/// where the block kernel exists, a tile elsewhere.
+#[cfg(all(target_arch = "x86_64", feature = "std"))]
+const COLLECT: usize = HOST_BLOCK;
+#[cfg(not(all(target_arch = "x86_64", feature = "std")))]
+const COLLECT: usize = MAX_TILE;
 
 /// A validated int8 model borrowing its weights from a blob.
 #[derive(Debug, Clone)]
@@ -425,8 +425,12 @@ impl<'a> Int8Model<'a> {
         let (pairs, spare) = work.split_at_mut((2 * half).min(work.len()));
         let mut pairs = ping_pong(pairs, half)?;
         let expanded = as_words(spare);
+        // The block kernel copies the weights first: not worth it when no
+        // block can fill.
         #[cfg(all(target_arch = "x86_64", feature = "std"))]
-        let mut block = BlockEncoder::new(&self.p.arch, &self.p.encoder, extra);
+        let mut block = (source.len() >= HOST_BLOCK)
+            .then(|| BlockEncoder::new(&self.p.arch, &self.p.encoder, extra))
+            .flatten();
         #[cfg(all(target_arch = "x86_64", feature = "std"))]
         let batch = if block.is_some() { HOST_BLOCK } else { tile };
         #[cfg(not(all(target_arch = "x86_64", feature = "std")))]

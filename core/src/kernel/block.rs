@@ -31,7 +31,7 @@ use core::arch::x86_64::{
     _mm256_max_epi32, _mm256_or_si256, _mm256_set1_epi32, _mm256_slli_epi32, _mm256_storeu_si256,
 };
 
-use super::x86::{as_i16, load, max, requantize_lanes, store};
+use super::x86::{activations, as_i16, max};
 use super::{Requant, Sink, as_words};
 use crate::arch::{Arch, HOST_BLOCK as BLOCK, INPUT_DIM};
 use crate::fixed::OutputStep;
@@ -56,18 +56,13 @@ impl<'w> BlockEncoder<'w> {
             return None;
         }
         let words = as_words(area);
-        let total: usize = arch
-            .encoder_layers()
-            .map(|l| l.outputs * l.inputs.div_ceil(2))
-            .sum();
-        let widest = arch.encoder_layers().map(|l| l.inputs.div_ceil(2)).max()?;
+        let (total, buffer) = arch.host_block_words();
         let (weights, rest) = words.split_at_mut_checked(total)?;
-        let (a, rest) = rest.split_at_mut_checked(BLOCK * widest)?;
-        let b = rest.get_mut(..BLOCK * widest)?;
+        let (a, rest) = rest.split_at_mut_checked(buffer)?;
+        let b = rest.get_mut(..buffer)?;
         let mut free = &mut *weights;
         for (shape, layer) in arch.encoder_layers().zip(layers) {
-            let (out, tail) =
-                free.split_at_mut_checked(shape.outputs * shape.inputs.div_ceil(2))?;
+            let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
             widen(layer.weights, shape.inputs, out);
             free = tail;
         }
@@ -210,16 +205,6 @@ fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], dest: Des
 #[target_feature(enable = "avx2")]
 fn largest(acc: [__m256i; VECTORS]) -> i32 {
     max(acc.into_iter().fold(acc[0], |m, v| _mm256_max_epi32(m, v)))
-}
-
-/// The eight activations of one output's accumulators.
-#[inline]
-#[target_feature(enable = "avx2")]
-fn activations(acc: __m256i, step: &OutputStep) -> __m256i {
-    match step.fast_parts() {
-        Some(parts) => requantize_lanes(acc, parts),
-        None => load(store(acc).map(|a| step.apply(a) as i32)),
-    }
 }
 
 #[cfg(test)]

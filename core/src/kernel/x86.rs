@@ -257,17 +257,24 @@ fn outputs(
         match sink {
             Sink::Pool(_) => sink.take(o, 0, &[max(sum)], &step),
             Sink::Store { out, outputs } => {
-                let values = match step.fast_parts() {
-                    Some(parts) => requantize(sum, parts),
-                    None => store(sum).map(|acc| step.apply(acc) as i32),
-                };
-                for (t, v) in values.into_iter().enumerate() {
+                for (t, v) in store(activations(sum, &step)).into_iter().enumerate() {
                     if let Some(y) = out.get_mut(t * *outputs + o) {
                         *y = v as i8;
                     }
                 }
             }
         }
+    }
+}
+
+/// `OutputStep::apply` on eight accumulators: [`requantize`] on the fast
+/// path, lane by lane on the general one.
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(super) fn activations(acc: __m256i, step: &OutputStep) -> __m256i {
+    match step.fast_parts() {
+        Some(parts) => requantize(acc, parts),
+        None => load(store(acc).map(|a| step.apply(a) as i32)),
     }
 }
 
@@ -278,17 +285,7 @@ fn outputs(
 /// same integer operations as the scalar step, so the same values.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn requantize(acc: __m256i, parts: (i32, i32, u32, i8)) -> [i32; ROWS] {
-    store(requantize_lanes(acc, parts))
-}
-
-/// [`requantize`] as a vector.
-#[inline]
-#[target_feature(enable = "avx2")]
-pub(super) fn requantize_lanes(
-    acc: __m256i,
-    (m, offset, high_shift, act_min): (i32, i32, u32, i8),
-) -> __m256i {
+fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8)) -> __m256i {
     let m = _mm256_set1_epi32(m);
     let even = _mm256_mul_epi32(acc, m);
     let odd = _mm256_mul_epi32(_mm256_srli_epi64::<32>(acc), m);
