@@ -11,6 +11,7 @@ pub mod methods;
 pub mod metrics;
 pub mod nearest;
 pub mod pairs;
+pub mod paper;
 pub mod plot;
 pub mod pointnetlk;
 pub mod recipes;
