@@ -6,7 +6,7 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use pcrnet_core::arch::{PAPER_ENCODER, PCRNET_HEAD};
-use pcrnet_train::train::data::Dataset;
+use pcrnet_train::train::dataset::Dataset;
 use pcrnet_train::train::{TrainConfig, Trainer};
 use pcrnet_train::{EMBEDDED_ENCODER, EMBEDDED_HEAD};
 

@@ -10,7 +10,7 @@ use pcrnet_train::template::Reference;
 use pcrnet_train::train::geometry::{apply, quat_to_mat};
 use pcrnet_train::train::model::{self, ModelKind};
 use pcrnet_train::train::{
-    Checkpoint, Dataset, LossKind, PairConfig, RunOptions, Sampling, Schedule, TrainConfig,
+    Checkpoint, Dataset, LossKind, PairConfig, RunOptions, Sampling, Schedule, Split, TrainConfig,
     Trainer, data, export, initial_params, rotation_error_deg,
 };
 
@@ -411,14 +411,13 @@ fn loads_modelnet_folder() {
             std::fs::write(dir.join(format!("{class}_{i}.xyz")), text).unwrap();
         }
     }
-    let all =
-        Dataset::load_modelnet(&root, data::Split::Train, None, 32, Sampling::Random, 1).unwrap();
+    let all = Dataset::load_modelnet(&root, Split::Train, None, 32, Sampling::Random, 1).unwrap();
     assert_eq!(all.len(), 3);
     assert_eq!(all.labels, vec!["a", "a", "b"]);
     assert!(all.clouds.iter().all(|c| c.len() == 32));
     let only_b = Dataset::load_modelnet(
         &root,
-        data::Split::Train,
+        Split::Train,
         Some(&["b".to_string()]),
         64,
         Sampling::Fps,
@@ -427,13 +426,12 @@ fn loads_modelnet_folder() {
     .unwrap();
     assert_eq!(only_b.labels, vec!["b"]);
     assert_eq!(only_b.clouds[0].len(), 64);
-    let test =
-        Dataset::load_modelnet(&root, data::Split::Test, None, 32, Sampling::Fps, 1).unwrap();
+    let test = Dataset::load_modelnet(&root, Split::Test, None, 32, Sampling::Fps, 1).unwrap();
     assert_eq!(test.len(), 1);
     assert!(
         Dataset::load_modelnet(
             &root,
-            data::Split::Test,
+            Split::Test,
             Some(&["zz".into()]),
             8,
             Sampling::Fps,

@@ -7,7 +7,7 @@ use pcrnet_train::train::geometry::{
 };
 use pcrnet_train::train::loss::{chamfer, chamfer_value, pose_loss};
 use pcrnet_train::train::model::{self, Batch, ModelKind};
-use pcrnet_train::train::{LossKind, PairConfig, data, initial_params, ops};
+use pcrnet_train::train::{Dataset, LossKind, PairConfig, initial_params, ops};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -193,7 +193,7 @@ fn pose_loss_gradient() {
 }
 
 fn tiny_batch(seed: u64, b: usize, n: usize) -> Batch {
-    let ds = data::Dataset::generated(b, n, seed);
+    let ds = Dataset::generated(b, n, seed);
     let shapes: Vec<usize> = (0..b).collect();
     let seeds: Vec<u64> = (0..b as u64).map(|i| seed * 100 + i).collect();
     let cfg = PairConfig {

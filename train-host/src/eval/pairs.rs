@@ -21,7 +21,8 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::train::data::{self, DataError, Dataset, PairConfig, Sampling, Split};
+use crate::train::data::{self, PairConfig, Sampling};
+use crate::train::dataset::{DataError, Dataset, Split};
 use crate::train::geometry::Mat3;
 
 /// Version of the pair-set file layout.

@@ -32,6 +32,7 @@ pub mod adam;
 pub mod checkpoint;
 pub mod cli;
 pub mod data;
+pub mod dataset;
 pub mod export;
 pub mod geometry;
 pub mod loss;
@@ -52,7 +53,8 @@ use serde::{Deserialize, Serialize};
 pub use crate::eval::metrics::{Summary, rotation_error_deg, translation_error};
 pub use adam::{Adam, Schedule};
 pub use checkpoint::{Checkpoint, CheckpointError, Progress};
-pub use data::{Dataset, PairConfig, Sampling, Split};
+pub use data::{PairConfig, Sampling};
+pub use dataset::{Dataset, Split};
 pub use loss::LossKind;
 pub use model::{Batch, ModelKind};
 
