@@ -397,6 +397,35 @@ fn pairs_and_preprocessing() {
 
 /// A ModelNet-style folder of files loads by class and split.
 #[test]
+fn a_folder_of_data_roots_is_refused() {
+    // As `../shared/data`: one root of classes beside one single-class root.
+    let root = tmp_dir("roots");
+    for dir in ["mn/a/train", "air/train"] {
+        let dir = root.join(dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let pts = pcrnet_train::shapes::sample(pcrnet_train::shapes::Shape::Ell, 40, 0);
+        let text: String = pts
+            .iter()
+            .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+            .collect();
+        std::fs::write(dir.join("x.xyz"), text).unwrap();
+    }
+    let e = Dataset::load_modelnet(&root, Split::Train, None, 32, Sampling::Random, 1).unwrap_err();
+    assert!(
+        matches!(&e, pcrnet_train::train::dataset::DataError::NestedRoot { inner, .. } if inner.ends_with("mn")),
+        "{e}"
+    );
+    assert!(e.to_string().contains("pass one root"), "{e}");
+    // Each root alone loads.
+    for (dir, label) in [("mn", "a"), ("air", "air")] {
+        let d =
+            Dataset::load_modelnet(&root.join(dir), Split::Train, None, 32, Sampling::Random, 1)
+                .unwrap();
+        assert_eq!(d.labels, vec![label]);
+    }
+}
+
+#[test]
 fn loads_modelnet_folder() {
     let root = tmp_dir("modelnet");
     for (class, split, k) in [("a", "train", 2), ("a", "test", 1), ("b", "train", 1)] {

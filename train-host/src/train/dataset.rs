@@ -54,6 +54,20 @@ pub enum DataError {
     /// Nothing matched (no class folder, no file, or an empty cloud).
     #[error("no usable cloud found: {0}")]
     Empty(String),
+    /// The folder holds data roots (folders of classes), not classes: its
+    /// classes would be a mix of whichever roots happen to hold the split.
+    #[error(
+        "{} holds data roots, not classes ({} has class folders of its own): pass one root, e.g. {}",
+        root.display(),
+        inner.display(),
+        inner.display()
+    )]
+    NestedRoot {
+        /// The folder given.
+        root: PathBuf,
+        /// A data root inside it.
+        inner: PathBuf,
+    },
 }
 
 /// A class name, a file name and its preprocessed cloud.
@@ -76,6 +90,12 @@ pub struct Dataset {
     pub names: Vec<String>,
     /// Points per cloud.
     pub points: usize,
+}
+
+/// Whether a folder inside `dir` holds `split` (`<dir>/<class>/<split>/`):
+/// `dir` is then a data root, not a class.
+fn holds_classes(dir: &Path, split: Split) -> bool {
+    list_dir(dir).is_ok_and(|subs| subs.iter().any(|c| c.join(split.dir()).is_dir()))
 }
 
 fn list_dir(path: &Path) -> Result<Vec<PathBuf>, DataError> {
@@ -124,6 +144,12 @@ impl Dataset {
             }
             let dir = class_dir.join(split.dir());
             if !dir.is_dir() {
+                if holds_classes(&class_dir, split) {
+                    return Err(DataError::NestedRoot {
+                        root: root.to_path_buf(),
+                        inner: class_dir,
+                    });
+                }
                 continue;
             }
             for f in list_dir(&dir)? {
