@@ -313,6 +313,19 @@ PcrnetStatus pcrnet_model_load(const uint8_t *blob, size_t blob_len, PcrnetModel
 size_t pcrnet_model_scratch_len(const PcrnetModel *model, size_t tile);
 
 /*
+ Bytes of scratch with which a host build of this library on an x86-64
+ CPU with AVX2 encodes many points per weight pass (the block kernel,
+ picked at run time; results identical bit for bit): the
+ `PCRNET_MAX_TILE` scratch plus the kernel's int16 weights and
+ activations. Firmware builds never use the extra bytes: give them
+ `pcrnet_model_scratch_len`. 0 for a handle that is not loaded.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`.
+ */
+size_t pcrnet_model_host_scratch_len(const PcrnetModel *model);
+
+/*
  Network passes the model was trained for (1: PCRNet; more: i-PCRNet),
  the `passes` to register with; 0 for a handle that is not loaded.
 

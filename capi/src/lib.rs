@@ -27,7 +27,9 @@
 //! - **Scratch** is the working memory of one call, any alignment; it must
 //!   not overlap the blob, the points or the outputs. A bigger scratch
 //!   (up to `pcrnet_model_scratch_len` with tile `PCRNET_MAX_TILE`)
-//!   runs faster; the results are identical for every size.
+//!   runs faster; the results are identical for every size. On an x86-64
+//!   host, `pcrnet_model_host_scratch_len` bytes also let the encoder run
+//!   its AVX2 block kernel (several times faster, same results).
 //!
 //! # Errors
 //! Every function that can fail returns a status (`PcrnetStatus`);
@@ -417,6 +419,23 @@ pub unsafe extern "C" fn pcrnet_model_load(
 pub unsafe extern "C" fn pcrnet_model_scratch_len(model: *const PcrnetModel, tile: usize) -> usize {
     match self::model(model) {
         Ok(m) if (1..=MAX_TILE).contains(&tile) => m.scratch_len(tile),
+        _ => 0,
+    }
+}
+
+/// Bytes of scratch with which a host build of this library on an x86-64
+/// CPU with AVX2 encodes many points per weight pass (the block kernel,
+/// picked at run time; results identical bit for bit): the
+/// `PCRNET_MAX_TILE` scratch plus the kernel's int16 weights and
+/// activations. Firmware builds never use the extra bytes: give them
+/// `pcrnet_model_scratch_len`. 0 for a handle that is not loaded.
+///
+/// # Safety
+/// `model` must be null or point to a `PcrnetModel`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_model_host_scratch_len(model: *const PcrnetModel) -> usize {
+    match self::model(model) {
+        Ok(m) => m.host_scratch_len(),
         _ => 0,
     }
 }

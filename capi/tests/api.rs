@@ -152,6 +152,12 @@ fn the_smallest_scratch_gives_the_same_registration() {
     let (s2, r2) = register(&model, &source, &options, &mut big);
     assert_eq!((s1, s2), (PcrnetStatus::PCRNET_OK, PcrnetStatus::PCRNET_OK));
     assert_eq!(r1, r2);
+    // The host scratch (the AVX2 block kernel where the CPU has it).
+    let mut host = vec![0i8; unsafe { pcrnet_model_host_scratch_len(&*model) }];
+    assert!(host.len() > big.len());
+    let (s3, r3) = register(&model, &source, &options, &mut host);
+    assert_eq!(s3, PcrnetStatus::PCRNET_OK);
+    assert_eq!(r1, r3);
     // One byte short of the minimum is refused, and nothing is written.
     let (s, out) = register(&model, &source, &options, &mut small[1..]);
     assert_eq!(s, PcrnetStatus::PCRNET_ERROR_SCRATCH_TOO_SMALL);
@@ -235,6 +241,7 @@ fn null_pointers_and_unloaded_handles_are_statuses_and_write_nothing() {
         PCRNET_ERROR_NOT_LOADED
     );
     assert_eq!(unsafe { pcrnet_model_scratch_len(&*failed, 1) }, 0);
+    assert_eq!(unsafe { pcrnet_model_host_scratch_len(&*failed) }, 0);
     assert_eq!(unsafe { pcrnet_model_scratch_len(m, 0) }, 0);
     assert_eq!(
         unsafe { pcrnet_model_scratch_len(m, PCRNET_MAX_TILE + 1) },
