@@ -23,7 +23,7 @@ cargo xtask <command>
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
                 the no-panic proof, the C header, the QEMU harness on
-                every core, the C example, every fuzz target for 30 s,
+                every core, the C example, the aarch64 kernels, every fuzz target for 30 s,
                 then the host tests
   demo          the main job: register the shipped source with the trained
                 embedded default (int8) through the device pipeline, and say
@@ -37,6 +37,11 @@ cargo xtask <command>
                 M7 mps2-an500, M33 mps2-an505, RISC-V rv32imac virt: cases
                 up to 1,024 points, no paper-size model; M0 microbit: the
                 small random models), each bit-exact with the host
+  aarch64-test  pcrnet-core's tests (with `std`: the NEON and SDOT host
+                kernels, each against the portable one) built for
+                aarch64-unknown-linux-gnu and run under qemu-aarch64 on a
+                CPU with the dot-product extension (max) and one without
+                (Cortex-A53)
   firmware-run  build firmware-example and run it under QEMU
   profile       run firmware-example under QEMU with instruction tracing
                 and print the instructions per function and hottest blocks
@@ -71,8 +76,9 @@ cargo xtask <command>
 
 Missing tools are installed: the Rust targets of the cores and the
 nightly toolchain (rustup), cargo-fuzz (cargo install), qemu-system-arm,
-qemu-system-misc (RISC-V), gcc-arm-none-eabi, libnewlib-arm-none-eabi and
-binutils-arm-none-eabi (apt-get).
+qemu-system-misc (RISC-V), qemu-user and gcc-aarch64-linux-gnu (aarch64),
+gcc-arm-none-eabi, libnewlib-arm-none-eabi and binutils-arm-none-eabi
+(apt-get).
 ";
 
 fn main() -> ExitCode {
@@ -86,6 +92,7 @@ fn main() -> ExitCode {
         Some("cores") => cores(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
         Some("firmware-run") => firmware_run(),
+        Some("aarch64-test") => aarch64_test(),
         Some("profile") => ensure_target()
             .and_then(|()| ensure_qemu())
             .and_then(|()| profile::run(&root())),
@@ -232,6 +239,62 @@ fn layers() -> Result<(), String> {
     harness(&["layers", "--board", "mps2-an500"])
 }
 
+/// The 64-bit Arm Linux target of `aarch64-test`.
+const AARCH64: &str = "aarch64-unknown-linux-gnu";
+
+/// Clippy on pcrnet-core's aarch64 code, then its tests with `std` for
+/// aarch64 Linux under qemu-aarch64 (user mode), once on QEMU's `max` CPU
+/// (with `dotprod`: the `SDOT` kernels) and once on a Cortex-A53 (without:
+/// the `SMULL` kernels).
+fn aarch64_test() -> Result<(), String> {
+    ensure_targets(&[AARCH64])?;
+    ensure_apt("qemu-aarch64", &["qemu-user"])?;
+    ensure_apt(
+        "aarch64-linux-gnu-gcc",
+        &["gcc-aarch64-linux-gnu", "libc6-dev-arm64-cross"],
+    )?;
+    cargo(&[
+        "clippy",
+        "-p",
+        "pcrnet-core",
+        "--features",
+        "std",
+        "--target",
+        AARCH64,
+        "--all-targets",
+        "--",
+        "-D",
+        "warnings",
+    ])?;
+    for cpu in ["max", "cortex-a53"] {
+        run_with_env(
+            env!("CARGO"),
+            &[
+                "test",
+                "--release",
+                "-p",
+                "pcrnet-core",
+                "--features",
+                "std",
+                "--target",
+                AARCH64,
+            ],
+            &[
+                (
+                    "CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER",
+                    "aarch64-linux-gnu-gcc",
+                ),
+                (
+                    "CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER",
+                    "qemu-aarch64 -L /usr/aarch64-linux-gnu",
+                ),
+                ("QEMU_CPU", cpu),
+            ],
+        )?;
+    }
+    Ok(())
+}
+
 fn firmware_run() -> Result<(), String> {
     ensure_target()?;
     ensure_qemu()?;
@@ -296,6 +359,7 @@ fn ci() -> Result<(), String> {
     qemu_test()?;
     cores()?;
     c_example()?;
+    aarch64_test()?;
     run_in(
         &root().join("fuzz"),
         env!("CARGO"),

@@ -150,7 +150,15 @@ mod x86;
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
 pub(crate) mod block;
 
-#[cfg(all(test, target_arch = "x86_64", feature = "std"))]
+#[cfg(all(target_arch = "aarch64", feature = "std"))]
+#[allow(unsafe_code)]
+mod neon;
+
+#[cfg(all(
+    test,
+    any(target_arch = "x86_64", target_arch = "aarch64"),
+    feature = "std"
+))]
 mod test_layer;
 
 /// int8 values as the bytes they are stored in.
@@ -161,6 +169,17 @@ pub(crate) fn bytes_of(x: &[i8]) -> &[u8] {
     unsafe {
         core::slice::from_raw_parts(x.as_ptr() as *const u8, x.len())
     }
+}
+
+/// The bytes of `words`, as int8 values.
+#[cfg(all(target_arch = "aarch64", feature = "std"))]
+pub(crate) fn as_bytes(words: &mut [u32]) -> &mut [i8] {
+    // SAFETY: i8 needs no alignment and every bit pattern is a valid i8
+    // and u32; `align_to_mut` hands out all of `words` as the middle part,
+    // with its lifetime.
+    #[allow(unsafe_code)]
+    let (_, bytes, _) = unsafe { words.align_to_mut::<i8>() };
+    bytes
 }
 
 /// Views the scratch bytes left for expanded activations as aligned `u32`
@@ -201,8 +220,9 @@ pub(crate) fn rows_mut<T>(values: &mut [T], len: usize) -> core::slice::ChunksEx
 /// 4 and `expanded` holds their int16 activations (`2 x inputs` words per
 /// group of four rows, see `arch::expanded_len`). On x86-64 with the `std`
 /// feature, a full tile of at least 16 inputs goes through the AVX2
-/// kernel (`x86`) when the CPU has AVX2. Other rows and targets take
-/// [`dense_tile`]'s path.
+/// kernel (`x86`) when the CPU has AVX2; on aarch64 with the `std`
+/// feature, through the NEON kernel (`neon`: `SDOT` where the CPU has it).
+/// Other rows and targets take [`dense_tile`]'s path.
 #[inline(always)]
 pub(crate) fn dense_tile_i8(
     weights: &[u8],
@@ -243,6 +263,10 @@ pub(crate) fn dense_tile_i8(
     }
     #[cfg(all(target_arch = "x86_64", feature = "std"))]
     if x86::dense_tile(weights, inputs, q, x, expanded, sink) {
+        return;
+    }
+    #[cfg(all(target_arch = "aarch64", feature = "std"))]
+    if neon::dense_tile(weights, inputs, q, x, sink) {
         return;
     }
     let _ = expanded;
@@ -306,7 +330,9 @@ fn portable_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink: &mut Si
 /// `inputs / 2` words) the vector is expanded to int16 pairs once and four
 /// weight rows share each pair of activation words (`dsp::dot_rows4`). On
 /// x86-64 with the `std` feature and AVX2 (at least 16 inputs) the AVX2
-/// kernel runs, four rows at a time (`x86::dense_vector`).
+/// kernel runs, four rows at a time (`x86::dense_vector`); on aarch64 with
+/// the `std` feature (at least 16 inputs), the NEON kernel
+/// (`neon::dense_vector`).
 #[inline(always)]
 pub(crate) fn dense_vector(
     weights: &[u8],
@@ -374,7 +400,14 @@ pub(crate) fn dense_vector(
     {
         x86::dense_vector(weights, parts, q, expanded, out)
     }
-    #[cfg(not(any(pcrnet_arm_dsp, all(target_arch = "x86_64", feature = "std"))))]
+    #[cfg(all(target_arch = "aarch64", feature = "std"))]
+    {
+        neon::dense_vector(weights, parts, q, expanded, out)
+    }
+    #[cfg(not(any(
+        pcrnet_arm_dsp,
+        all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std")
+    )))]
     {
         let _ = (weights, parts, q, expanded, out);
         false
