@@ -137,8 +137,9 @@ pub const OBJECT_POINTS: usize = 1024;
 
 /// The object-specific models: the README's `train --object` recipe with
 /// 30 epochs, with the template's points as sources and resampled; and
-/// the resampled one trained for 60 epochs (what longer training buys).
-pub const OBJECT_RECIPES: [Recipe; 3] = [
+/// the resampled one trained for 60 and 90 epochs (what longer training
+/// buys).
+pub const OBJECT_RECIPES: [Recipe; 4] = [
     Recipe {
         name: "air0001-pose",
         input: Input::Object(OBJECT_FILE),
@@ -155,6 +156,12 @@ pub const OBJECT_RECIPES: [Recipe; 3] = [
         name: "air0001-pose-resampled-60",
         input: Input::Object(OBJECT_FILE),
         more: &["--epochs", "60", "--resample"],
+        args: OBJECT_ARGS,
+    },
+    Recipe {
+        name: "air0001-pose-resampled-90",
+        input: Input::Object(OBJECT_FILE),
+        more: &["--epochs", "90", "--resample"],
         args: OBJECT_ARGS,
     },
 ];
