@@ -28,11 +28,9 @@ pub struct Recipe {
     pub name: &'static str,
     /// What it trains on.
     pub input: Input,
-    /// The remaining `pcrnet train` arguments.
-    pub args: &'static [&'static str],
-    /// Arguments after `args` (what sets a recipe apart from another
-    /// sharing its `args`).
-    pub more: &'static [&'static str],
+    /// The remaining `pcrnet train` arguments, in parts (shared lists
+    /// first, then what sets the recipe apart), concatenated.
+    pub args: &'static [&'static [&'static str]],
 }
 
 /// Every model the experiments use.
@@ -41,88 +39,77 @@ pub const RECIPES: [Recipe; 6] = [
     Recipe {
         name: "mn10-pcrnet",
         input: Input::Data("ModelNet10"),
-        more: &[],
         args: &[
-            "--arch", "embedded", "--model", "pcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "30", "--noise", "--seed", "1",
+            EMBEDDED_ARGS,
+            &["--model", "pcrnet", "--epochs", "30", "--noise"],
         ],
     },
     Recipe {
         name: "mn10-ipcrnet",
         input: Input::Data("ModelNet10"),
-        more: &[],
         args: &[
-            "--arch", "embedded", "--model", "ipcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "20", "--noise", "--seed", "1",
+            EMBEDDED_ARGS,
+            &["--model", "ipcrnet", "--epochs", "20", "--noise"],
         ],
     },
     Recipe {
         name: "mn10-seen5-ipcrnet",
         input: Input::Data("ModelNet10"),
-        more: &[],
-        args: SEEN5_ARGS,
+        args: &[EMBEDDED_ARGS, SEEN5_MORE],
     },
     Recipe {
         name: "mn10-toilet-ipcrnet",
         input: Input::Data("ModelNet10"),
-        more: &[],
         args: &[
-            "--classes",
-            "toilet",
-            "--arch",
-            "embedded",
-            "--model",
-            "ipcrnet",
-            "--points",
-            "512",
-            "--batch",
-            "32",
-            "--epochs",
-            "40",
-            "--seed",
-            "1",
+            EMBEDDED_ARGS,
+            &[
+                "--classes",
+                "toilet",
+                "--model",
+                "ipcrnet",
+                "--epochs",
+                "40",
+            ],
         ],
     },
     Recipe {
         name: "air-pcrnet",
         input: Input::Data("ModelNet40-airplane"),
-        more: &[],
         args: &[
-            "--arch", "embedded", "--model", "pcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "40", "--noise", "--seed", "1",
+            EMBEDDED_ARGS,
+            &["--model", "pcrnet", "--epochs", "40", "--noise"],
         ],
     },
     Recipe {
         name: "air-ipcrnet",
         input: Input::Data("ModelNet40-airplane"),
-        more: &[],
         args: &[
-            "--arch", "embedded", "--model", "ipcrnet", "--points", "512", "--batch", "32",
-            "--epochs", "40", "--noise", "--seed", "1",
+            EMBEDDED_ARGS,
+            &["--model", "ipcrnet", "--epochs", "40", "--noise"],
         ],
     },
+];
+
+/// What every experiment model but the object-specific ones shares: the
+/// embedded architecture at the experiments' 512 points, batch 32, seed 1.
+const EMBEDDED_ARGS: &[&str] = &[
+    "--arch", "embedded", "--points", "512", "--batch", "32", "--seed", "1",
 ];
 
 /// The partial-data airplane model (kept apart: it is the one recipe with `--partial`).
 pub const PARTIAL_RECIPE: Recipe = Recipe {
     name: "air-partial-ipcrnet",
     input: Input::Data("ModelNet40-airplane"),
-    more: &[],
     args: &[
-        "--arch",
-        "embedded",
-        "--model",
-        "ipcrnet",
-        "--points",
-        "512",
-        "--batch",
-        "32",
-        "--epochs",
-        "40",
-        "--noise",
-        "--partial",
-        "--seed",
-        "1",
+        EMBEDDED_ARGS,
+        &[
+            "--model",
+            "ipcrnet",
+            "--epochs",
+            "40",
+            "--noise",
+            "--partial",
+        ],
     ],
 };
 
@@ -143,26 +130,22 @@ pub const OBJECT_RECIPES: [Recipe; 4] = [
     Recipe {
         name: "air0001-pose",
         input: Input::Object(OBJECT_FILE),
-        more: &["--epochs", "30"],
-        args: OBJECT_ARGS,
+        args: &[OBJECT_ARGS, &["--epochs", "30"]],
     },
     Recipe {
         name: "air0001-pose-resampled",
         input: Input::Object(OBJECT_FILE),
-        more: &["--epochs", "30", "--resample"],
-        args: OBJECT_ARGS,
+        args: &[OBJECT_ARGS, &["--epochs", "30", "--resample"]],
     },
     Recipe {
         name: "air0001-pose-resampled-60",
         input: Input::Object(OBJECT_FILE),
-        more: &["--epochs", "60", "--resample"],
-        args: OBJECT_ARGS,
+        args: &[OBJECT_ARGS, &["--epochs", "60", "--resample"]],
     },
     Recipe {
         name: "air0001-pose-resampled-90",
         input: Input::Object(OBJECT_FILE),
-        more: &["--epochs", "90", "--resample"],
-        args: OBJECT_ARGS,
+        args: &[OBJECT_ARGS, &["--epochs", "90", "--resample"]],
     },
 ];
 
@@ -186,22 +169,15 @@ const OBJECT_ARGS: &[&str] = &[
     "1",
 ];
 
-/// The generalisation experiment's five-class i-PCRNet.
-const SEEN5_ARGS: &[&str] = &[
+/// The generalisation experiment's five-class i-PCRNet, after
+/// [`EMBEDDED_ARGS`].
+const SEEN5_MORE: &[&str] = &[
     "--classes",
     "bathtub,bed,chair,desk,dresser",
-    "--arch",
-    "embedded",
     "--model",
     "ipcrnet",
-    "--points",
-    "512",
-    "--batch",
-    "32",
     "--epochs",
     "20",
-    "--seed",
-    "1",
 ];
 
 /// Issue 11, item 6: the generalisation experiment's five-class model
@@ -213,33 +189,26 @@ pub const HELDOUT_RECIPES: [Recipe; 2] = [
     Recipe {
         name: "mn10-seen5-plus-ipcrnet",
         input: Input::Several(&["ModelNet10", "ModelNet40-airplane"]),
-        more: &[],
         args: &[
-            "--classes",
-            "bathtub,bed,chair,desk,dresser,ModelNet40-airplane",
-            "--generated",
-            "1000",
-            "--arch",
-            "embedded",
-            "--model",
-            "ipcrnet",
-            "--points",
-            "512",
-            "--batch",
-            "32",
-            "--epochs",
-            "20",
-            "--steps-per-epoch",
-            "59",
-            "--seed",
-            "1",
+            EMBEDDED_ARGS,
+            &[
+                "--classes",
+                "bathtub,bed,chair,desk,dresser,ModelNet40-airplane",
+                "--generated",
+                "1000",
+                "--model",
+                "ipcrnet",
+                "--epochs",
+                "20",
+                "--steps-per-epoch",
+                "59",
+            ],
         ],
     },
     Recipe {
         name: "mn10-seen5-identity-ipcrnet",
         input: Input::Data("ModelNet10"),
-        more: &["--identity-share", "0.05"],
-        args: SEEN5_ARGS,
+        args: &[EMBEDDED_ARGS, SEEN5_MORE, &["--identity-share", "0.05"]],
     },
 ];
 
@@ -269,7 +238,12 @@ impl Recipe {
         for path in paths {
             v.extend([flag.to_string(), data.join(path).display().to_string()]);
         }
-        v.extend(self.args.iter().chain(self.more).map(|s| s.to_string()));
+        v.extend(
+            self.args
+                .iter()
+                .flat_map(|part| part.iter())
+                .map(|s| s.to_string()),
+        );
         v.extend([
             "--no-progress".to_string(),
             "--out".to_string(),
