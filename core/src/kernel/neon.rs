@@ -133,10 +133,8 @@ unsafe fn tile<D: Dot>(
         .zip(q.shift);
     for (o, (((row, bias), m), &s)) in channels.enumerate() {
         let (body, tail) = row.split_at(full);
-        let mut acc = [0i32; ROWS].map(|_| {
-            // SAFETY: NEON is part of every aarch64 CPU.
-            unsafe { vdupq_n_s32(0) }
-        });
+        // SAFETY: NEON is part of every aarch64 CPU.
+        let mut acc = [unsafe { vdupq_n_s32(0) }; ROWS];
         for (c, w) in body.chunks_exact(LANES).enumerate() {
             // SAFETY: `w` is 16 bytes, and every point's row holds
             // `inputs >= full` values, so 16 from `c * 16 < full` are in
@@ -222,10 +220,8 @@ unsafe fn vector<D: Dot>(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i8
         let rs = group
             .each_ref()
             .map(|g| g.as_ref().map_or(*first, |((r, _), _)| *r));
-        let mut acc = [0i32; 4].map(|_| {
-            // SAFETY: NEON is part of every aarch64 CPU.
-            unsafe { vdupq_n_s32(0) }
-        });
+        // SAFETY: NEON is part of every aarch64 CPU.
+        let mut acc = [unsafe { vdupq_n_s32(0) }; 4];
         for (c, x) in body.chunks_exact(LANES).enumerate() {
             // SAFETY: `x` is 16 values and every row holds `inputs >=
             // full` bytes, so 16 from `c * 16 < full` are in bounds; NEON
