@@ -18,12 +18,12 @@ import json
 import os
 import pathlib
 import sys
-import time
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import open3d as o3d  # noqa: E402
+from bench_timing import median_ms  # noqa: E402
 
 POINTS = 1024
 ROUNDS = 5
@@ -69,14 +69,7 @@ def main():
             )
 
         results = [run(p) for p in pairs]
-        times = []
-        for r in range(ROUNDS + 1):
-            t = time.perf_counter()
-            for p in pairs:
-                run(p)
-            if r > 0:
-                times.append((time.perf_counter() - t) * 1e3 / len(pairs))
-        o3d_ms = sorted(times)[len(times) // 2]
+        o3d_ms = median_ms(run, pairs, ROUNDS)
         gt = [np.array(x["r"]) for x in truth]
         theirs = [np.array(x.transformation[:3, :3]) for x in results]
         mine = [np.array(x["r"]) for x in ours[name]["poses"]]

@@ -15,13 +15,14 @@ Usage: ort_bench.py DIR
 import json
 import pathlib
 import sys
-import time
 
 import numpy as np
 import onnx
 import onnxruntime as ort
 from onnx import TensorProto, helper, numpy_helper
 from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+
+from bench_timing import median_ms
 
 POINTS = 1024
 OPSET = 17
@@ -95,18 +96,6 @@ def session(path):
     return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
 
 
-def median_ms(sess, clouds, rounds):
-    """As ours: one warm-up round, then the median round's time per call."""
-    times = []
-    for r in range(rounds + 1):
-        t = time.perf_counter()
-        for c in clouds:
-            sess.run(None, {"points": c})
-        if r > 0:
-            times.append((time.perf_counter() - t) * 1e3 / len(clouds))
-    return sorted(times)[len(times) // 2]
-
-
 def main():
     if len(sys.argv) != 2:
         raise SystemExit(__doc__)
@@ -137,8 +126,8 @@ def main():
         rel = float(np.max(np.abs(theirs - mine)) / max(float(np.max(np.abs(mine))), 1e-30))
         if rel > 1e-4:
             raise SystemExit(f"{name}: ONNX Runtime's f32 outputs differ from ours by {rel:.2e} (relative)")
-        ort_f32 = median_ms(f32_sess, clouds, rounds)
-        ort_int8 = median_ms(int8_sess, clouds, rounds)
+        ort_f32 = median_ms(lambda c: f32_sess.run(None, {"points": c}), clouds, rounds)
+        ort_int8 = median_ms(lambda c: int8_sess.run(None, {"points": c}), clouds, rounds)
         widths = "-".join(map(str, ours["encoder"])) + " / " + "-".join(map(str, ours["head"]))
         rows.append(
             {
