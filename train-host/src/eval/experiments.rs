@@ -336,6 +336,9 @@ pub(super) fn label(method: &str, model: Option<&str>) -> String {
     }
 }
 
+/// The commit the code ran from, `-dirty` if a tracked file outside the
+/// experiments' own output (`results/`, `RESULTS.md`, which every run
+/// rewrites) differs from it.
 fn commit() -> String {
     let git = |args: &[&str]| {
         std::process::Command::new("git")
@@ -347,8 +350,15 @@ fn commit() -> String {
     };
     match git(&["rev-parse", "--short=12", "HEAD"]) {
         Some(c) => {
-            let dirty = git(&["status", "--porcelain", "--untracked-files=no"])
-                .is_some_and(|s| !s.is_empty());
+            let dirty = git(&[
+                "status",
+                "--porcelain",
+                "--untracked-files=no",
+                "--",
+                ":(top,exclude)results",
+                ":(top,exclude)RESULTS.md",
+            ])
+            .is_some_and(|s| !s.is_empty());
             if dirty { format!("{c}-dirty") } else { c }
         }
         None => "unknown".into(),
