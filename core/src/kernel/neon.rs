@@ -250,7 +250,7 @@ unsafe fn vector<D: Dot>(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i8
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_layer::{TestLayer, byte};
+    use super::super::test_layer::{TestLayer, byte, vector_cases};
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
@@ -300,32 +300,24 @@ mod tests {
         }
     }
 
-    /// The head's vector kernels give the portable kernel's activations,
-    /// with one part or two, with and without a tail past 16, for row
-    /// counts that are and are not multiples of four.
+    /// The head's vector kernels (`SDOT` where the CPU has it, and
+    /// `SMULL`) give the portable kernel's activations
+    /// ([`super::super::test_layer::vector_cases`]).
     #[test]
     fn neon_vector_matches_portable() {
-        let mut rng = SplitMix64(19);
-        for &(split, inputs, outputs) in &[(8, 16, 4), (0, 40, 7), (256, 512, 256), (20, 41, 9)] {
-            let layer = TestLayer::new(&mut rng, inputs, outputs, (-31, 31));
-            let (weights, q) = (&layer.weights, layer.requant());
-            let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng) as u8).collect();
-            let mut want = std::vec![0i8; outputs];
-            let sink = &mut Sink::Store {
-                out: &mut want,
-                outputs,
-            };
-            super::super::dense_tile(weights, inputs, q, &x, sink);
-            let (a, b) = x.split_at(split);
+        for c in vector_cases(19) {
+            let (inputs, outputs) = (c.x.len(), c.want.len());
+            let (weights, q) = (&c.layer.weights, c.layer.requant());
+            let (a, b) = c.x.split_at(c.split);
             let mut expanded = std::vec![0u32; inputs.div_ceil(4)];
             let mut got = std::vec![0i8; outputs];
             assert!(dense_vector(weights, &[a, b], q, &mut expanded, &mut got));
-            assert_eq!(got, want, "dispatched, {inputs} -> {outputs}");
-            let xs: Vec<i8> = x.iter().map(|&v| v as i8).collect();
+            assert_eq!(got, c.want, "dispatched, {inputs} -> {outputs}");
+            let xs: Vec<i8> = c.x.iter().map(|&v| v as i8).collect();
             let mut got = std::vec![0i8; outputs];
             // SAFETY: `Smull` needs only NEON.
             unsafe { vector::<Smull>(weights, inputs, q, &xs, &mut got) };
-            assert_eq!(got, want, "smull, {inputs} -> {outputs}");
+            assert_eq!(got, c.want, "smull, {inputs} -> {outputs}");
         }
     }
 

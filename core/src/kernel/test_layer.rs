@@ -1,6 +1,6 @@
 //! A random int8 layer for the kernels' bit-exactness tests.
 
-use super::Requant;
+use super::{Requant, Sink};
 use crate::testing::SplitMix64;
 use std::vec::Vec;
 
@@ -59,4 +59,39 @@ impl TestLayer {
             act_min: self.zero_point,
         }
     }
+}
+
+/// A case of the head's vector kernels: a random layer, an input vector
+/// given as two parts (split at `split`) and the portable kernel's
+/// activations for it.
+pub(crate) struct VectorCase {
+    pub layer: TestLayer,
+    pub x: Vec<u8>,
+    pub split: usize,
+    pub want: Vec<i8>,
+}
+
+/// The vector kernels' cases: one part or two, with and without a tail
+/// past 16 inputs, row counts that are and are not multiples of four.
+pub(crate) fn vector_cases(seed: u64) -> Vec<VectorCase> {
+    let mut rng = SplitMix64(seed);
+    [(8, 16, 4), (0, 40, 7), (256, 512, 256), (20, 41, 9)]
+        .into_iter()
+        .map(|(split, inputs, outputs)| {
+            let layer = TestLayer::new(&mut rng, inputs, outputs, (-31, 31));
+            let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng) as u8).collect();
+            let mut want = std::vec![0i8; outputs];
+            let sink = &mut Sink::Store {
+                out: &mut want,
+                outputs,
+            };
+            super::dense_tile(&layer.weights, inputs, layer.requant(), &x, sink);
+            VectorCase {
+                layer,
+                x,
+                split,
+                want,
+            }
+        })
+        .collect()
 }

@@ -350,7 +350,7 @@ fn reduce(acc: [__m256i; ROWS]) -> __m256i {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_layer::{TestLayer, byte};
+    use super::super::test_layer::{TestLayer, byte, vector_cases};
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
@@ -481,30 +481,27 @@ mod tests {
         }
     }
 
-    /// The head's vector kernel gives the portable kernel's activations,
-    /// with one part or two, with and without a tail past 16, for row
-    /// counts that are and are not multiples of four.
+    /// The head's vector kernel gives the portable kernel's activations
+    /// ([`super::super::test_layer::vector_cases`]).
     #[test]
     fn avx2_vector_matches_portable() {
         if !std::is_x86_feature_detected!("avx2") {
             return;
         }
-        let mut rng = SplitMix64(13);
-        for &(split, inputs, outputs) in &[(8, 16, 4), (0, 40, 7), (256, 512, 256), (20, 41, 9)] {
-            let layer = TestLayer::new(&mut rng, inputs, outputs, (-31, 31));
-            let (weights, q) = (&layer.weights, layer.requant());
-            let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng) as u8).collect();
-            let mut want = std::vec![0i8; outputs];
-            let sink = &mut Sink::Store {
-                out: &mut want,
-                outputs,
-            };
-            super::super::dense_tile(weights, inputs, q, &x, sink);
-            let (a, b) = x.split_at(split);
+        for c in vector_cases(13) {
+            let (inputs, outputs) = (c.x.len(), c.want.len());
+            let (a, b) = c.x.split_at(c.split);
             let mut expanded = std::vec![0u32; inputs.div_ceil(2)];
             let mut got = std::vec![0i8; outputs];
-            assert!(dense_vector(weights, &[a, b], q, &mut expanded, &mut got));
-            assert_eq!(got, want, "{inputs} -> {outputs}");
+            let q = c.layer.requant();
+            assert!(dense_vector(
+                &c.layer.weights,
+                &[a, b],
+                q,
+                &mut expanded,
+                &mut got
+            ));
+            assert_eq!(got, c.want, "{inputs} -> {outputs}");
         }
     }
 
