@@ -23,8 +23,8 @@ cargo xtask <command>
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
                 the no-panic proof, the C header, the QEMU harness on
-                every core, the C example, the aarch64 kernels, every fuzz target for 30 s,
-                then the host tests
+                every core, the C example, the aarch64 kernels, every
+                fuzz target for 30 s, then the host tests
   demo          the main job: register the shipped source with the trained
                 embedded default (int8) through the device pipeline, and say
                 whether the pose is reliable; extra arguments go to
@@ -253,32 +253,26 @@ fn aarch64_test() -> Result<(), String> {
         "aarch64-linux-gnu-gcc",
         &["gcc-aarch64-linux-gnu", "libc6-dev-arm64-cross"],
     )?;
-    cargo(&[
-        "clippy",
+    let core = [
         "-p",
         "pcrnet-core",
         "--features",
         "std",
         "--target",
         AARCH64,
-        "--all-targets",
-        "--",
-        "-D",
-        "warnings",
-    ])?;
+    ];
+    cargo(
+        &[
+            &["clippy"][..],
+            &core,
+            &["--all-targets", "--", "-D", "warnings"],
+        ]
+        .concat(),
+    )?;
     for cpu in ["max", "cortex-a53"] {
         run_with_env(
             env!("CARGO"),
-            &[
-                "test",
-                "--release",
-                "-p",
-                "pcrnet-core",
-                "--features",
-                "std",
-                "--target",
-                AARCH64,
-            ],
+            &[&["test", "--release"][..], &core].concat(),
             &[
                 (
                     "CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER",
