@@ -32,11 +32,33 @@ pub enum Precision {
 /// a device may prefer a looser tolerance (see the README).
 pub const ITERATIVE_TOLERANCE: f32 = 1e-7;
 
-/// The blob to run: `blob` itself, or with `template` (user units) bound in
-/// place of its own (see [`bind`]).
-fn model_for(blob: &[u8], template: Option<&[[f32; 3]]>) -> Result<Vec<u8>, TemplateError> {
+/// A template cloud (user units) to bind in place of a blob's own, and how
+/// many of its points the bound blob stores for checking and refining poses
+/// (see [`bind`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Bound<'a> {
+    /// The template cloud.
+    pub cloud: &'a [[f32; 3]],
+    /// Points stored (farthest-point subsampled; all of them when the
+    /// cloud has fewer).
+    pub stored: usize,
+}
+
+impl<'a> Bound<'a> {
+    /// `cloud` with the default [`DEFAULT_TEMPLATE_POINTS`] stored.
+    pub fn new(cloud: &'a [[f32; 3]]) -> Self {
+        Bound {
+            cloud,
+            stored: DEFAULT_TEMPLATE_POINTS,
+        }
+    }
+}
+
+/// The blob to run: `blob` itself, or with `template` bound in place of its
+/// own (see [`bind`]).
+fn model_for(blob: &[u8], template: Option<Bound<'_>>) -> Result<Vec<u8>, TemplateError> {
     match template {
-        Some(t) => bind(blob, t, DEFAULT_TEMPLATE_POINTS),
+        Some(t) => bind(blob, t.cloud, t.stored),
         None => Ok(blob.to_vec()),
     }
 }
@@ -45,7 +67,7 @@ fn model_for(blob: &[u8], template: Option<&[[f32; 3]]>) -> Result<Vec<u8>, Temp
 /// 0 means the passes the blob was trained for.
 pub fn pipeline(
     blob: &[u8],
-    template: Option<&[[f32; 3]]>,
+    template: Option<Bound<'_>>,
     source: &[[f32; 3]],
     options: &Options,
 ) -> Result<(Registration, Precision), TemplateError> {
@@ -139,7 +161,7 @@ pub fn network(
     passes: usize,
     tolerance: f32,
 ) -> Result<NetworkPose, TemplateError> {
-    let blob = model_for(blob, template)?;
+    let blob = model_for(blob, template.map(Bound::new))?;
     let ((pose, passes), precision) = match Int8Model::from_bytes(&blob) {
         Ok(model) => {
             let mut scratch = vec![0i8; model.host_scratch_len()];
@@ -175,7 +197,7 @@ pub fn register_pointnetlk(
     source: &[[f32; 3]],
     iterations: usize,
 ) -> Result<LkResult, TemplateError> {
-    let blob = model_for(blob, template)?;
+    let blob = model_for(blob, template.map(Bound::new))?;
     let model = F32Model::from_bytes(&blob)?;
     let params = F32Params::from_network(model.network());
     let frame = *model.frame();
@@ -252,9 +274,64 @@ mod tests {
             Err(TemplateError::Core(pcrnet_core::Error::EmptyCloud))
         ));
         // The pipeline without refinement is the network's pose, scored.
-        let (bare, _) = pipeline(&int8, Some(&world), &source, &Options::network_only()).unwrap();
+        let (bare, _) = pipeline(
+            &int8,
+            Some(Bound::new(&world)),
+            &source,
+            &Options::network_only(),
+        )
+        .unwrap();
         assert_eq!(bare.pose, r8.pose);
         assert_eq!((bare.hypothesis, bare.icp_iterations), (0, 0));
+    }
+
+    /// A source sampled apart from the template (no shared point) is
+    /// refined closer to its true pose against more stored template points:
+    /// what `--template-points` buys.
+    #[test]
+    fn more_stored_template_points_refine_a_resampled_source_closer() {
+        let mut params = F32Params::init(Arch::new(&[16, 32], &[32]).unwrap(), 7);
+        let (w, b) = params.layers.last_mut().unwrap();
+        w.iter_mut().for_each(|v| *v *= 1e-3);
+        b[0] = 2.0;
+        let template = sample(Shape::Ell, 1200, 3);
+        let calib: Vec<_> = (0..8)
+            .map(|i| random_transform(&template, 20.0, 0.1, i))
+            .collect();
+        let reference = Reference::new(&template, 64).unwrap();
+        let int8 = quantize(
+            &params,
+            &reference,
+            &calib,
+            CalibrationRule::default(),
+            TrainedFor::pcrnet(true),
+        )
+        .unwrap();
+        // Another sampling of the same surface, turned 10 degrees about z.
+        let (s, c) = 10f32.to_radians().sin_cos();
+        let source: Vec<[f32; 3]> = sample(Shape::Ell, 600, 11)
+            .iter()
+            .map(|p| [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]])
+            .collect();
+        let options = Options {
+            max_points: 600,
+            ..Options::default()
+        };
+        let error = |stored: usize| {
+            let bound = Bound {
+                cloud: &template,
+                stored,
+            };
+            let (r, _) = pipeline(&int8, Some(bound), &source, &options).unwrap();
+            // The true pose turns the source back by 10 degrees about z.
+            let q = r.pose.rotation;
+            let (half, _) = (10f32.to_radians() / 2.0).sin_cos();
+            let dot = (q[0] * half.cos() - q[3] * half).abs();
+            2.0 * dot.min(1.0).acos().to_degrees()
+        };
+        let (sparse, dense) = (error(64), error(1200));
+        assert!(dense < sparse, "64 points: {sparse} deg, 1200: {dense} deg");
+        assert!(dense < 0.5, "1200 points: {dense} deg");
     }
 
     #[test]

@@ -283,6 +283,18 @@ fn user_errors_name_the_flag_or_file_once() {
         (
             vec![
                 "register".into(),
+                tpl.clone(),
+                src.clone(),
+                "--model".into(),
+                int8.clone(),
+                "--template-points".into(),
+                "70000".into(),
+            ],
+            "--template-points must be between 1 and 65535",
+        ),
+        (
+            vec![
+                "register".into(),
                 src.clone(),
                 "--model".into(),
                 int8.clone(),

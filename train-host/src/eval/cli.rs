@@ -110,6 +110,13 @@ pub struct MethodOptions {
     /// the template's size.
     #[arg(long)]
     pub icp_distance: Option<f32>,
+    /// Template points the device pipeline stores when a template cloud is
+    /// given in place of the blob's own (farthest-point subsampled, all of
+    /// them when the cloud has fewer; 1 to 65535, default 512): its check
+    /// and ICP run against these: more points refine finer, and a blob
+    /// stores about 10 bytes of flash per point (point, normal, search grid).
+    #[arg(long)]
+    pub template_points: Option<usize>,
     /// Refine the network's pose with ICP.
     #[arg(long)]
     pub refine_icp: bool,
@@ -126,6 +133,7 @@ impl MethodOptions {
             ("--iterations", self.iterations),
             ("--hypotheses", self.hypotheses),
             ("--max-points", self.max_points),
+            ("--template-points", self.template_points),
         ];
         for (flag, v) in at_least_one {
             anyhow::ensure!(v != Some(0), "{flag} must be at least 1");
@@ -164,6 +172,7 @@ impl MethodOptions {
         m.max_points = self.max_points.unwrap_or(m.max_points);
         m.metric = self.metric.unwrap_or(m.metric);
         m.icp_distance = self.icp_distance.unwrap_or(m.icp_distance);
+        m.template_points = self.template_points.unwrap_or(m.template_points);
         m
     }
 

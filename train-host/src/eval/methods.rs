@@ -27,7 +27,9 @@ use pcrnet_core::{Degeneracy, F32Model, Frame, Int8Model, Options, Pose};
 use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
-use crate::register::{ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk};
+use crate::register::{
+    Bound, ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk,
+};
 use crate::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError};
 
 /// A method family.
@@ -106,6 +108,11 @@ pub struct Method {
     /// Device ICP pair distance (model units: share of the template's size).
     #[serde(default = "default_icp_distance")]
     pub icp_distance: f32,
+    /// Template points the device pipeline stores when a template cloud is
+    /// bound in place of the blob's own (it checks and refines poses
+    /// against them).
+    #[serde(default = "default_template_points")]
+    pub template_points: usize,
 }
 
 fn default_hypotheses() -> usize {
@@ -126,6 +133,10 @@ fn default_max_points() -> usize {
 
 fn default_icp_distance() -> f32 {
     pcrnet_core::Options::default().icp_distance
+}
+
+fn default_template_points() -> usize {
+    DEFAULT_TEMPLATE_POINTS
 }
 
 impl Method {
@@ -151,6 +162,7 @@ impl Method {
             max_points: default_max_points(),
             metric: DeviceMetric::default(),
             icp_distance: default_icp_distance(),
+            template_points: default_template_points(),
         }
     }
 
@@ -204,11 +216,14 @@ impl Method {
                 DeviceMetric::PointToPlane => "",
                 DeviceMetric::PointToPoint => " (point-to-point)",
             };
-            let points = if self.max_points == default_max_points() {
+            let mut points = if self.max_points == default_max_points() {
                 String::new()
             } else {
                 format!(", {} points", self.max_points)
             };
+            if self.template_points != default_template_points() {
+                points += &format!(", {}-point template", self.template_points);
+            }
             if self.icp_iterations == 0 {
                 format!("{precision} K={}{points}, scored, no ICP", self.hypotheses)
             } else {
@@ -288,7 +303,11 @@ pub fn run(
 ) -> Result<Outcome, MethodError> {
     let start = Instant::now();
     let model = || blob.ok_or(MethodError::NoModel(method.kind));
-    let degenerate = source_degeneracy(blob, template, source)?;
+    let bound = template.map(|cloud| Bound {
+        cloud,
+        stored: method.template_points,
+    });
+    let degenerate = source_degeneracy(blob, bound, source)?;
     let mut out = match method.kind {
         MethodKind::Icp => {
             let config = IcpConfig {
@@ -307,7 +326,7 @@ pub fn run(
             }
         }
         MethodKind::Device => {
-            let (r, precision) = pipeline(model()?, template, source, &method.device_options())?;
+            let (r, precision) = pipeline(model()?, bound, source, &method.device_options())?;
             Outcome {
                 pose: r.pose,
                 iterations: r.passes,
@@ -373,7 +392,7 @@ pub fn run(
 /// template. A template with no extent is an error for every method.
 fn source_degeneracy(
     blob: Option<&[u8]>,
-    template: Option<&[[f32; 3]]>,
+    template: Option<Bound<'_>>,
     source: &[[f32; 3]],
 ) -> Result<Option<Degeneracy>, MethodError> {
     let judge = |t: &Template<'_>, frame: Frame| {
@@ -381,7 +400,7 @@ fn source_degeneracy(
         refine::degeneracy(t, &subset, MIN_EXTENT)
     };
     if let Some(template) = template {
-        let reference = Reference::new(template, DEFAULT_TEMPLATE_POINTS)?;
+        let reference = Reference::new(template.cloud, template.stored)?;
         let t = Template::new(reference.cloud()).map_err(TemplateError::from)?;
         return Ok(judge(&t, reference.frame));
     }
