@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use pcrnet_core::{Degeneracy, Error, Int8Model, MAX_TILE, Options, Registration};
-use pcrnet_train::register::pipeline;
+use pcrnet_train::register::{Bound, pipeline};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::TemplateError;
 
@@ -22,7 +22,13 @@ fn angle_deg(a: &[f32; 4], b: &[f32; 4]) -> f32 {
 }
 
 fn register(template: &[[f32; 3]], source: &[[f32; 3]]) -> Result<Registration, TemplateError> {
-    pipeline(&shipped(), Some(template), source, &Options::default()).map(|(r, _)| r)
+    pipeline(
+        &shipped(),
+        Some(Bound::new(template)),
+        source,
+        &Options::default(),
+    )
+    .map(|(r, _)| r)
 }
 
 #[test]
@@ -66,7 +72,12 @@ fn degenerate_and_hostile_sources_are_errors_or_flagged() {
     let model = Int8Model::from_bytes(&blob).unwrap();
     let extent = 1.0f32;
     let check = |name: &str, source: &[[f32; 3]]| -> Result<Registration, Error> {
-        let r = pipeline(&blob, Some(&template), source, &Options::default());
+        let r = pipeline(
+            &blob,
+            Some(Bound::new(&template)),
+            source,
+            &Options::default(),
+        );
         match r {
             Ok((r, _)) => {
                 let values = r.pose.rotation.iter().chain(&r.pose.translation);
