@@ -369,7 +369,7 @@ fn training_for_ones_own_object_end_to_end() {
         .arg(&object)
         .args(["--arch", "8,16:16", "--points", "64", "--batch", "4"])
         .args(["--epochs", "2", "--steps-per-epoch", "2", "--no-progress"])
-        .args(["--single-view", "--resample"])
+        .args(["--single-view", "--resample", "--template-points", "64"])
         .arg("--out")
         .arg(&out_dir)
         .output()
@@ -385,6 +385,14 @@ fn training_for_ones_own_object_end_to_end() {
     for blob in ["model-int8.pcrn", "model-f32.pcrn"] {
         assert!(out_dir.join(blob).is_file(), "{blob}: {stderr}");
     }
+    // The blob stores the whole 64-point template, as the guide asks.
+    let out = pcrnet()
+        .arg("inspect")
+        .arg(out_dir.join("model-int8.pcrn"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("template: 64 points with normals"), "{stdout}");
     let out = pcrnet()
         .arg("register")
         .arg(&object)
@@ -429,7 +437,7 @@ fn training_for_ones_own_object_end_to_end() {
         .arg("eval")
         .arg("--pairs")
         .arg(&pairs)
-        .args(["--method", "device", "--model"])
+        .args(["--method", "device", "--template-points", "64", "--model"])
         .arg(out_dir.join("model-int8.pcrn"))
         .output()
         .unwrap();
@@ -441,7 +449,9 @@ fn training_for_ones_own_object_end_to_end() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(
-        stdout.contains("(6 pairs)") && stdout.contains("AUC"),
+        stdout.contains("(6 pairs)")
+            && stdout.contains("AUC")
+            && stdout.contains("64-point template"),
         "{stdout}"
     );
     assert!(!stdout.contains("failed"), "{stdout}");
