@@ -392,7 +392,10 @@ fn training_for_ones_own_object_end_to_end() {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("template: 64 points with normals"), "{stdout}");
+    assert!(
+        stdout.contains("template: 64 points with normals"),
+        "{stdout}"
+    );
     let out = pcrnet()
         .arg("register")
         .arg(&object)
