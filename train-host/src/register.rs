@@ -285,28 +285,35 @@ mod tests {
         assert_eq!((bare.hypothesis, bare.icp_iterations), (0, 0));
     }
 
+    /// An untrained network whose head is biased to the identity (as a
+    /// trained head is, near it), quantized for `reference` with
+    /// calibration poses of `unit` (the template in the model frame): the
+    /// pipeline's pose then comes from the device ICP.
+    fn identity_biased(reference: &Reference, unit: &[[f32; 3]]) -> Vec<u8> {
+        let mut params = F32Params::init(Arch::new(&[16, 32], &[32]).unwrap(), 7);
+        let (w, b) = params.layers.last_mut().unwrap();
+        w.iter_mut().for_each(|v| *v *= 1e-3);
+        b[0] = 2.0;
+        let calib: Vec<_> = (0..8)
+            .map(|i| random_transform(unit, 20.0, 0.1, i))
+            .collect();
+        quantize(
+            &params,
+            reference,
+            &calib,
+            CalibrationRule::default(),
+            TrainedFor::pcrnet(true),
+        )
+        .unwrap()
+    }
+
     /// A source sampled apart from the template (no shared point) is
     /// refined closer to its true pose against more stored template points:
     /// what `--template-points` buys.
     #[test]
     fn more_stored_template_points_refine_a_resampled_source_closer() {
-        let mut params = F32Params::init(Arch::new(&[16, 32], &[32]).unwrap(), 7);
-        let (w, b) = params.layers.last_mut().unwrap();
-        w.iter_mut().for_each(|v| *v *= 1e-3);
-        b[0] = 2.0;
         let template = sample(Shape::Ell, 1200, 3);
-        let calib: Vec<_> = (0..8)
-            .map(|i| random_transform(&template, 20.0, 0.1, i))
-            .collect();
-        let reference = Reference::new(&template, 64).unwrap();
-        let int8 = quantize(
-            &params,
-            &reference,
-            &calib,
-            CalibrationRule::default(),
-            TrainedFor::pcrnet(true),
-        )
-        .unwrap();
+        let int8 = identity_biased(&Reference::new(&template, 64).unwrap(), &template);
         // Another sampling of the same surface, turned 10 degrees about z.
         let (s, c) = 10f32.to_radians().sin_cos();
         let source: Vec<[f32; 3]> = sample(Shape::Ell, 600, 11)
@@ -336,12 +343,6 @@ mod tests {
 
     #[test]
     fn the_refined_pipeline_recovers_a_known_transform_in_user_units() {
-        // An untrained network whose head is biased to the identity (as a
-        // trained head is, near it): the pose then comes from the device ICP.
-        let mut params = F32Params::init(Arch::new(&[16, 32], &[32]).unwrap(), 7);
-        let (w, b) = params.layers.last_mut().unwrap();
-        w.iter_mut().for_each(|v| *v *= 1e-3);
-        b[0] = 2.0;
         let unit = sample(Shape::Ell, 400, 3);
         // The template in millimetres, far from the origin.
         let world: Vec<[f32; 3]> = unit
@@ -354,18 +355,7 @@ mod tests {
                 ]
             })
             .collect();
-        let calib: Vec<_> = (0..8)
-            .map(|i| random_transform(&unit, 20.0, 0.1, i))
-            .collect();
-        let reference = Reference::new(&world, 400).unwrap();
-        let int8 = quantize(
-            &params,
-            &reference,
-            &calib,
-            CalibrationRule::default(),
-            TrainedFor::pcrnet(true),
-        )
-        .unwrap();
+        let int8 = identity_biased(&Reference::new(&world, 400).unwrap(), &unit);
         // The source: the template turned 15 degrees about a tilted axis
         // through its centre and moved 9 mm.
         let source: Vec<[f32; 3]> = {
