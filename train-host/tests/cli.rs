@@ -298,6 +298,17 @@ fn user_errors_name_the_flag_or_file_once() {
                 src.clone(),
                 "--model".into(),
                 int8.clone(),
+                "--template-points".into(),
+                "1024".into(),
+            ],
+            "--template-points applies to a TEMPLATE file",
+        ),
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--model".into(),
+                int8.clone(),
                 "--icp-distance=nan".into(),
             ],
             "--icp-distance NaN",

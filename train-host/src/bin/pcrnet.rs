@@ -226,6 +226,10 @@ fn run(command: Command) -> anyhow::Result<()> {
                 [s] => (None, s.as_path()),
                 _ => anyhow::bail!("register takes [TEMPLATE] SOURCE"),
             };
+            anyhow::ensure!(
+                template.is_some() || options.template_points.is_none(),
+                "--template-points applies to a TEMPLATE file bound in place of the blob's own; the blob's own template keeps the points it was exported with (`pcrnet export --template-points`, `pcrnet inspect` shows them)"
+            );
             // Both clouds are read in f64 and moved by the template's
             // median before rounding to f32 (map coordinates keep their
             // shape); without a template file the source stays in the
