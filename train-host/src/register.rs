@@ -223,8 +223,10 @@ pub fn register_pointnetlk(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::eval::metrics::rotation_error_deg;
     use crate::shapes::{Shape, random_transform, sample};
     use crate::template::Reference;
+    use crate::train::geometry::{euler_to_mat, mat_vec, quat_to_mat, transpose};
     use crate::{CalibrationRule, F32Params, TrainedFor, quantize};
     use pcrnet_core::Arch;
 
@@ -314,12 +316,14 @@ mod tests {
     fn more_stored_template_points_refine_a_resampled_source_closer() {
         let template = sample(Shape::Ell, 1200, 3);
         let int8 = identity_biased(&Reference::new(&template, 64).unwrap(), &template);
-        // Another sampling of the same surface, turned 10 degrees about z.
-        let (s, c) = 10f32.to_radians().sin_cos();
+        // Another sampling of the same surface, turned 10 degrees about z;
+        // the true pose turns it back.
+        let turn = euler_to_mat([0.0, 0.0, 10f32.to_radians()]);
         let source: Vec<[f32; 3]> = sample(Shape::Ell, 600, 11)
             .iter()
-            .map(|p| [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]])
+            .map(|p| mat_vec(&turn, p))
             .collect();
+        let truth = transpose(&turn);
         let options = Options {
             max_points: 600,
             ..Options::default()
@@ -330,11 +334,7 @@ mod tests {
                 stored,
             };
             let (r, _) = pipeline(&int8, Some(bound), &source, &options).unwrap();
-            // The true pose turns the source back by 10 degrees about z.
-            let q = r.pose.rotation;
-            let (half, _) = (10f32.to_radians() / 2.0).sin_cos();
-            let dot = (q[0] * half.cos() - q[3] * half).abs();
-            2.0 * dot.min(1.0).acos().to_degrees()
+            rotation_error_deg(&quat_to_mat(r.pose.rotation), &truth)
         };
         let (sparse, dense) = (error(64), error(1200));
         assert!(dense < sparse, "64 points: {sparse} deg, 1200: {dense} deg");
