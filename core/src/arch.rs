@@ -77,6 +77,22 @@ impl LayerShape {
     }
 }
 
+/// The x86-64 host block kernel's scratch ([`Arch::host_block_len`]), in
+/// words.
+pub(crate) struct HostBlockWords {
+    /// The encoder's weights as int16 pairs ([`LayerShape::pair_words`]),
+    /// each row padded to an even length; every layer but a pooled layer
+    /// that runs on bytes.
+    pub weights: usize,
+    /// A pooled layer on bytes: its rows' weight sums (one per output),
+    /// then the list of its input quads that take the high-bit pass.
+    pub pooled: usize,
+    /// One activation buffer: [`HOST_BLOCK`] points x the widest layer
+    /// input in int16 pairs (the coordinates count as four), or x the
+    /// pooled layer's input as two sets of byte quads if that is more.
+    pub buffer: usize,
+}
+
 impl Arch {
     /// Builds an architecture from width lists, checking the limits
     /// (1..=`MAX_LAYERS` encoder layers, 0..=`MAX_LAYERS` head layers, widths >= 1).
@@ -172,25 +188,35 @@ impl Arch {
 
     /// Bytes of scratch the int8 encoder's x86-64 host kernel uses past
     /// [`Self::int8_scratch_len`]: the encoder's weights as int16 (each
-    /// row padded to an even length) and two buffers of [`HOST_BLOCK`]
-    /// points x the widest layer input as int16 (the coordinates count as
-    /// four), plus 3 for alignment.
+    /// row padded to an even length), but those of the pooled layer when
+    /// its input is an int8 activation (it reads its int8 weights as
+    /// stored and needs one word per output and per four inputs instead),
+    /// and two buffers of [`HOST_BLOCK`] points x the widest layer input
+    /// as int16 (the coordinates count as four), plus 3 for alignment.
     pub fn host_block_len(&self) -> usize {
-        let (weights, buffer) = self.host_block_words();
-        4 * (weights + 2 * buffer) + 3
+        let w = self.host_block_words();
+        4 * (w.weights + w.pooled + 2 * w.buffer) + 3
     }
 
-    /// The host block kernel's words: the encoder's weights as int16
-    /// pairs ([`LayerShape::pair_words`]), and one activation buffer
-    /// ([`HOST_BLOCK`] points x the widest layer input, in pairs).
-    pub(crate) fn host_block_words(&self) -> (usize, usize) {
-        let weights = self.encoder_layers().map(|l| l.pair_words()).sum();
-        let widest = self
+    /// The host block kernel's scratch in words.
+    pub(crate) fn host_block_words(&self) -> HostBlockWords {
+        let last = self.encoder_layers().last();
+        // The pooled layer runs on bytes when its input is an int8
+        // activation, not the int16 coordinates.
+        let pooled = last.filter(|_| self.encoder.len() > 1);
+        let int16 = self
             .encoder_layers()
-            .map(|l| l.inputs.div_ceil(2))
-            .max()
-            .unwrap_or(0);
-        (weights, HOST_BLOCK * widest)
+            .take(self.encoder.len() - usize::from(pooled.is_some()));
+        let weights = int16.map(|l| l.pair_words()).sum();
+        let pairs = self.encoder_layers().map(|l| l.inputs.div_ceil(2));
+        // Bytes: the block's low bits and high bits, each a word per point
+        // and quad of inputs.
+        let bytes = pooled.map_or(0, |l| 2 * l.inputs.div_ceil(4));
+        HostBlockWords {
+            weights,
+            pooled: pooled.map_or(0, |l| l.outputs + l.inputs.div_ceil(4)),
+            buffer: HOST_BLOCK * pairs.chain([bytes]).max().unwrap_or(0),
+        }
     }
 
     /// Elements of f32 scratch the f32 path needs.

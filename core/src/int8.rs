@@ -452,7 +452,8 @@ impl<'a> Int8Model<'a> {
             #[cfg(all(target_arch = "x86_64", feature = "std"))]
             if let Some(block) = block.as_mut() {
                 let layers = self.p.arch.encoder_layers().zip(self.p.encoder.iter());
-                let layers = layers.map(|(s, l)| (s.inputs, s.outputs, requant(l, true)));
+                let layers =
+                    layers.map(|(s, l)| (s.inputs, s.outputs, l.weights, requant(l, true)));
                 block.encode(&points, layers, feature);
                 encoded += filled;
                 filled = 0;

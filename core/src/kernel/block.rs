@@ -6,9 +6,9 @@
 //! eight partial sums horizontally, for every output. Here the vector
 //! lanes run along the points instead, so no lane sum is ever needed:
 //!
-//! - the weights of every encoder layer are copied once per call into
-//!   int16 rows padded to an even length (input `2j` in the low half of
-//!   word `j`, input `2j + 1` in the high half);
+//! - the weights of every encoder layer but the pooled one are copied once
+//!   per call into int16 rows padded to an even length (input `2j` in the
+//!   low half of word `j`, input `2j + 1` in the high half);
 //! - a layer's input is kept as int16 pairs *by point*: word `j * BLOCK +
 //!   p` holds point `p`'s inputs `2j` and `2j + 1`. The first layer's
 //!   input is the coordinates: `(x, y)` then `(z, 0)`;
@@ -20,7 +20,11 @@
 //! - the output step runs on eight points at once, and the two outputs'
 //!   activations are interleaved straight into the next layer's pairs; the
 //!   last layer takes the largest accumulator of each output for the
-//!   max-pool (the output step is non-decreasing, see [`Sink::Pool`]).
+//!   max-pool (the output step is non-decreasing, see [`Sink::Pool`]);
+//! - the last (pooled) layer, most of the work, runs on bytes instead
+//!   when its input is an int8 activation ([`bytes`]): `VPMADDUBSW` on
+//!   the low seven bits of each input, a second pass only for the rare
+//!   quads of inputs with the top bit set.
 //!
 //! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`),
 //! and model loading bounds every partial sum (see [`super::dot`]), so the
@@ -37,13 +41,20 @@ use crate::arch::{Arch, HOST_BLOCK as BLOCK, INPUT_DIM};
 use crate::fixed::OutputStep;
 use crate::format::{Int8Layer, le_i32s};
 
+mod bytes;
+use bytes::{Pooled, pool_bytes};
+
 /// Vectors of eight points in a block.
 const VECTORS: usize = BLOCK / 8;
 
-/// A block encoder over a caller's scratch: the int16 weights and two
+/// A block encoder over a caller's scratch: the int16 weights, the pooled
+/// layer's row sums and quad list when it runs on bytes, and two
 /// activation buffers.
 pub(crate) struct BlockEncoder<'w> {
     weights: &'w [u32],
+    /// The pooled layer on bytes: each row's weight sum, and room for the
+    /// list of quads that take the high-bit pass.
+    pooled: Option<(&'w [u32], &'w mut [u32])>,
     acts: (&'w mut [u32], &'w mut [u32]),
 }
 
@@ -56,29 +67,47 @@ impl<'w> BlockEncoder<'w> {
             return None;
         }
         let words = as_words(area);
-        let (total, buffer) = arch.host_block_words();
-        let (weights, rest) = words.split_at_mut_checked(total)?;
-        let (a, rest) = rest.split_at_mut_checked(buffer)?;
-        let b = rest.get_mut(..buffer)?;
+        let sizes = arch.host_block_words();
+        let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
+        let (pooled, rest) = rest.split_at_mut_checked(sizes.pooled)?;
+        let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
+        let b = rest.get_mut(..sizes.buffer)?;
         let mut free = &mut *weights;
-        for (shape, layer) in arch.encoder_layers().zip(layers) {
+        let mut shapes = arch.encoder_layers().zip(layers).peekable();
+        while let Some((shape, layer)) = shapes.next() {
+            if shapes.peek().is_none() && sizes.pooled > 0 {
+                let (sums, quads) = pooled.split_at_mut_checked(shape.outputs)?;
+                for (sum, row) in sums
+                    .iter_mut()
+                    .zip(super::rows(layer.weights, shape.inputs))
+                {
+                    *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
+                }
+                return Some(BlockEncoder {
+                    weights,
+                    pooled: Some((sums, quads)),
+                    acts: (a, b),
+                });
+            }
             let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
             widen(layer.weights, shape.inputs, out);
             free = tail;
         }
         Some(BlockEncoder {
             weights,
+            pooled: None,
             acts: (a, b),
         })
     }
 
     /// Encodes a block of quantized points and max-pools the last layer
     /// into `feature`. `layers` holds each encoder layer's input and output
-    /// widths and requantization, first to last, as in [`Self::new`].
+    /// widths, int8 weights and requantization, first to last, as in
+    /// [`Self::new`].
     pub(crate) fn encode<'q>(
         &mut self,
         points: &[[i16; INPUT_DIM]; BLOCK],
-        layers: impl Iterator<Item = (usize, usize, Requant<'q>)>,
+        layers: impl Iterator<Item = (usize, usize, &'q [u8], Requant<'q>)>,
         feature: &mut [i8],
     ) {
         let (a, b) = (&mut *self.acts.0, &mut *self.acts.1);
@@ -90,11 +119,26 @@ impl<'w> BlockEncoder<'w> {
         let (mut input, mut output) = (a, b);
         let mut weights = self.weights;
         let mut layers = layers.peekable();
-        while let Some((inputs, outputs, q)) = layers.next() {
+        while let Some((inputs, outputs, bytes, q)) = layers.next() {
             let pairs = inputs.div_ceil(2);
+            let last = layers.peek().is_none();
+            if let (true, Some((sums, quads))) = (last, self.pooled.as_mut()) {
+                let pooled = Pooled {
+                    weights: bytes,
+                    inputs,
+                    sums,
+                };
+                // SAFETY: `BlockEncoder::new` found AVX2, all `pool_bytes`
+                // requires.
+                #[allow(unsafe_code)]
+                unsafe {
+                    pool_bytes(&pooled, q, input, output, quads, feature)
+                };
+                return;
+            }
             let (w, rest) = weights.split_at(weights.len().min(outputs * pairs));
             weights = rest;
-            let dest = if layers.peek().is_none() {
+            let dest = if last {
                 Dest::Pool(&mut *feature)
             } else {
                 Dest::Pairs(&mut *output)
@@ -203,8 +247,9 @@ fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], dest: Des
 /// The largest lane of the block's accumulators.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn largest(acc: [__m256i; VECTORS]) -> i32 {
-    max(acc.into_iter().fold(acc[0], |m, v| _mm256_max_epi32(m, v)))
+fn largest<const N: usize>(acc: [__m256i; N]) -> i32 {
+    let first = acc.first().copied().unwrap_or(_mm256_set1_epi32(i32::MIN));
+    max(acc.into_iter().fold(first, |m, v| _mm256_max_epi32(m, v)))
 }
 
 #[cfg(test)]
@@ -213,6 +258,19 @@ mod tests {
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
+
+    /// A block's inputs (`BLOCK` rows of `inputs`) as int16 pairs by point.
+    pub(super) fn by_point(x: &[i8], inputs: usize) -> Vec<u32> {
+        let pairs = inputs.div_ceil(2);
+        let mut input = std::vec![0u32; pairs * BLOCK];
+        for (p, row) in x.chunks(inputs).enumerate() {
+            for j in 0..pairs {
+                let v = |k: usize| row.get(k).map_or(0, |&v| v as i16);
+                input[j * BLOCK + p] = pair(v(2 * j), v(2 * j + 1));
+            }
+        }
+        input
+    }
 
     /// One layer of the block kernel gives the portable kernel's
     /// activations, stored and max-pooled, on even and odd widths, on the
@@ -231,14 +289,7 @@ mod tests {
                 let pairs = inputs.div_ceil(2);
                 let mut wide = std::vec![0u32; outputs * pairs];
                 widen(weights, inputs, &mut wide);
-                // The block's inputs as pairs by point.
-                let mut input = std::vec![0u32; pairs * BLOCK];
-                for (p, row) in x.chunks(inputs).enumerate() {
-                    for j in 0..pairs {
-                        let v = |k: usize| row.get(k).map_or(0, |&v| v as i16);
-                        input[j * BLOCK + p] = pair(v(2 * j), v(2 * j + 1));
-                    }
-                }
+                let input = by_point(&x, inputs);
                 let mut want = std::vec![0i8; BLOCK * outputs];
                 let sink = &mut Sink::Store {
                     out: &mut want,

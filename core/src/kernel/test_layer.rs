@@ -7,10 +7,10 @@ use std::vec::Vec;
 /// Random weights, biases and output steps of one layer.
 pub(crate) struct TestLayer {
     pub weights: Vec<u8>,
-    bias: Vec<u8>,
-    multiplier: Vec<u8>,
-    shift: Vec<u8>,
-    zero_point: i8,
+    pub bias: Vec<u8>,
+    pub multiplier: Vec<u8>,
+    pub shift: Vec<u8>,
+    pub zero_point: i8,
 }
 
 /// A random int8 value.
