@@ -81,8 +81,8 @@ impl LayerShape {
 /// words.
 pub(crate) struct HostBlockWords {
     /// The encoder's weights as int16 pairs ([`LayerShape::pair_words`]),
-    /// each row padded to an even length; every layer but a pooled layer
-    /// that runs on bytes.
+    /// each row padded to an even length (a pooled layer that runs on
+    /// bytes copies its own only for blocks the byte kernel declines).
     pub weights: usize,
     /// A pooled layer on bytes: its rows' weight sums (one per output),
     /// then the list of its input quads that take the high-bit pass.
@@ -188,11 +188,11 @@ impl Arch {
 
     /// Bytes of scratch the int8 encoder's x86-64 host kernel uses past
     /// [`Self::int8_scratch_len`]: the encoder's weights as int16 (each
-    /// row padded to an even length), but those of the pooled layer when
-    /// its input is an int8 activation (it reads its int8 weights as
-    /// stored and needs one word per output and per four inputs instead),
-    /// and two buffers of [`HOST_BLOCK`] points x the widest layer input
-    /// as int16 (the coordinates count as four), plus 3 for alignment.
+    /// row padded to an even length); when the pooled layer's input is an
+    /// int8 activation, one word per output and per four of its inputs
+    /// for its byte kernel; and two buffers of [`HOST_BLOCK`] points x the
+    /// widest layer input as int16 (the coordinates count as four), plus 3
+    /// for alignment.
     pub fn host_block_len(&self) -> usize {
         let w = self.host_block_words();
         4 * (w.weights + w.pooled + 2 * w.buffer) + 3
@@ -204,10 +204,7 @@ impl Arch {
         // The pooled layer runs on bytes when its input is an int8
         // activation, not the int16 coordinates.
         let pooled = last.filter(|_| self.encoder.len() > 1);
-        let int16 = self
-            .encoder_layers()
-            .take(self.encoder.len() - usize::from(pooled.is_some()));
-        let weights = int16.map(|l| l.pair_words()).sum();
+        let weights = self.encoder_layers().map(|l| l.pair_words()).sum();
         let pairs = self.encoder_layers().map(|l| l.inputs.div_ceil(2));
         // Bytes: the block's low bits and high bits, each a word per point
         // and quad of inputs.

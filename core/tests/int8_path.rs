@@ -417,3 +417,25 @@ fn the_robust_centroid_leaves_out_stray_points_only() {
     );
     assert_eq!(robust_centroid(&[], 4.0), Err(Error::EmptyCloud));
 }
+
+/// The shipped trained model, whose pooled layer's inputs sit mostly in the
+/// lower half of their range, so that the x86-64 host kernel runs the
+/// pooled layer on bytes (the random models above make it decline): the
+/// host scratch gives the tiles' bits (the tile kernels are checked against
+/// the plain reference above; this model's frame moves the points first,
+/// which `reference` does not do).
+#[test]
+fn trained_model_host_kernel_matches_tiles() {
+    let blob = include_bytes!("../../models/embedded-default-int8.pcrn");
+    let model = Int8Model::from_bytes(blob).unwrap();
+    let mut tiles = vec![0i8; model.scratch_len(MAX_TILE)];
+    let mut host = vec![0i8; model.host_scratch_len()];
+    for (seed, n) in [(31u64, 48usize), (32, 1000), (33, 2048)] {
+        let pts = cloud(seed, n, 0.5);
+        let want = model.infer(&pts, &mut tiles).unwrap();
+        let (feature, head) = (want.feature.to_vec(), want.head);
+        let got = model.infer(&pts, &mut host).unwrap();
+        assert_eq!(got.feature, &feature[..], "feature, n {n}");
+        assert_eq!(got.head, head, "head, n {n}");
+    }
+}

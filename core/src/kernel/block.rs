@@ -52,10 +52,21 @@ const VECTORS: usize = BLOCK / 8;
 /// activation buffers.
 pub(crate) struct BlockEncoder<'w> {
     weights: &'w [u32],
-    /// The pooled layer on bytes: each row's weight sum, and room for the
-    /// list of quads that take the high-bit pass.
-    pooled: Option<(&'w [u32], &'w mut [u32])>,
+    pooled: Option<OnBytes<'w>>,
     acts: (&'w mut [u32], &'w mut [u32]),
+}
+
+/// The pooled layer's scratch when it runs on bytes.
+struct OnBytes<'w> {
+    /// Each row's weight sum.
+    sums: &'w [u32],
+    /// Room for the list of quads that take the high-bit pass.
+    quads: &'w mut [u32],
+    /// Room for its int16 weights, copied the first time a block has too
+    /// many quads with a high bit for the byte kernel to pay (see
+    /// [`pool_bytes`]).
+    wide: &'w mut [u32],
+    widened: bool,
 }
 
 impl<'w> BlockEncoder<'w> {
@@ -72,30 +83,38 @@ impl<'w> BlockEncoder<'w> {
         let (pooled, rest) = rest.split_at_mut_checked(sizes.pooled)?;
         let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
         let b = rest.get_mut(..sizes.buffer)?;
+        // A pooled layer on bytes: its int16 weights last, copied later if
+        // at all.
+        let last = arch.encoder_layers().zip(layers).last();
+        let on_bytes = last.filter(|_| sizes.pooled > 0);
+        let later = on_bytes.map_or(0, |(shape, _)| shape.pair_words());
+        let (weights, wide) = weights.split_at_mut_checked(sizes.weights.checked_sub(later)?)?;
         let mut free = &mut *weights;
-        let mut shapes = arch.encoder_layers().zip(layers).peekable();
-        while let Some((shape, layer)) = shapes.next() {
-            if shapes.peek().is_none() && sizes.pooled > 0 {
-                let (sums, quads) = pooled.split_at_mut_checked(shape.outputs)?;
-                for (sum, row) in sums
-                    .iter_mut()
-                    .zip(super::rows(layer.weights, shape.inputs))
-                {
-                    *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
-                }
-                return Some(BlockEncoder {
-                    weights,
-                    pooled: Some((sums, quads)),
-                    acts: (a, b),
-                });
-            }
+        let now = arch.encoder_layers().zip(layers);
+        for (shape, layer) in now.take(arch.encoder.len() - usize::from(on_bytes.is_some())) {
             let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
             widen(layer.weights, shape.inputs, out);
             free = tail;
         }
+        let pooled = match on_bytes {
+            Some((shape, layer)) => {
+                let (sums, quads) = pooled.split_at_mut_checked(shape.outputs)?;
+                let rows = super::rows(layer.weights, shape.inputs);
+                for (sum, row) in sums.iter_mut().zip(rows) {
+                    *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
+                }
+                Some(OnBytes {
+                    sums,
+                    quads,
+                    wide,
+                    widened: false,
+                })
+            }
+            None => None,
+        };
         Some(BlockEncoder {
             weights,
-            pooled: None,
+            pooled,
             acts: (a, b),
         })
     }
@@ -122,17 +141,23 @@ impl<'w> BlockEncoder<'w> {
         while let Some((inputs, outputs, bytes, q)) = layers.next() {
             let pairs = inputs.div_ceil(2);
             let last = layers.peek().is_none();
-            if let (true, Some((sums, quads))) = (last, self.pooled.as_mut()) {
+            if let (true, Some(on)) = (last, self.pooled.as_mut()) {
                 let pooled = Pooled {
                     weights: bytes,
                     inputs,
-                    sums,
+                    sums: on.sums,
                 };
                 // SAFETY: `BlockEncoder::new` found AVX2, all `pool_bytes`
-                // requires.
+                // and `layer` require.
                 #[allow(unsafe_code)]
                 unsafe {
-                    pool_bytes(&pooled, q, input, output, quads, feature)
+                    if !pool_bytes(&pooled, q, input, output, on.quads, feature) {
+                        if !on.widened {
+                            widen(bytes, inputs, on.wide);
+                            on.widened = true;
+                        }
+                        layer(on.wide, pairs, q, input, Dest::Pool(feature));
+                    }
                 };
                 return;
             }
