@@ -91,7 +91,11 @@ impl<'w> BlockEncoder<'w> {
         let (weights, wide) = weights.split_at_mut_checked(sizes.weights.checked_sub(later)?)?;
         let mut free = &mut *weights;
         let now = arch.encoder_layers().zip(layers);
-        for (shape, layer) in now.take(arch.encoder.len() - usize::from(on_bytes.is_some())) {
+        for (shape, layer) in now.take(
+            arch.encoder
+                .len()
+                .saturating_sub(usize::from(on_bytes.is_some())),
+        ) {
             let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
             widen(layer.weights, shape.inputs, out);
             free = tail;
