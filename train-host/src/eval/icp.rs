@@ -1,12 +1,13 @@
 //! Point-to-point ICP (Besl & McKay), the paper's baseline: exact nearest
 //! neighbours ([`super::nearest`]: a grid, a `kiddo` k-d tree for far
-//! queries), the rigid update by the Kabsch / SVD method (`nalgebra`), in
+//! queries, each source point's match kept without a search while it
+//! provably stands), the rigid update by the Kabsch / SVD method (`nalgebra`), in
 //! f64.
 
 use nalgebra::{Matrix3, Vector3};
 use pcrnet_core::Pose;
 
-use super::nearest::NearestSearch;
+use super::nearest::{NearestSearch, Track};
 use super::pose_from_matrix;
 
 /// ICP settings.
@@ -98,19 +99,20 @@ pub fn icp(
     let mut mse = f64::INFINITY;
     let mut trajectory = Vec::new();
     let mut matched = vec![Vector3::zeros(); moved.len()];
-    // Each source point's match of the previous iteration (none yet).
-    let mut hints = vec![usize::MAX; moved.len()];
+    // What each source point's last search found, and how far it has moved since.
+    let mut tracks = vec![Track::default(); moved.len()];
     for iteration in 1..=config.max_iterations {
         let mut sum = 0.0;
-        for ((m, h), p) in matched.iter_mut().zip(&mut hints).zip(&moved) {
-            let nn = search.nearest(&[p.x, p.y, p.z], (*h != usize::MAX).then_some(*h));
+        for ((m, track), p) in matched.iter_mut().zip(&mut tracks).zip(&moved) {
+            let nn = search.nearest(&[p.x, p.y, p.z], track);
             sum += nn.squared;
-            *h = nn.index;
             *m = Vector3::from(search.point(nn.index));
         }
         let (dr, dt) = kabsch(&moved, &matched);
-        for p in &mut moved {
-            *p = dr * *p + dt;
+        for (p, track) in moved.iter_mut().zip(&mut tracks) {
+            let next = dr * *p + dt;
+            track.moved((next - *p).norm());
+            *p = next;
         }
         r = dr * r;
         t = dr * t + dt;
