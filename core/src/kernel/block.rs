@@ -1,5 +1,6 @@
-//! The x86-64 AVX2 block encoder (`std` feature): [`HOST_BLOCK`] points
-//! through every encoder layer, each layer a small matrix product.
+//! The x86-64 AVX2 (and AVX-512 VNNI) block encoder (`std` feature):
+//! [`HOST_BLOCK`] points through every encoder layer, each layer a small
+//! matrix product.
 //!
 //! The tile kernel ([`super::x86`]) multiplies one weight row with eight
 //! points' activations along the input axis and must add each point's
@@ -24,7 +25,9 @@
 //! - the last (pooled) layer, most of the work, runs on bytes instead
 //!   when its input is an int8 activation ([`bytes`]): `VPMADDUBSW` on
 //!   the low seven bits of each input, a second pass only for the rare
-//!   quads of inputs with the top bit set.
+//!   quads of inputs with the top bit set; on a CPU with AVX-512 VNNI
+//!   ([`vnni`]), `VPDPBUSD` on whole bytes, sixteen points a vector, four
+//!   rows at a time.
 //!
 //! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`),
 //! and model loading bounds every partial sum (see [`super::dot`]), so the
@@ -42,7 +45,9 @@ use crate::fixed::OutputStep;
 use crate::format::{Int8Layer, le_i32s};
 
 mod bytes;
+mod vnni;
 use bytes::{Pooled, pool_bytes};
+use vnni::pool_vnni;
 
 /// Vectors of eight points in a block.
 const VECTORS: usize = BLOCK / 8;
@@ -67,6 +72,8 @@ struct OnBytes<'w> {
     /// [`pool_bytes`]).
     wide: &'w mut [u32],
     widened: bool,
+    /// The CPU has AVX-512 VNNI: [`pool_vnni`] instead of [`pool_bytes`].
+    vnni: bool,
 }
 
 impl<'w> BlockEncoder<'w> {
@@ -112,6 +119,8 @@ impl<'w> BlockEncoder<'w> {
                     quads,
                     wide,
                     widened: false,
+                    vnni: std::is_x86_feature_detected!("avx512vnni")
+                        && std::is_x86_feature_detected!("avx512bw"),
                 })
             }
             None => None,
@@ -152,10 +161,16 @@ impl<'w> BlockEncoder<'w> {
                     sums: on.sums,
                 };
                 // SAFETY: `BlockEncoder::new` found AVX2, all `pool_bytes`
-                // and `layer` require.
+                // and `layer` require, and AVX-512 VNNI and BW (which
+                // imply F) when `on.vnni`, all `pool_vnni` requires.
                 #[allow(unsafe_code)]
                 unsafe {
-                    if !pool_bytes(&pooled, q, input, output, on.quads, feature) {
+                    let done = if on.vnni {
+                        pool_vnni(&pooled, q, input, output, feature)
+                    } else {
+                        pool_bytes(&pooled, q, input, output, on.quads, feature)
+                    };
+                    if !done {
                         if !on.widened {
                             widen(bytes, inputs, on.wide);
                             on.widened = true;

@@ -144,7 +144,7 @@ fn half_of(x: &[u32], half: usize) -> &Half {
 
 /// Weights `4j..4j + 4` of a row as one word, zeros past its end.
 #[inline]
-fn quad(row: &[u8], j: usize) -> i32 {
+pub(super) fn quad(row: &[u8], j: usize) -> i32 {
     let mut word = [0u8; 4];
     for (w, &v) in word.iter_mut().zip(row.iter().skip(4 * j)) {
         *w = v;
@@ -181,7 +181,7 @@ fn quad_step(
 /// `x0 + 128` and `x1 + 128` in the low half of each point's word.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn bytes_of(pairs: Option<&[u32; 8]>) -> __m256i {
+pub(super) fn bytes_of(pairs: Option<&[u32; 8]>) -> __m256i {
     let Some(pairs) = pairs else {
         return _mm256_setzero_si256();
     };
