@@ -1,4 +1,5 @@
-//! The f32 encoder's x86-64 AVX kernel, chosen at run time (`std` feature).
+//! The f32 encoder's x86-64 AVX kernel, chosen at run time (`std` feature),
+//! its tile's inner products with AVX-512F where the CPU has it.
 //!
 //! [`F32_TILE`] points go through the layers together, one point per
 //! vector lane: the tile's activations are stored input-major (`x[i][t]`),
@@ -19,7 +20,9 @@
 use core::arch::x86_64::{
     __m256, _CMP_LT_OQ, _mm256_add_ps, _mm256_andnot_ps, _mm256_cmp_ps, _mm256_loadu_ps,
     _mm256_mul_ps, _mm256_permute2f128_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_shuffle_ps,
-    _mm256_storeu_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+    _mm256_storeu_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps, _mm512_add_ps, _mm512_cmp_ps_mask,
+    _mm512_loadu_ps, _mm512_maskz_mov_ps, _mm512_mul_ps, _mm512_set1_ps, _mm512_setzero_ps,
+    _mm512_storeu_ps,
 };
 
 use super::{Layer, Params, pool};
@@ -47,16 +50,27 @@ pub(super) fn encode<P: Params>(
         return Ok(false);
     }
     let (a, b) = ping_pong(work, half)?;
-    // SAFETY: the CPU has AVX (checked above), all `tiles` requires.
+    // SAFETY: the CPU has AVX (checked above), all `tiles` and `outputs`
+    // require, and AVX-512F where `outputs_wide` is picked.
     #[allow(unsafe_code)]
     unsafe {
-        tiles(layers, arch, source, map, feature, a, b)?
+        if std::is_x86_feature_detected!("avx512f") {
+            tiles(layers, arch, source, map, feature, a, b, outputs_wide::<P>)?
+        } else {
+            tiles(layers, arch, source, map, feature, a, b, outputs::<P>)?
+        }
     };
     Ok(true)
 }
 
+/// A kernel for `B` outputs over a tile ([`outputs`], [`outputs_wide`]).
+type Block<P, const B: usize> = unsafe fn([P; B], [f32; B], &[f32]) -> [[f32; F32_TILE]; B];
+
+/// The encoder over the source, a tile at a time, `B` outputs at a time
+/// through `block`, which the caller's CPU must support.
+#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx")]
-fn tiles<'w, P: Params>(
+fn tiles<'w, P: Params, const B: usize>(
     layers: &[Layer<P>],
     arch: &Arch,
     source: &[[f32; 3]],
@@ -64,6 +78,7 @@ fn tiles<'w, P: Params>(
     feature: &mut [f32],
     mut a: &'w mut [f32],
     mut b: &'w mut [f32],
+    block: Block<P, B>,
 ) -> Result<()> {
     let last = layers.len().saturating_sub(1);
     for (c, chunk) in source.chunks(F32_TILE).enumerate() {
@@ -107,14 +122,16 @@ fn tiles<'w, P: Params>(
                     *y = v;
                 }
             };
-            // Four outputs at a time: eight independent sums in flight. The
+            // `B` outputs at a time: eight independent sums in flight. The
             // last block repeats its last output where there are fewer than
-            // four left; the repeats are dropped.
-            for o in (0..shape.outputs).step_by(BLOCK) {
+            // `B` left; the repeats are dropped.
+            for o in (0..shape.outputs).step_by(B) {
                 let k = |k: usize| (o + k).min(shape.outputs - 1);
                 let rows = core::array::from_fn(|j| layer.weights.slice(k(j) * inputs, inputs));
                 let bias = core::array::from_fn(|j| layer.bias.get(k(j)));
-                let values = outputs(rows, bias, x);
+                // SAFETY: the caller checked the CPU for `block`.
+                #[allow(unsafe_code)]
+                let values = unsafe { block(rows, bias, x) };
                 for (j, v) in values.into_iter().enumerate().take(shape.outputs - o) {
                     emit(o + j, v);
                 }
@@ -174,6 +191,58 @@ fn outputs<P: Params>(rows: [P; BLOCK], bias: [f32; BLOCK], x: &[f32]) -> [[f32;
         }
         out
     })
+}
+
+/// Outputs per pass of the AVX-512 kernel: eight, one vector of the
+/// tile's sixteen points each, again eight sums in flight.
+const WIDE_BLOCK: usize = 8;
+
+/// [`outputs`] with AVX-512F, eight outputs at a time, the tile's sixteen
+/// points in one vector: the same multiply, then add, per lane and input
+/// in the same order, so the same bits.
+#[target_feature(enable = "avx512f")]
+fn outputs_wide<P: Params>(
+    rows: [P; WIDE_BLOCK],
+    bias: [f32; WIDE_BLOCK],
+    x: &[f32],
+) -> [[f32; F32_TILE]; WIDE_BLOCK] {
+    let mut acc = [_mm512_setzero_ps(); WIDE_BLOCK];
+    for (acc, &b) in acc.iter_mut().zip(&bias) {
+        *acc = _mm512_set1_ps(b);
+    }
+    // One zip over the inputs: a single trip count, no per-row end checks.
+    let [w0, w1, w2, w3, w4, w5, w6, w7] = rows;
+    let inputs = x.as_chunks::<F32_TILE>().0.iter();
+    let columns = inputs.zip(
+        w0.values()
+            .zip(w1.values())
+            .zip(w2.values())
+            .zip(w3.values())
+            .zip(w4.values())
+            .zip(w5.values())
+            .zip(w6.values())
+            .zip(w7.values()),
+    );
+    for (xi, (((((((w0, w1), w2), w3), w4), w5), w6), w7)) in columns {
+        // SAFETY: `xi` is 16 f32; unaligned loads are allowed.
+        #[allow(unsafe_code)]
+        let xi = unsafe { _mm512_loadu_ps(xi.as_ptr()) };
+        for (acc, w) in acc.iter_mut().zip([w0, w1, w2, w3, w4, w5, w6, w7]) {
+            *acc = _mm512_add_ps(*acc, _mm512_mul_ps(_mm512_set1_ps(w), xi));
+        }
+    }
+    let mut out = [[0f32; F32_TILE]; WIDE_BLOCK];
+    for (acc, out) in acc.iter().zip(&mut out) {
+        // ReLU as the portable path (see `outputs`).
+        let below = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(*acc, _mm512_setzero_ps());
+        let relu = _mm512_maskz_mov_ps(!below, *acc);
+        // SAFETY: `out` is 16 f32; unaligned stores are allowed.
+        #[allow(unsafe_code)]
+        unsafe {
+            _mm512_storeu_ps(out.as_mut_ptr(), relu)
+        };
+    }
+    out
 }
 
 /// [`super::dense_concat`] for the first `outputs / 8 * 8` outputs, eight
@@ -316,7 +385,7 @@ fn store(v: __m256) -> [f32; LANES] {
 
 #[cfg(test)]
 mod tests {
-    use super::Layer;
+    use super::{F32_TILE, Layer, outputs, outputs_wide};
     use crate::F32Model;
     use crate::testing::{SplitMix64, random_f32_blob_into};
     use std::vec::Vec;
@@ -353,6 +422,51 @@ mod tests {
                     assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits));
                 }
             }
+        }
+    }
+
+    /// The AVX-512 block kernel gives the AVX one's bits, eight outputs
+    /// against two passes of four, for widths around multiples of eight and
+    /// sixteen, sums on both sides of zero (the ReLU), and a NaN input.
+    #[test]
+    fn wide_block_matches_avx_block() {
+        if !std::is_x86_feature_detected!("avx512f") {
+            std::eprintln!("no AVX-512F on this CPU: outputs_wide not tested");
+            return;
+        }
+        let mut rng = SplitMix64(10);
+        for inputs in [1, 3, 7, 16, 33, 64, 130] {
+            let w: Vec<f32> = (0..8 * inputs).map(|_| rng.uniform(-1.0, 1.0)).collect();
+            let mut x: Vec<f32> = (0..F32_TILE * inputs)
+                .map(|_| rng.uniform(-2.0, 2.0))
+                .collect();
+            if inputs == 33 {
+                x[5] = f32::NAN;
+            }
+            let bias: [f32; 8] = core::array::from_fn(|_| rng.uniform(-0.5, 0.5));
+            let rows: [&[f32]; 8] = core::array::from_fn(|j| &w[j * inputs..(j + 1) * inputs]);
+            // SAFETY: the CPU has AVX-512F (checked above), and so AVX.
+            #[allow(unsafe_code)]
+            let (wide, lo, hi) = unsafe {
+                (
+                    outputs_wide(rows, bias, &x),
+                    outputs(
+                        [rows[0], rows[1], rows[2], rows[3]],
+                        [bias[0], bias[1], bias[2], bias[3]],
+                        &x,
+                    ),
+                    outputs(
+                        [rows[4], rows[5], rows[6], rows[7]],
+                        [bias[4], bias[5], bias[6], bias[7]],
+                        &x,
+                    ),
+                )
+            };
+            let bits =
+                |v: &[[f32; F32_TILE]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let narrow: Vec<[f32; F32_TILE]> = lo.into_iter().chain(hi).collect();
+            assert_eq!(bits(&wide), bits(&narrow), "{inputs} inputs");
+            assert!(wide.iter().flatten().any(|&v| v == 0.0), "some ReLU clamps");
         }
     }
 
