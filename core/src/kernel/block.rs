@@ -27,7 +27,11 @@
 //!   the low seven bits of each input, a second pass only for the rare
 //!   quads of inputs with the top bit set; on a CPU with AVX-512 VNNI
 //!   ([`vnni`]), `VPDPBUSD` on whole bytes, sixteen points a vector, four
-//!   rows at a time.
+//!   rows at a time;
+//! - on a CPU with AVX-512 VNNI the other layers run through [`wide`]
+//!   instead: the same int16 pairs, `VPDPWSSD` (a pair's two products
+//!   added to the accumulator in one instruction), sixteen points a
+//!   vector, four rows at a time.
 //!
 //! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`),
 //! and model loading bounds every partial sum (see [`super::dot`]), so the
@@ -46,8 +50,10 @@ use crate::format::{Int8Layer, le_i32s};
 
 mod bytes;
 mod vnni;
+mod wide;
 use bytes::{Pooled, pool_bytes};
 use vnni::pool_vnni;
+use wide::layer_wide;
 
 /// Vectors of eight points in a block.
 const VECTORS: usize = BLOCK / 8;
@@ -59,6 +65,9 @@ pub(crate) struct BlockEncoder<'w> {
     weights: &'w [u32],
     pooled: Option<OnBytes<'w>>,
     acts: (&'w mut [u32], &'w mut [u32]),
+    /// The CPU has AVX-512 VNNI and BW: [`pool_vnni`] instead of
+    /// [`pool_bytes`], [`layer_wide`] instead of [`layer`].
+    vnni: bool,
 }
 
 /// The pooled layer's scratch when it runs on bytes.
@@ -72,8 +81,6 @@ struct OnBytes<'w> {
     /// [`pool_bytes`]).
     wide: &'w mut [u32],
     widened: bool,
-    /// The CPU has AVX-512 VNNI: [`pool_vnni`] instead of [`pool_bytes`].
-    vnni: bool,
 }
 
 impl<'w> BlockEncoder<'w> {
@@ -119,8 +126,6 @@ impl<'w> BlockEncoder<'w> {
                     quads,
                     wide,
                     widened: false,
-                    vnni: std::is_x86_feature_detected!("avx512vnni")
-                        && std::is_x86_feature_detected!("avx512bw"),
                 })
             }
             None => None,
@@ -129,6 +134,8 @@ impl<'w> BlockEncoder<'w> {
             weights,
             pooled,
             acts: (a, b),
+            vnni: std::is_x86_feature_detected!("avx512vnni")
+                && std::is_x86_feature_detected!("avx512bw"),
         })
     }
 
@@ -149,7 +156,7 @@ impl<'w> BlockEncoder<'w> {
             *z = pair(zc, 0);
         }
         let (mut input, mut output) = (a, b);
-        let mut weights = self.weights;
+        let (mut weights, vnni) = (self.weights, self.vnni);
         let mut layers = layers.peekable();
         while let Some((inputs, outputs, bytes, q)) = layers.next() {
             let pairs = inputs.div_ceil(2);
@@ -162,10 +169,10 @@ impl<'w> BlockEncoder<'w> {
                 };
                 // SAFETY: `BlockEncoder::new` found AVX2, all `pool_bytes`
                 // and `layer` require, and AVX-512 VNNI and BW (which
-                // imply F) when `on.vnni`, all `pool_vnni` requires.
+                // imply F) when `vnni`, all `pool_vnni` requires.
                 #[allow(unsafe_code)]
                 unsafe {
-                    let done = if on.vnni {
+                    let done = if vnni {
                         pool_vnni(&pooled, q, input, output, feature)
                     } else {
                         pool_bytes(&pooled, q, input, output, on.quads, feature)
@@ -187,10 +194,15 @@ impl<'w> BlockEncoder<'w> {
             } else {
                 Dest::Pairs(&mut *output)
             };
-            // SAFETY: `BlockEncoder::new` found AVX2, all `layer` requires.
+            // SAFETY: `BlockEncoder::new` found AVX2, all `layer` requires,
+            // and AVX-512 VNNI and BW when `vnni`, all `layer_wide` requires.
             #[allow(unsafe_code)]
             unsafe {
-                layer(w, pairs, q, input, dest)
+                if vnni {
+                    layer_wide(w, pairs, q, input, dest)
+                } else {
+                    layer(w, pairs, q, input, dest)
+                }
             };
             core::mem::swap(&mut input, &mut output);
         }
