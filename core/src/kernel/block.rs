@@ -134,8 +134,7 @@ impl<'w> BlockEncoder<'w> {
             weights,
             pooled,
             acts: (a, b),
-            vnni: std::is_x86_feature_detected!("avx512vnni")
-                && std::is_x86_feature_detected!("avx512bw"),
+            vnni: vnni::has_vnni(),
         })
     }
 

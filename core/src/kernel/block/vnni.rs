@@ -12,11 +12,18 @@ use super::bytes::{Pooled, bytes_of, quad};
 use super::{BLOCK, VECTORS};
 use crate::fixed::OutputStep;
 
-/// Rows that share each load of the block's inputs.
-const ROWS: usize = 4;
+/// Rows that share each load of the block's inputs (here and in
+/// [`super::wide`]).
+pub(super) const ROWS: usize = 4;
 
 /// Vectors of sixteen points in a block.
-const WIDE: usize = BLOCK / 16;
+pub(super) const WIDE: usize = BLOCK / 16;
+
+/// Whether the CPU has what the AVX-512 VNNI kernels need (VNNI and BW,
+/// which imply F).
+pub(super) fn has_vnni() -> bool {
+    std::is_x86_feature_detected!("avx512vnni") && std::is_x86_feature_detected!("avx512bw")
+}
 
 /// The pooled (last) layer, its input an int8 activation, on a CPU with
 /// AVX-512 VNNI. `VPDPBUSD` multiplies 64 unsigned bytes by 64 signed ones
@@ -110,8 +117,7 @@ pub(super) fn pool_vnni(
                 break;
             };
             let step = OutputStep::new(i32::from_le_bytes(m), s as i8, q.zero_point, q.act_min);
-            let m = _mm512_max_epi32(_mm512_max_epi32(acc[0], acc[1]), acc[2]);
-            sink.take(ch, 0, &[_mm512_reduce_max_epi32(m)], &step);
+            sink.take(ch, 0, &[largest_wide(acc)], &step);
         }
     }
     true
@@ -122,18 +128,8 @@ pub(super) fn pool_vnni(
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
 fn dot_step(acc: &mut [[__m512i; WIDE]; ROWS], w: [i32; ROWS], x: &[u32]) {
-    let Some(x) = x.first_chunk::<BLOCK>() else {
+    let Some(xs) = block_vectors(x) else {
         return;
-    };
-    // SAFETY: `x` is `BLOCK` = 16 * WIDE words, 64 bytes from each word
-    // `16 v`; unaligned loads are allowed.
-    #[allow(unsafe_code)]
-    let xs: [__m512i; WIDE] = unsafe {
-        [
-            _mm512_loadu_si512(x.as_ptr().cast()),
-            _mm512_loadu_si512(x[16..].as_ptr().cast()),
-            _mm512_loadu_si512(x[32..].as_ptr().cast()),
-        ]
     };
     for (acc, &w) in acc.iter_mut().zip(&w) {
         let w = _mm512_set1_epi32(w);
@@ -141,6 +137,32 @@ fn dot_step(acc: &mut [[__m512i; WIDE]; ROWS], w: [i32; ROWS], x: &[u32]) {
             *a = _mm512_dpbusd_epi32(*a, x, w);
         }
     }
+}
+
+/// A block's words (one per point) as vectors of sixteen points; `None`
+/// when `x` is short.
+#[inline]
+#[target_feature(enable = "avx512f")]
+pub(super) fn block_vectors(x: &[u32]) -> Option<[__m512i; WIDE]> {
+    let x = x.first_chunk::<BLOCK>()?;
+    // SAFETY: `x` is `BLOCK` = 16 * WIDE words, 64 bytes from each word
+    // `16 v`; unaligned loads are allowed.
+    #[allow(unsafe_code)]
+    let xs = unsafe {
+        [
+            _mm512_loadu_si512(x.as_ptr().cast()),
+            _mm512_loadu_si512(x[16..].as_ptr().cast()),
+            _mm512_loadu_si512(x[32..].as_ptr().cast()),
+        ]
+    };
+    Some(xs)
+}
+
+/// The largest lane of a row's accumulators over the block.
+#[inline]
+#[target_feature(enable = "avx512f")]
+pub(super) fn largest_wide(acc: &[__m512i; WIDE]) -> i32 {
+    _mm512_reduce_max_epi32(_mm512_max_epi32(_mm512_max_epi32(acc[0], acc[1]), acc[2]))
 }
 
 /// The block's int16 input pairs as byte quads of `x + 128` by point (word
@@ -187,8 +209,7 @@ mod tests {
 
     /// Whether this CPU can run the kernel (the tests say when it cannot).
     fn vnni() -> bool {
-        let found = std::is_x86_feature_detected!("avx512vnni")
-            && std::is_x86_feature_detected!("avx512bw");
+        let found = has_vnni();
         if !found {
             std::eprintln!("no AVX-512 VNNI on this CPU: pool_vnni not tested");
         }

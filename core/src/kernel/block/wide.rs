@@ -4,20 +4,14 @@
 use core::arch::x86_64::{
     __m256i, __m512i, _mm256_and_si256, _mm256_or_si256, _mm256_set1_epi32, _mm256_setzero_si256,
     _mm256_slli_epi32, _mm256_storeu_si256, _mm512_castsi512_si256, _mm512_dpwssd_epi32,
-    _mm512_extracti64x4_epi64, _mm512_loadu_si512, _mm512_max_epi32, _mm512_reduce_max_epi32,
-    _mm512_set1_epi32, _mm512_setzero_si512,
+    _mm512_extracti64x4_epi64, _mm512_set1_epi32, _mm512_setzero_si512,
 };
 
 use super::super::x86::activations;
 use super::super::{Requant, Sink, rows, rows_mut};
+use super::vnni::{ROWS, WIDE, block_vectors, largest_wide};
 use super::{BLOCK, Dest};
 use crate::fixed::OutputStep;
-
-/// Rows that share each load of the block's inputs.
-const ROWS: usize = 4;
-
-/// Vectors of sixteen points in a block.
-const WIDE: usize = BLOCK / 16;
 
 /// [`super::layer`] with AVX-512 VNNI: `weights` holds `outputs` rows of
 /// `pairs` int16-pair words, `input` the block's input pairs by point.
@@ -72,8 +66,7 @@ pub(super) fn layer_wide(
         if let Some(sink) = &mut pool {
             for (r, (acc, step)) in acc.iter().zip(&steps).enumerate() {
                 if let Some(step) = step {
-                    let m = _mm512_max_epi32(_mm512_max_epi32(acc[0], acc[1]), acc[2]);
-                    sink.take(o + r, 0, &[_mm512_reduce_max_epi32(m)], step);
+                    sink.take(o + r, 0, &[largest_wide(acc)], step);
                 }
             }
         } else if let Some(out) = &mut out {
@@ -94,18 +87,8 @@ pub(super) fn layer_wide(
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
 fn pair_step(acc: &mut [[__m512i; WIDE]; ROWS], w: [u32; ROWS], x: &[u32]) {
-    let Some(x) = x.first_chunk::<BLOCK>() else {
+    let Some(xs) = block_vectors(x) else {
         return;
-    };
-    // SAFETY: `x` is `BLOCK` = 16 * WIDE words, 64 bytes from each word
-    // `16 v`; unaligned loads are allowed.
-    #[allow(unsafe_code)]
-    let xs: [__m512i; WIDE] = unsafe {
-        [
-            _mm512_loadu_si512(x.as_ptr().cast()),
-            _mm512_loadu_si512(x[16..].as_ptr().cast()),
-            _mm512_loadu_si512(x[32..].as_ptr().cast()),
-        ]
     };
     for (acc, &w) in acc.iter_mut().zip(&w) {
         let w = _mm512_set1_epi32(w as i32);
@@ -167,6 +150,7 @@ mod tests {
     use super::super::super::dense_tile;
     use super::super::super::test_layer::{TestLayer, byte};
     use super::super::tests::by_point;
+    use super::super::vnni::has_vnni;
     use super::super::{layer, widen};
     use super::*;
     use crate::testing::SplitMix64;
@@ -178,9 +162,7 @@ mod tests {
     /// rows taken together), on both requantization paths.
     #[test]
     fn wide_layer_matches_portable_and_avx2() {
-        if !(std::is_x86_feature_detected!("avx512vnni")
-            && std::is_x86_feature_detected!("avx512bw"))
-        {
+        if !has_vnni() {
             std::eprintln!("no AVX-512 VNNI on this CPU: layer_wide not tested");
             return;
         }
