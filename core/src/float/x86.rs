@@ -18,11 +18,11 @@
 //! bounds the one-output loop.
 
 use core::arch::x86_64::{
-    __m256, _CMP_LT_OQ, _mm256_add_ps, _mm256_andnot_ps, _mm256_cmp_ps, _mm256_loadu_ps,
-    _mm256_mul_ps, _mm256_permute2f128_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_shuffle_ps,
-    _mm256_storeu_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps, _mm512_add_ps, _mm512_cmp_ps_mask,
-    _mm512_loadu_ps, _mm512_maskz_mov_ps, _mm512_mul_ps, _mm512_set1_ps, _mm512_setzero_ps,
-    _mm512_storeu_ps,
+    __m256, _CMP_LT_OQ, _mm256_add_ps, _mm256_andnot_ps, _mm256_cmp_ps, _mm256_cvtss_f32,
+    _mm256_loadu_ps, _mm256_max_ps, _mm256_mul_ps, _mm256_permute2f128_ps, _mm256_set1_ps,
+    _mm256_setzero_ps, _mm256_shuffle_ps, _mm256_storeu_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+    _mm512_add_ps, _mm512_cmp_ps_mask, _mm512_loadu_ps, _mm512_maskz_mov_ps, _mm512_mul_ps,
+    _mm512_set1_ps, _mm512_setzero_ps, _mm512_storeu_ps,
 };
 
 use super::{Layer, Params, pool};
@@ -110,30 +110,30 @@ fn tiles<'w, P: Params, const B: usize>(
             };
             let out = b.as_chunks_mut::<F32_TILE>().0.iter_mut();
             let mut out = out.take(if l == last { 0 } else { shape.outputs });
-            let mut emit = |o: usize, v: [f32; F32_TILE]| {
-                if l == last {
-                    // The portable path's max-pool, point by point in order.
-                    if let Some(f) = feature.get_mut(o) {
-                        for &v in v.iter().take(chunk.len()) {
-                            pool(f, v);
-                        }
-                    }
-                } else if let Some(y) = out.next() {
-                    *y = v;
-                }
-            };
             // `B` outputs at a time: eight independent sums in flight. The
             // last block repeats its last output where there are fewer than
             // `B` left; the repeats are dropped.
             for o in (0..shape.outputs).step_by(B) {
-                let k = |k: usize| (o + k).min(shape.outputs - 1);
-                let rows = core::array::from_fn(|j| layer.weights.slice(k(j) * inputs, inputs));
-                let bias = core::array::from_fn(|j| layer.bias.get(k(j)));
+                // Loops, not `array::from_fn`: its closure is not inlined.
+                let mut rows = [layer.weights.slice(o * inputs, inputs); B];
+                let mut bias = [layer.bias.get(o); B];
+                for (j, (row, bias)) in rows.iter_mut().zip(&mut bias).enumerate() {
+                    let k = (o + j).min(shape.outputs - 1);
+                    *row = layer.weights.slice(k * inputs, inputs);
+                    *bias = layer.bias.get(k);
+                }
                 // SAFETY: the caller checked the CPU for `block`.
                 #[allow(unsafe_code)]
                 let values = unsafe { block(rows, bias, x) };
-                for (j, v) in values.into_iter().enumerate().take(shape.outputs - o) {
-                    emit(o + j, v);
+                // No closure here: `pool_tile` would not be inlined in one.
+                for (j, v) in values.iter().enumerate().take(shape.outputs - o) {
+                    if l != last {
+                        if let Some(y) = out.next() {
+                            *y = *v;
+                        }
+                    } else if let Some(f) = feature.get_mut(o + j) {
+                        pool_tile(f, v, chunk.len());
+                    }
                 }
             }
             if l != last {
@@ -143,6 +143,43 @@ fn tiles<'w, P: Params, const B: usize>(
         }
     }
     Ok(())
+}
+
+/// The portable path's max-pool over the tile's first `n` points, point
+/// by point in order ([`pool`]), with its bits: the tile's largest value
+/// is found with `VMAXPS` first and decides alone where that is the same
+/// thing. [`pool`] keeps `f` unless a point is larger, takes no NaN, and
+/// of equal values keeps the first, which only shows for zeros (`-0.0 ==
+/// 0.0`): every other value has one bit pattern. So with the largest
+/// non-NaN value `m` of `f` and the points, `f` stays when `m <= f`,
+/// becomes `m` when `m > f` and `m != 0`, and only a tile whose largest
+/// value is a zero above `f` (a channel the ReLU zeroed for the whole
+/// tile) goes through [`pool`] point by point, to keep the first zero's
+/// sign. Lanes past `n` repeat the first point's value (see [`tiles`]),
+/// which changes no maximum.
+#[inline]
+#[target_feature(enable = "avx")]
+fn pool_tile(f: &mut f32, v: &[f32; F32_TILE], n: usize) {
+    let [lo, hi] = v.as_chunks::<LANES>().0 else {
+        return;
+    };
+    // `VMAXPS a, b` gives `b` when either is NaN: the points go first, so
+    // a NaN point leaves the running maximum (never NaN: `f` is not).
+    let m = _mm256_max_ps(load(*hi), _mm256_max_ps(load(*lo), _mm256_set1_ps(*f)));
+    let m = _mm256_max_ps(m, _mm256_permute2f128_ps::<0x01>(m, m));
+    let m = _mm256_max_ps(m, _mm256_shuffle_ps::<0b01_00_11_10>(m, m));
+    let m = _mm256_max_ps(m, _mm256_shuffle_ps::<0b10_11_00_01>(m, m));
+    let m = _mm256_cvtss_f32(m);
+    if m <= *f {
+        return;
+    }
+    if m != 0.0 {
+        *f = m;
+        return;
+    }
+    for &v in v.iter().take(n) {
+        pool(f, v);
+    }
 }
 
 /// Outputs per pass of the tiled encoder.
@@ -177,8 +214,10 @@ fn outputs<P: Params>(rows: [P; BLOCK], bias: [f32; BLOCK], x: &[f32]) -> [[f32;
             *a_hi = _mm256_add_ps(*a_hi, _mm256_mul_ps(w, hi));
         }
     }
-    acc.map(|acc| {
-        let mut out = [0f32; F32_TILE];
+    // A loop, not `acc.map`: a closure has no AVX of its own, so its
+    // intrinsics would not be inlined.
+    let mut out = [[0f32; F32_TILE]; BLOCK];
+    for (acc, out) in acc.iter().zip(&mut out) {
         for (acc, lanes) in acc.iter().zip(out.as_chunks_mut::<LANES>().0) {
             // ReLU as the portable path: 0.0 where the sum is below zero,
             // the sum itself otherwise (-0.0 and NaN pass unchanged).
@@ -189,8 +228,8 @@ fn outputs<P: Params>(rows: [P; BLOCK], bias: [f32; BLOCK], x: &[f32]) -> [[f32;
                 _mm256_storeu_ps(lanes.as_mut_ptr(), _mm256_andnot_ps(below, *acc))
             };
         }
-        out
-    })
+    }
+    out
 }
 
 /// Outputs per pass of the AVX-512 kernel: eight, one vector of the
@@ -385,10 +424,65 @@ fn store(v: __m256) -> [f32; LANES] {
 
 #[cfg(test)]
 mod tests {
-    use super::{F32_TILE, Layer, outputs, outputs_wide};
+    use super::{F32_TILE, Layer, outputs, outputs_wide, pool_tile};
     use crate::F32Model;
     use crate::testing::{SplitMix64, random_f32_blob_into};
     use std::vec::Vec;
+
+    /// The tile's max-pool keeps the bits of the point-by-point one: the
+    /// first of two zeros, no NaN, `f` unless a point is larger, lanes past
+    /// the tile's points (repeats of its first) never counted, over tiles
+    /// drawn from values that make each of these matter.
+    #[test]
+    fn tile_pool_matches_point_by_point() {
+        if !std::is_x86_feature_detected!("avx") {
+            return;
+        }
+        let values = [
+            -0.0,
+            0.0,
+            1.0,
+            -1.0,
+            f32::NAN,
+            2.5,
+            f32::NEG_INFINITY,
+            3e-39,
+        ];
+        let mut rng = SplitMix64(41);
+        let (mut zeros, mut taken) = (0, 0);
+        for _ in 0..20_000 {
+            let n = rng.int(1, F32_TILE as i32) as usize;
+            let mut v = [0f32; F32_TILE];
+            for x in v.iter_mut().take(n) {
+                *x = values[rng.int(0, values.len() as i32 - 1) as usize];
+            }
+            let first = v[0];
+            v.iter_mut().skip(n).for_each(|x| *x = first);
+            let start = [f32::NEG_INFINITY, -0.0, 0.0, -1.0, 1.0][rng.int(0, 4) as usize];
+            let mut want = start;
+            for &x in v.iter().take(n) {
+                super::pool(&mut want, x);
+            }
+            let mut got = start;
+            // SAFETY: the CPU has AVX (checked above).
+            #[allow(unsafe_code)]
+            unsafe {
+                pool_tile(&mut got, &v, n)
+            };
+            assert_eq!(
+                got.to_bits(),
+                want.to_bits(),
+                "{v:?} ({n} points) from {start}"
+            );
+            zeros += usize::from(want == 0.0 && want.to_bits() != start.to_bits());
+            taken += usize::from(want.to_bits() != start.to_bits());
+        }
+        // Both branches ran: zeros that entered, and other values.
+        assert!(
+            zeros > 100 && taken > zeros + 100,
+            "{zeros} zeros of {taken}"
+        );
+    }
 
     /// With room for tiles, the encoder and the head give the one-point
     /// path's bits, for clouds shorter than, equal to and longer than a
