@@ -221,7 +221,7 @@ pub fn register_pointnetlk(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::eval::metrics::rotation_error_deg;
     use crate::shapes::{Shape, random_transform, sample};
@@ -291,7 +291,7 @@ mod tests {
     /// trained head is, near it), quantized for `reference` with
     /// calibration poses of `unit` (the template in the model frame): the
     /// pipeline's pose then comes from the device ICP.
-    fn identity_biased(reference: &Reference, unit: &[[f32; 3]]) -> Vec<u8> {
+    pub(crate) fn identity_biased(reference: &Reference, unit: &[[f32; 3]]) -> Vec<u8> {
         let mut params = F32Params::init(Arch::new(&[16, 32], &[32]).unwrap(), 7);
         let (w, b) = params.layers.last_mut().unwrap();
         w.iter_mut().for_each(|v| *v *= 1e-3);

@@ -269,12 +269,18 @@ pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u
 /// The same model with another template (user units): for registering
 /// against any cloud with a trained blob of either kind.
 pub fn bind(blob: &[u8], template: &[[f32; 3]], stored: usize) -> Result<Vec<u8>, TemplateError> {
-    let reference = Reference::new(template, stored)?;
+    bind_reference(blob, &Reference::new(template, stored)?)
+}
+
+/// [`bind`] with the template's [`Reference`] already built (for callers
+/// that also use it otherwise: building one subsamples the cloud and
+/// estimates normals, several milliseconds at 512 stored points).
+pub fn bind_reference(blob: &[u8], reference: &Reference) -> Result<Vec<u8>, TemplateError> {
     match Int8Model::from_bytes(blob) {
-        Ok(m) => int8_blob(m.payload(), &reference),
+        Ok(m) => int8_blob(m.payload(), reference),
         Err(pcrnet_core::Error::WrongKind { .. }) => {
             let payload: F32Payload<'_> = format::decode(format::open(blob, ModelKind::F32)?)?;
-            f32_blob(&payload, &reference)
+            f32_blob(&payload, reference)
         }
         Err(e) => Err(e.into()),
     }

@@ -18,6 +18,7 @@
 //! (or PointNetLK's Jacobian, or ICP's k-d tree) and the iterations. The
 //! paper's PCRNet also encodes both clouds per registration.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use pcrnet_core::refine::{self, Subset};
@@ -27,10 +28,8 @@ use pcrnet_core::{Degeneracy, F32Model, Frame, Int8Model, Options, Pose};
 use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
-use crate::register::{
-    Bound, ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk,
-};
-use crate::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError};
+use crate::register::{ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk};
+use crate::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError, bind_reference};
 
 /// A method family.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -303,11 +302,22 @@ pub fn run(
 ) -> Result<Outcome, MethodError> {
     let start = Instant::now();
     let model = || blob.ok_or(MethodError::NoModel(method.kind));
-    let bound = template.map(|cloud| Bound {
-        cloud,
-        stored: method.template_points,
-    });
-    let degenerate = source_degeneracy(blob, bound, source)?;
+    // One reference for the degeneracy verdict and the bound blob: each
+    // takes several milliseconds to build, as long as a network pass.
+    let reference = template
+        .map(|cloud| Reference::new(cloud, method.template_points))
+        .transpose()?;
+    let degenerate = source_degeneracy(blob, reference.as_ref(), source)?;
+    // The blob with the template bound in place of its own. The network's
+    // template feature is taken from the whole cloud, so the stored points
+    // (`method.template_points`) change only what the device pipeline
+    // checks and refines against.
+    let bound = |blob| -> Result<Cow<'_, [u8]>, MethodError> {
+        Ok(match &reference {
+            Some(r) => Cow::Owned(bind_reference(blob, r)?),
+            None => Cow::Borrowed(blob),
+        })
+    };
     let mut out = match method.kind {
         MethodKind::Icp => {
             let config = IcpConfig {
@@ -326,7 +336,8 @@ pub fn run(
             }
         }
         MethodKind::Device => {
-            let (r, precision) = pipeline(model()?, bound, source, &method.device_options())?;
+            let blob = bound(model()?)?;
+            let (r, precision) = pipeline(&blob, None, source, &method.device_options())?;
             Outcome {
                 pose: r.pose,
                 iterations: r.passes,
@@ -361,7 +372,7 @@ pub fn run(
                 MethodKind::Pcrnet => 1,
                 _ => method.iterations,
             };
-            let r = network(model()?, template, source, passes, method.tolerance)?;
+            let r = network(&bound(model()?)?, None, source, passes, method.tolerance)?;
             Outcome {
                 pose: r.pose,
                 iterations: r.passes,
@@ -392,15 +403,14 @@ pub fn run(
 /// template. A template with no extent is an error for every method.
 fn source_degeneracy(
     blob: Option<&[u8]>,
-    template: Option<Bound<'_>>,
+    reference: Option<&Reference>,
     source: &[[f32; 3]],
 ) -> Result<Option<Degeneracy>, MethodError> {
     let judge = |t: &Template<'_>, frame: Frame| {
         let subset = Subset::new(source, frame, Options::default().max_points);
         refine::degeneracy(t, &subset, MIN_EXTENT)
     };
-    if let Some(template) = template {
-        let reference = Reference::new(template.cloud, template.stored)?;
+    if let Some(reference) = reference {
         let t = Template::new(reference.cloud()).map_err(TemplateError::from)?;
         return Ok(judge(&t, reference.frame));
     }
@@ -448,5 +458,51 @@ mod tests {
         assert!((r.pose.translation[0] + 0.02).abs() < 1e-4, "{:?}", r.pose);
         assert_eq!(r.trajectory.map(|v| v.len()), Some(r.iterations));
         assert!(r.seconds > 0.0);
+    }
+
+    /// `run` builds the template's reference once, for the degeneracy
+    /// verdict and the bound blob: its poses are those of binding the
+    /// template inside `network` and `pipeline`, and the stored point count
+    /// changes nothing for the network methods, on an int8 blob whose head
+    /// is biased to the identity (so that the device ICP refines against
+    /// the stored points) and on an f32 one.
+    #[test]
+    fn one_reference_gives_the_bound_poses() {
+        use crate::register::Bound;
+        use crate::register::tests::identity_biased;
+        use crate::shapes::random_transform;
+        use crate::{F32Params, TrainedFor};
+        let template = sample(Shape::Ell, 600, 3);
+        let source = random_transform(&sample(Shape::Ell, 400, 11), 8.0, 0.05, 4);
+        let reference = Reference::new(&template, 64).unwrap();
+        let int8_blob = identity_biased(&reference, &template);
+        let params = F32Params::init(pcrnet_core::Arch::new(&[16, 32], &[32]).unwrap(), 5);
+        let f32_blob = params
+            .to_f32_blob(&reference, TrainedFor::pcrnet(true))
+            .unwrap();
+        let mut refined = 0;
+        for blob in [&int8_blob, &f32_blob] {
+            let want = network(blob, Some(&template), &source, 1, 0.0)
+                .unwrap()
+                .pose;
+            for stored in [DEFAULT_TEMPLATE_POINTS, 100] {
+                let mut m = Method::new(MethodKind::Pcrnet);
+                m.template_points = stored;
+                let got = run(&m, Some(blob), Some(&template), &source).unwrap();
+                assert_eq!(got.pose, want, "PCRNet, {stored} stored points");
+                m.kind = MethodKind::Device;
+                let got = run(&m, Some(blob), Some(&template), &source).unwrap();
+                let bound = Bound {
+                    cloud: &template,
+                    stored,
+                };
+                let options = m.device_options();
+                let (want, _) = pipeline(blob, Some(bound), &source, &options).unwrap();
+                assert_eq!(got.pose, want.pose, "device, {stored} stored points");
+                refined += usize::from(want.icp_iterations > 0);
+            }
+        }
+        // The int8 blob's poses came from ICP on the stored points.
+        assert!(refined >= 2, "{refined} device runs refined");
     }
 }
