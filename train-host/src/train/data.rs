@@ -159,45 +159,7 @@ pub fn mix_seed(seed: u64, a: u64, b: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Farthest point sampling: `k` points of `cloud`, starting from `start`.
-pub fn farthest_point_sampling(cloud: &[[f32; 3]], k: usize, start: usize) -> Vec<[f32; 3]> {
-    farthest_point_sampling_with(cloud, k, start, None)
-}
-
-/// [`farthest_point_sampling`], counting each point picked on `progress`.
-pub fn farthest_point_sampling_with(
-    cloud: &[[f32; 3]],
-    k: usize,
-    start: usize,
-    progress: Option<&crate::progress::Progress>,
-) -> Vec<[f32; 3]> {
-    if cloud.is_empty() || k == 0 {
-        return Vec::new();
-    }
-    let d2 = |a: &[f32; 3], b: &[f32; 3]| {
-        (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
-    };
-    let mut out = Vec::with_capacity(k);
-    let mut dist = vec![f32::INFINITY; cloud.len()];
-    let mut cur = start % cloud.len();
-    for _ in 0..k.min(cloud.len()) {
-        if let Some(p) = progress {
-            p.inc(1);
-        }
-        out.push(cloud[cur]);
-        let c = cloud[cur];
-        let mut best = (0usize, -1f32);
-        for (i, p) in cloud.iter().enumerate() {
-            let d = d2(p, &c).min(dist[i]);
-            dist[i] = d;
-            if d > best.1 {
-                best = (i, d);
-            }
-        }
-        cur = best.0;
-    }
-    out
-}
+pub use super::fps::{farthest_point_sampling, farthest_point_sampling_with};
 
 /// Reduces (or pads) a cloud to `points` points and normalises it (see the
 /// module docs). Returns `None` for a cloud without finite points.

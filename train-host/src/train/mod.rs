@@ -34,6 +34,7 @@ pub mod cli;
 pub mod data;
 pub mod dataset;
 pub mod export;
+pub mod fps;
 pub mod geometry;
 pub mod loss;
 pub mod model;
