@@ -206,6 +206,8 @@ impl<'a> Template<'a> {
     /// Visits cells in shells of growing Chebyshev radius around `q`'s
     /// (clamped) cell and stops once no unvisited cell can hold a closer
     /// point than the best so far (or than `limit`): exact, not approximate.
+    /// Of equally near points it returns the first it visits: the one in
+    /// the nearest shell, then with the lowest index.
     pub fn nearest(&self, q: [i32; 3], limit: u64) -> Option<Neighbour> {
         let ([x, y, z], [ox, oy, oz]) = (q, self.cloud.origin);
         let centre = [
@@ -217,41 +219,59 @@ impl<'a> Template<'a> {
         let mut bound = limit;
         let g = self.grid;
         let cell = self.cloud.cell as i64;
+        // The squared distance from q to the slab of cells `c` along axis
+        // `a` (0 inside it), at most `u32::MAX`: a cell's box is at least
+        // the sum of its three slabs' away. (The cap can only make a cell
+        // look nearer than it is, and visiting a cell that holds no point
+        // below the bound changes nothing.)
+        let slab = |origin: i16, v: i32, c: i32| -> u32 {
+            let lo = origin as i64 + c as i64 * cell;
+            let hi = lo + cell - 1;
+            let v = v as i64;
+            let d = (lo - v).max(v - hi).max(0) as u64;
+            (d * d).min(u32::MAX as u64) as u32
+        };
+        // The y and z slabs of the shell's box, by cell coordinate: each
+        // is computed once per shell, not once per cell. (u32: clearing
+        // the arrays costs every call.)
+        let (mut ys, mut zs) = ([0u32; MAX_GRID as usize], [0u32; MAX_GRID as usize]);
         for r in 0..g {
             let lo = centre.map(|c| (c - r).max(0));
             let hi = centre.map(|c| (c + r).min(g - 1));
+            for (slabs, lo, hi, o, v) in [
+                (&mut ys, lo[1], hi[1], oy, y),
+                (&mut zs, lo[2], hi[2], oz, z),
+            ] {
+                for c in lo..=hi {
+                    if let Some(s) = slabs.get_mut(c as usize) {
+                        *s = slab(o, v, c);
+                    }
+                }
+            }
+            // The shell's cells (Chebyshev distance `r` from the centre
+            // cell) in x, y, z order: every z of the box where x or y is on
+            // the shell, else only its two z faces.
             for cx in lo[0]..=hi[0] {
+                let sx = slab(ox, x, cx) as u64;
                 for cy in lo[1]..=hi[1] {
-                    for cz in lo[2]..=hi[2] {
-                        let ring = (cx - centre[0])
-                            .abs()
-                            .max((cy - centre[1]).abs())
-                            .max((cz - centre[2]).abs());
-                        if ring != r {
-                            continue;
-                        }
+                    let sxy = sx + ys.get(cy as usize).map_or(0, |&s| s as u64);
+                    let on_shell = (cx - centre[0]).abs().max((cy - centre[1]).abs()) == r;
+                    let mut visit = |cz: i32| {
                         // Skip a cell that cannot hold a point closer than
                         // the best so far: its box is at least this far.
-                        let mut gap2 = 0u64;
-                        for (a, cc) in [cx, cy, cz].into_iter().enumerate() {
-                            let lo = self.cloud.origin[a] as i64 + cc as i64 * cell;
-                            let hi = lo + cell - 1;
-                            let v = q[a] as i64;
-                            let d = (lo - v).max(v - hi).max(0) as u64;
-                            gap2 += d * d;
+                        let gap2 = sxy + zs.get(cz as usize).map_or(0, |&s| s as u64);
+                        if gap2 < bound {
+                            let c = ((cx * g + cy) * g + cz) as usize;
+                            self.scan_cell(c, q, &mut bound, &mut best);
                         }
-                        if gap2 >= bound {
-                            continue;
-                        }
-                        let c = ((cx * g + cy) * g + cz) as usize;
-                        for i in self.offset(c)..self.offset(c + 1) {
-                            let d = distance_squared(self.point(i), q);
-                            if d < bound {
-                                bound = d;
-                                best = Some(Neighbour {
-                                    index: i,
-                                    distance_squared: d,
-                                });
+                    };
+                    if on_shell {
+                        (lo[2]..=hi[2]).for_each(&mut visit);
+                    } else {
+                        // r >= 1 here: two distinct faces, in z order.
+                        for cz in [centre[2] - r, centre[2] + r] {
+                            if (lo[2]..=hi[2]).contains(&cz) {
+                                visit(cz);
                             }
                         }
                     }
@@ -278,6 +298,22 @@ impl<'a> Template<'a> {
             }
         }
         best
+    }
+
+    /// Offers cell `c`'s points to the nearest-point search: a point
+    /// strictly nearer than `bound` becomes the best and lowers it.
+    #[inline(always)]
+    fn scan_cell(&self, c: usize, q: [i32; 3], bound: &mut u64, best: &mut Option<Neighbour>) {
+        for i in self.offset(c)..self.offset(c + 1) {
+            let d = distance_squared(self.point(i), q);
+            if d < *bound {
+                *bound = d;
+                *best = Some(Neighbour {
+                    index: i,
+                    distance_squared: d,
+                });
+            }
+        }
     }
 }
 
@@ -460,6 +496,62 @@ mod tests {
                 // With a limit, points at or beyond it are not returned.
                 assert_eq!(t.nearest(q, n.distance_squared), None);
             }
+        }
+    }
+
+    /// Of equally near points, the search returns the first it visits:
+    /// the one whose cell is in the nearest shell around the query's cell,
+    /// then the lowest index (points are stored by cell, cells visited in
+    /// index order within a shell). Points and queries on a coarse lattice
+    /// make many ties; queries also fall outside the grid.
+    #[test]
+    fn grid_search_breaks_ties_in_visit_order() {
+        let mut rng = SplitMix64(5);
+        for grid in [1u8, 2, 3, 5, 8] {
+            let mut points = [[0i16; 3]; 300];
+            for p in points.iter_mut() {
+                *p = [0; 3].map(|_: i32| (rng.int(-4, 4) * 1500) as i16);
+            }
+            let (mut pb, mut nb, mut cb) = ([0u8; 6 * 300], [0u8; 900], [0u8; 2 * (8 * 8 * 8 + 1)]);
+            let normals = [[127i8, 0, 0]; 300];
+            let out = BuildOut {
+                points: &mut pb,
+                normals: &mut nb,
+                cells: &mut cb,
+            };
+            let cloud = build(&points, &normals, 1e-4, grid, &[], out).unwrap();
+            let t = Template::new(cloud).unwrap();
+            let g = t.grid;
+            let cell = |p: [i32; 3]| {
+                let c = t.cell_of(p).unwrap() as i32;
+                [c / (g * g), c / g % g, c % g]
+            };
+            let (mut ties, mut shells) = (0, 0);
+            for _ in 0..400 {
+                let q = [0; 3].map(|_: i32| rng.int(-5, 5) * 1500 + rng.int(-1, 1) * 750);
+                let centre = [0, 1, 2].map(|a| t.axis_cell(t.cloud.origin[a], q[a]));
+                let shell = |i: usize| {
+                    let c = cell(t.point(i));
+                    (0..3).map(|a| (c[a] - centre[a]).abs()).max().unwrap_or(0)
+                };
+                let n = t.nearest(q, u64::MAX).unwrap();
+                let nearest: std::vec::Vec<usize> = (0..t.len())
+                    .filter(|&i| distance_squared(t.point(i), q) == n.distance_squared)
+                    .collect();
+                let want = nearest
+                    .iter()
+                    .copied()
+                    .min_by_key(|&i| (shell(i), i))
+                    .unwrap();
+                assert_eq!(n.index, want, "grid {grid}, query {q:?}");
+                ties += usize::from(nearest.len() > 1);
+                shells += usize::from(nearest.iter().any(|&i| shell(i) != shell(want)));
+            }
+            assert!(ties > 100, "grid {grid}: {ties} queries with ties");
+            assert!(
+                shells > 0 || grid < 3,
+                "grid {grid}: ties across shells never met"
+            );
         }
     }
 
