@@ -470,6 +470,20 @@ mod tests {
             .unwrap()
     }
 
+    /// Runs `check` on a template of 300 points on a `grid`-cell grid (at
+    /// most 8), every normal along x.
+    fn with_template(points: &[[i16; 3]; 300], grid: u8, check: impl FnOnce(&Template<'_>)) {
+        let (mut pb, mut nb, mut cb) = ([0u8; 6 * 300], [0u8; 900], [0u8; 2 * (8 * 8 * 8 + 1)]);
+        let normals = [[127i8, 0, 0]; 300];
+        let out = BuildOut {
+            points: &mut pb,
+            normals: &mut nb,
+            cells: &mut cb,
+        };
+        let cloud = build(points, &normals, 1e-4, grid, &[], out).unwrap();
+        check(&Template::new(cloud).unwrap());
+    }
+
     #[test]
     fn grid_search_is_exact() {
         let mut rng = SplitMix64(3);
@@ -478,24 +492,17 @@ mod tests {
             for p in points.iter_mut() {
                 *p = [0; 3].map(|_: i32| rng.int(-9000, 9000) as i16);
             }
-            let (mut pb, mut nb, mut cb) = ([0u8; 6 * 300], [0u8; 900], [0u8; 2 * (8 * 8 * 8 + 1)]);
-            let normals = [[127i8, 0, 0]; 300];
-            let out = BuildOut {
-                points: &mut pb,
-                normals: &mut nb,
-                cells: &mut cb,
-            };
-            let cloud = build(&points, &normals, 1e-4, grid, &[], out).unwrap();
-            let t = Template::new(cloud).unwrap();
-            assert_eq!(t.len(), 300);
-            for _ in 0..500 {
-                let q = [0; 3].map(|_: i32| rng.int(-32767, 32767));
-                let n = t.nearest(q, u64::MAX).unwrap();
-                assert_eq!(n.distance_squared, brute(&points, q));
-                assert_eq!(distance_squared(t.point(n.index), q), n.distance_squared);
-                // With a limit, points at or beyond it are not returned.
-                assert_eq!(t.nearest(q, n.distance_squared), None);
-            }
+            with_template(&points, grid, |t| {
+                assert_eq!(t.len(), 300);
+                for _ in 0..500 {
+                    let q = [0; 3].map(|_: i32| rng.int(-32767, 32767));
+                    let n = t.nearest(q, u64::MAX).unwrap();
+                    assert_eq!(n.distance_squared, brute(&points, q));
+                    assert_eq!(distance_squared(t.point(n.index), q), n.distance_squared);
+                    // With a limit, points at or beyond it are not returned.
+                    assert_eq!(t.nearest(q, n.distance_squared), None);
+                }
+            });
         }
     }
 
@@ -512,46 +519,39 @@ mod tests {
             for p in points.iter_mut() {
                 *p = [0; 3].map(|_: i32| (rng.int(-4, 4) * 1500) as i16);
             }
-            let (mut pb, mut nb, mut cb) = ([0u8; 6 * 300], [0u8; 900], [0u8; 2 * (8 * 8 * 8 + 1)]);
-            let normals = [[127i8, 0, 0]; 300];
-            let out = BuildOut {
-                points: &mut pb,
-                normals: &mut nb,
-                cells: &mut cb,
-            };
-            let cloud = build(&points, &normals, 1e-4, grid, &[], out).unwrap();
-            let t = Template::new(cloud).unwrap();
-            let g = t.grid;
-            let cell = |p: [i32; 3]| {
-                let c = t.cell_of(p).unwrap() as i32;
-                [c / (g * g), c / g % g, c % g]
-            };
-            let (mut ties, mut shells) = (0, 0);
-            for _ in 0..400 {
-                let q = [0; 3].map(|_: i32| rng.int(-5, 5) * 1500 + rng.int(-1, 1) * 750);
-                let centre = [0, 1, 2].map(|a| t.axis_cell(t.cloud.origin[a], q[a]));
-                let shell = |i: usize| {
-                    let c = cell(t.point(i));
-                    (0..3).map(|a| (c[a] - centre[a]).abs()).max().unwrap_or(0)
+            with_template(&points, grid, |t| {
+                let g = t.grid;
+                let cell = |p: [i32; 3]| {
+                    let c = t.cell_of(p).unwrap() as i32;
+                    [c / (g * g), c / g % g, c % g]
                 };
-                let n = t.nearest(q, u64::MAX).unwrap();
-                let nearest: std::vec::Vec<usize> = (0..t.len())
-                    .filter(|&i| distance_squared(t.point(i), q) == n.distance_squared)
-                    .collect();
-                let want = nearest
-                    .iter()
-                    .copied()
-                    .min_by_key(|&i| (shell(i), i))
-                    .unwrap();
-                assert_eq!(n.index, want, "grid {grid}, query {q:?}");
-                ties += usize::from(nearest.len() > 1);
-                shells += usize::from(nearest.iter().any(|&i| shell(i) != shell(want)));
-            }
-            assert!(ties > 100, "grid {grid}: {ties} queries with ties");
-            assert!(
-                shells > 0 || grid < 3,
-                "grid {grid}: ties across shells never met"
-            );
+                let (mut ties, mut shells) = (0, 0);
+                for _ in 0..400 {
+                    let q = [0; 3].map(|_: i32| rng.int(-5, 5) * 1500 + rng.int(-1, 1) * 750);
+                    let centre = [0, 1, 2].map(|a| t.axis_cell(t.cloud.origin[a], q[a]));
+                    let shell = |i: usize| {
+                        let c = cell(t.point(i));
+                        (0..3).map(|a| (c[a] - centre[a]).abs()).max().unwrap_or(0)
+                    };
+                    let n = t.nearest(q, u64::MAX).unwrap();
+                    let nearest: std::vec::Vec<usize> = (0..t.len())
+                        .filter(|&i| distance_squared(t.point(i), q) == n.distance_squared)
+                        .collect();
+                    let want = nearest
+                        .iter()
+                        .copied()
+                        .min_by_key(|&i| (shell(i), i))
+                        .unwrap();
+                    assert_eq!(n.index, want, "grid {grid}, query {q:?}");
+                    ties += usize::from(nearest.len() > 1);
+                    shells += usize::from(nearest.iter().any(|&i| shell(i) != shell(want)));
+                }
+                assert!(ties > 100, "grid {grid}: {ties} queries with ties");
+                assert!(
+                    shells > 0 || grid < 3,
+                    "grid {grid}: ties across shells never met"
+                );
+            });
         }
     }
 
