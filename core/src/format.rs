@@ -347,6 +347,28 @@ pub(crate) fn expect_len(
     }
 }
 
+/// Checks a blob's trained pass count (at least 1).
+pub(crate) fn check_passes(passes: u16) -> Result<()> {
+    if passes >= 1 {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter {
+            what: "trained passes must be at least 1",
+        })
+    }
+}
+
+/// Checks a blob's frame: finite centre, finite positive scale.
+pub(crate) fn check_frame(frame: &Frame) -> Result<()> {
+    if frame.centre.iter().all(|c| c.is_finite()) && frame.scale.is_finite() && frame.scale > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter {
+            what: "frame centre or scale",
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::CRC32;

@@ -228,8 +228,8 @@ impl<'a> F32Model<'a> {
             4,
             "template feature",
         )?;
-        crate::int8::check_frame(&p.frame)?;
-        crate::int8::check_passes(p.passes)?;
+        crate::format::check_frame(&p.frame)?;
+        crate::format::check_passes(p.passes)?;
         let network = F32Network::new(p.arch, layers, LeF32(p.template_feature))?
             .with_centring(p.centre_source);
         Ok(F32Model {

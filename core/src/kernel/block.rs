@@ -1,6 +1,6 @@
 //! The x86-64 AVX2 (and AVX-512 VNNI) block encoder (`std` feature):
-//! [`HOST_BLOCK`] points through every encoder layer, each layer a small
-//! matrix product.
+//! [`HOST_BLOCK`](crate::arch::HOST_BLOCK) points through every encoder
+//! layer, each layer a small matrix product.
 //!
 //! The tile kernel ([`super::x86`]) multiplies one weight row with eight
 //! points' activations along the input axis and must add each point's

@@ -1,0 +1,341 @@
+//! The quantized int8 network: points -> quantize -> encode -> head -> pose.
+//!
+//! Integer-only from the int16 input coordinates to the head's i32 outputs:
+//! - input: `q = round(x / input_scale)` as int16, zero point 0 (see
+//!   [`crate::fixed::quantize_coordinate`]); int16 rather than int8 because
+//!   the input has only 3 channels (the first layer's cost is negligible)
+//!   and int8 coordinates measurably cost pose accuracy (see the README);
+//! - every layer: int8 weights (symmetric, per output channel), i32 bias,
+//!   i32 accumulation, Q31 requantization ([`crate::fixed`]), ReLU fused as
+//!   the lower clamp, int8 activations with per-tensor scale and zero point;
+//! - max-pool over points on the int8 values of the last encoder layer,
+//!   kept as a running max, so working memory does not depend on the number
+//!   of points;
+//! - head: the first layer reads the template feature (stored in the blob)
+//!   and the source feature in place; the output layer's i32 accumulators
+//!   are the raw head output.
+//!
+//! Points go through the encoder in tiles of up to [`MAX_TILE`] points; a
+//! weight row is then read once per tile. On an x86-64 host with AVX2 and
+//! [`Int8Model::host_scratch_len`] bytes of scratch, blocks of
+//! [`crate::arch::HOST_BLOCK`] points take the block kernel instead. The
+//! result depends on neither (bit for bit).
+//!
+//! The stages live apart: `check` (what loading proves about a blob),
+//! `encode` (points -> quantize -> encoder -> max-pooled feature) and
+//! `head` (template and source features -> head -> pose).
+
+mod check;
+mod encode;
+mod head;
+
+use crate::arch::{Arch, MAX_TILE, POSE_DIM};
+use crate::error::{Error, Result};
+use crate::fixed::INPUT_QMAX;
+use crate::format::{self, Int8Layer, Int8Payload, ModelKind};
+use crate::kernel::Requant;
+use crate::pose::{self, Centring, PointMap, Pose};
+use crate::registration::{self, Options, PassCounts, Registration};
+use crate::template::Template;
+
+/// A validated int8 model borrowing its weights from a blob.
+#[derive(Debug, Clone)]
+pub struct Int8Model<'a> {
+    p: Int8Payload<'a>,
+    template: Template<'a>,
+}
+
+/// Everything one inference produces besides the pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Int8Inference<'s> {
+    /// The source's int8 global feature (a view into the scratch).
+    pub feature: &'s [i8],
+    /// The head's raw i32 outputs `[qw, qx, qy, qz, tx, ty, tz]`: the
+    /// network's estimate for the source as it saw it (centred or not).
+    pub head: [i32; POSE_DIM],
+    /// How the source was moved before the network, in the model frame:
+    /// the identity, or the centring translation for models trained on
+    /// centred sources. The network's pose in the model frame is
+    /// `centring.then(&model.pose(&head)?)`; `frame.pose_to_user` of that
+    /// is the pose in user units.
+    pub centring: Pose,
+    /// Feature entries and head activations at the top of the int8 range.
+    pub saturated: u32,
+    /// Points left out of the encoder: outside the model's input range.
+    pub out_of_range: u32,
+}
+
+impl<'a> Int8Model<'a> {
+    /// Parses and validates an int8 blob. Weights stay in `blob`.
+    ///
+    /// Never inlined: the decoder's temporaries (the payload, serde's
+    /// sequence buffers) live in this call's frame and are gone when it
+    /// returns, instead of joining the caller's frame for the whole
+    /// program (the firmware example's `main` grew to 7.4 KB that way).
+    #[inline(never)]
+    pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
+        let payload: Int8Payload<'a> = format::decode(format::open(blob, ModelKind::Int8)?)?;
+        Self::from_payload(payload)
+    }
+
+    /// Parses a blob and checks that `scratch` can run it (one point per tile at least).
+    pub fn load(blob: &'a [u8], scratch: &[i8]) -> Result<Self> {
+        let model = Self::from_bytes(blob)?;
+        model.tile_for(scratch.len())?;
+        Ok(model)
+    }
+
+    /// Validates an already decoded payload (dimensions, parameter ranges,
+    /// accumulator bounds).
+    #[inline(always)]
+    pub fn from_payload(p: Int8Payload<'a>) -> Result<Self> {
+        // Checked by reference, then moved once into the model.
+        let template = Self::validate(&p)?;
+        Ok(Int8Model { p, template })
+    }
+
+    /// The template's points (model frame) used to check and refine poses.
+    pub fn template(&self) -> &Template<'a> {
+        &self.template
+    }
+
+    /// User units -> model frame.
+    pub fn frame(&self) -> &format::Frame {
+        &self.p.frame
+    }
+
+    /// Network passes the model was trained for (1: PCRNet; more: i-PCRNet).
+    pub fn trained_passes(&self) -> usize {
+        self.p.passes as usize
+    }
+
+    /// The network shape.
+    pub fn arch(&self) -> &Arch {
+        &self.p.arch
+    }
+
+    /// The decoded payload (quantization parameters and weight views).
+    pub fn payload(&self) -> &Int8Payload<'a> {
+        &self.p
+    }
+
+    /// Bytes of scratch needed with `tile` points per pass.
+    pub fn scratch_len(&self, tile: usize) -> usize {
+        self.p.arch.int8_scratch_len(tile)
+    }
+
+    /// Bytes of scratch with which an x86-64 host with AVX2 (`std`
+    /// feature) encodes [`crate::arch::HOST_BLOCK`] points at a time
+    /// (several times faster; same results, bit for bit): a full tile's
+    /// [`Self::scratch_len`] plus [`Arch::host_block_len`]. Elsewhere the
+    /// extra bytes go unused.
+    pub fn host_scratch_len(&self) -> usize {
+        self.scratch_len(MAX_TILE) + self.p.arch.host_block_len()
+    }
+
+    /// The largest tile (up to [`MAX_TILE`]) that fits `available` bytes.
+    fn tile_for(&self, available: usize) -> Result<usize> {
+        (1..=MAX_TILE)
+            .rev()
+            .find(|&t| self.scratch_len(t) <= available)
+            .ok_or(Error::ScratchTooSmall {
+                needed: self.scratch_len(1),
+                available,
+            })
+    }
+
+    /// Registers `source` (user units, any number of points from 1) to the
+    /// model's template: the network, then flip resolution and ICP against
+    /// the template's points as `options` say, returning the pose in user
+    /// units with its residual and flags. See [`crate::registration`].
+    // The entry points are never inlined (here and below): each call's
+    // stack is its own, as the QEMU harness measures and the README
+    // reports it, and a caller's frame does not grow by their temporaries.
+    #[inline(never)]
+    pub fn register(
+        &self,
+        source: &[[f32; 3]],
+        options: &Options,
+        scratch: &mut [i8],
+    ) -> Result<Registration> {
+        let tile = self.tile_for(scratch.len())?;
+        registration::run(
+            &self.p.frame,
+            self.centring(),
+            &self.template,
+            source,
+            options,
+            |map| self.pass(source, map, tile, scratch),
+        )
+    }
+
+    /// Whether the network sees the source centred on its centroid.
+    pub fn centres_source(&self) -> bool {
+        self.p.centre_source
+    }
+
+    /// How the source is placed for the network: centred on the centroid of
+    /// the points within the input range of a robust centre, if the model
+    /// centres sources (a stray point the encoder leaves out does not move
+    /// the centre either).
+    fn centring(&self) -> Centring {
+        if self.p.centre_source {
+            Centring::Centroid {
+                radius: INPUT_QMAX as f32 * self.p.input_scale,
+            }
+        } else {
+            Centring::None
+        }
+    }
+
+    /// The network alone, in user units: up to `passes` passes (1: PCRNet;
+    /// more: i-PCRNet), each on the source moved by the pose so far (moved
+    /// point by point while quantizing: no copy of the cloud), composing the
+    /// estimates, and stopping early once a pass changes the pose by less
+    /// than `tolerance` (`||delta - I||_F`, see [`pose::iterate`]). Returns
+    /// the pose and the number of passes. No check, no refinement: use
+    /// [`Self::register`] for the main job.
+    ///
+    /// Choosing `tolerance`: the paper's 1e-7 is never reached. A quantized
+    /// pass keeps moving the pose by about 3e-3 to 1e-2, so that rule always
+    /// runs every pass. On 200 ModelNet10 test pairs, 1e-2 to 2e-2 stopped
+    /// after 8-10 passes on average instead of 20, at the same accuracy
+    /// (measured with `pcrnet eval --tolerance`; see the README).
+    #[inline(never)]
+    pub fn network_pose(
+        &self,
+        source: &[[f32; 3]],
+        passes: usize,
+        tolerance: f32,
+        scratch: &mut [i8],
+    ) -> Result<(Pose, usize)> {
+        let tile = self.tile_for(scratch.len())?;
+        registration::network_pose(
+            &self.p.frame,
+            self.centring(),
+            source,
+            passes,
+            tolerance,
+            |map| Ok(self.pass(source, map, tile, scratch)?.0),
+        )
+    }
+
+    /// One network pass on the source moved by `map`: the pose (model
+    /// frame), the saturation count and the points left out.
+    fn pass(
+        &self,
+        source: &[[f32; 3]],
+        map: &PointMap,
+        tile: usize,
+        scratch: &mut [i8],
+    ) -> Result<(Pose, PassCounts)> {
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        let out_of_range = self.encode_into(source, map, tile, feature, work, extra)?;
+        let (head, saturated) = self.head_counted(feature, work)?;
+        let counts = PassCounts {
+            saturated,
+            out_of_range,
+        };
+        Ok((self.pose(&head)?, counts))
+    }
+
+    /// Encodes `source` and runs the head, returning the raw results.
+    /// Uses the largest tile the scratch allows.
+    pub fn infer<'s>(
+        &self,
+        source: &[[f32; 3]],
+        scratch: &'s mut [i8],
+    ) -> Result<Int8Inference<'s>> {
+        let tile = self.tile_for(scratch.len())?;
+        self.infer_tiled(source, tile, scratch)
+    }
+
+    /// As [`Self::infer`] with an explicit tile size (`1..=MAX_TILE`).
+    #[inline(never)]
+    pub fn infer_tiled<'s>(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        scratch: &'s mut [i8],
+    ) -> Result<Int8Inference<'s>> {
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        let (centring, out_of_range) = self.encode_centred(source, tile, feature, work, extra)?;
+        let (head, saturated) = self.head_counted(feature, work)?;
+        Ok(Int8Inference {
+            feature,
+            head,
+            centring,
+            saturated,
+            out_of_range,
+        })
+    }
+
+    /// Encodes `source` (centred first if the model says so) into its int8
+    /// global feature (a view into `scratch`).
+    pub fn encode<'s>(&self, source: &[[f32; 3]], scratch: &'s mut [i8]) -> Result<&'s [i8]> {
+        let tile = self.tile_for(scratch.len())?;
+        self.encode_tiled(source, tile, scratch)
+    }
+
+    /// As [`Self::encode`] with an explicit tile size (`1..=MAX_TILE`).
+    #[inline(never)]
+    pub fn encode_tiled<'s>(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        scratch: &'s mut [i8],
+    ) -> Result<&'s [i8]> {
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        self.encode_centred(source, tile, feature, work, extra)?;
+        Ok(feature)
+    }
+
+    /// Encodes `source`, centred first if the model says so; returns how it
+    /// was moved (the identity otherwise) and the points left out.
+    fn encode_centred(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        feature: &mut [i8],
+        work: &mut [i8],
+        extra: &mut [i8],
+    ) -> Result<(Pose, u32)> {
+        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
+        let map = PointMap::new(self.p.frame, &centring);
+        let out_of_range = self.encode_into(source, &map, tile, feature, work, extra)?;
+        Ok((centring, out_of_range))
+    }
+
+    /// The scratch as the feature, the encoder's and head's work area (for
+    /// `tile` points), and what lies past them (the host kernel's room).
+    fn split_scratch<'s>(
+        &self,
+        tile: usize,
+        scratch: &'s mut [i8],
+    ) -> Result<(&'s mut [i8], &'s mut [i8], &'s mut [i8])> {
+        if !(1..=MAX_TILE).contains(&tile) {
+            return Err(Error::InvalidParameter {
+                what: "tile outside 1..=MAX_TILE",
+            });
+        }
+        let needed = self.scratch_len(tile);
+        let available = scratch.len();
+        let too_small = Error::ScratchTooSmall { needed, available };
+        let (scratch, extra) = scratch.split_at_mut_checked(needed).ok_or(too_small)?;
+        let (feature, work) = scratch
+            .split_at_mut_checked(self.p.arch.feature_dim())
+            .ok_or(too_small)?;
+        Ok((feature, work, extra))
+    }
+}
+
+/// The output step of a layer with its ReLU (`relu`) or without.
+fn requant<'l>(layer: &Int8Layer<'l>, relu: bool) -> Requant<'l> {
+    Requant {
+        bias: layer.bias,
+        multiplier: layer.multiplier,
+        shift: layer.shift,
+        zero_point: layer.out_zero_point,
+        act_min: if relu { layer.out_zero_point } else { i8::MIN },
+    }
+}
