@@ -1,6 +1,12 @@
-//! The `pcrnet train` and `pcrnet export` subcommands (arguments and driver).
+//! The `pcrnet train` subcommand (arguments and driver), the argument
+//! parsers `pairs` and `eval` share, and the blob-writing subcommands
+//! (`export`, `upgrade`: [`export`], [`upgrade`]).
 
-use std::path::{Path, PathBuf};
+mod blobs;
+pub use blobs::{ExportArgs, UpgradeArgs, export, upgrade};
+use blobs::{load_template, trained_for};
+
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
@@ -223,28 +229,6 @@ impl PairArgs {
     }
 }
 
-/// Arguments of `pcrnet export`.
-#[derive(Debug, Clone, Args)]
-pub struct ExportArgs {
-    /// A checkpoint written by `pcrnet train`.
-    #[arg(long)]
-    pub checkpoint: PathBuf,
-    /// The template cloud (any format `pcrnet` reads).
-    #[arg(long)]
-    pub template: PathBuf,
-    /// Points the template is reduced to (default: as in training,
-    /// recorded in the checkpoint).
-    #[arg(long)]
-    pub points: Option<usize>,
-    /// Template points stored in the blob for checking and refining poses
-    /// on the device (6 bytes of flash each).
-    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
-    pub template_points: usize,
-    /// Output folder.
-    #[arg(long)]
-    pub out: PathBuf,
-}
-
 /// Points per cloud of `train` unless given (and of `pairs --object`, so
 /// that an object's test pairs match its training).
 pub const DEFAULT_POINTS: usize = 1024;
@@ -424,21 +408,6 @@ fn load_data(args: &TrainArgs, seed: u64) -> anyhow::Result<(Dataset, Dataset)> 
     Ok((train, val))
 }
 
-/// Reads a template file, reduces it as the training shapes were (farthest
-/// points), and records it for a blob: frame, stored points, turns. The
-/// template keeps its own units and axes.
-fn load_template(
-    path: &Path,
-    points: usize,
-    stored: usize,
-    seed: u64,
-) -> anyhow::Result<Reference> {
-    let raw = crate::io::read_cloud(path)?;
-    let reduced = data::reduce(&raw, points, Sampling::Fps, seed)
-        .with_context(|| format!("{}: no finite point", path.display()))?;
-    Reference::new(&reduced, stored).with_context(|| format!("{}", path.display()))
-}
-
 /// Runs `pcrnet train`.
 pub fn train(args: TrainArgs) -> anyhow::Result<()> {
     let config = config_from(&args)?;
@@ -577,96 +546,6 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         &reference,
         Some(&cal),
         trained_for(&trainer.config),
-        &args.out,
-    )? {
-        eprintln!("wrote {}", p.display());
-    }
-    Ok(())
-}
-
-/// Arguments of `pcrnet upgrade`.
-#[derive(Debug, Clone, Args)]
-pub struct UpgradeArgs {
-    /// A format-2 f32 blob (it holds all the weights).
-    #[arg(long)]
-    pub model: PathBuf,
-    /// The template cloud to record (any format `pcrnet` reads, any units).
-    #[arg(long)]
-    pub template: PathBuf,
-    /// Points the template is reduced to, as in training.
-    #[arg(long, default_value_t = 512)]
-    pub points: usize,
-    /// Template points stored in the blob (6 bytes of flash each).
-    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
-    pub template_points: usize,
-    /// Gaussian noise on the calibration sources: a fixed SIGMA or a range
-    /// LO,HI, as `train --noise` (0 for clean sources).
-    #[arg(long, default_value = "0,0.04")]
-    pub noise: String,
-    /// Seed of the template reduction and the calibration clouds.
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Network passes the model was trained for (format 2 did not record
-    /// it): 1 for PCRNet, the training's `--iterations` for i-PCRNet.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
-    pub passes: u16,
-    /// Output folder (model-f32.pcrn, model-int8.pcrn).
-    #[arg(long)]
-    pub out: PathBuf,
-}
-
-/// Runs `pcrnet upgrade`: a format-2 f32 blob to current f32 and int8 blobs.
-pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
-    let noise = parse_sigma(&args.noise, "--noise")?;
-    let blob =
-        std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
-    let (params, centre) =
-        crate::upgrade::read_v2_f32(&blob).with_context(|| format!("{}", args.model.display()))?;
-    let reference = load_template(&args.template, args.points, args.template_points, args.seed)?;
-    let pairs = data::PairConfig {
-        noise: (noise[1] > 0.0).then_some(noise),
-        centre,
-        ..data::PairConfig::default()
-    };
-    let cal = exp::calibration_clouds(&reference.normalised(), &pairs, 64, args.seed);
-    let trained = crate::TrainedFor {
-        centre_source: centre,
-        passes: args.passes,
-    };
-    for p in exp::export(&params, &reference, Some(&cal), trained, &args.out)? {
-        eprintln!("wrote {}", p.display());
-    }
-    Ok(())
-}
-
-/// How a training configuration's network should be run: centred
-/// sources as its pairs were, and i-PCRNet's passes.
-fn trained_for(config: &super::TrainConfig) -> crate::TrainedFor {
-    crate::TrainedFor {
-        centre_source: config.pairs.centre,
-        passes: match config.model {
-            ModelKind::Pcrnet => 1,
-            ModelKind::Ipcrnet { iterations } => u16::try_from(iterations).unwrap_or(u16::MAX),
-        },
-    }
-}
-
-/// Runs `pcrnet export`.
-pub fn export(args: ExportArgs) -> anyhow::Result<()> {
-    let ck = Checkpoint::load(&args.checkpoint)?;
-    let points = args.points.unwrap_or(ck.config.points);
-    let reference = load_template(&args.template, points, args.template_points, ck.config.seed)?;
-    let cal = exp::calibration_clouds(
-        &reference.normalised(),
-        &ck.config.pairs,
-        64,
-        ck.config.seed,
-    );
-    for p in exp::export(
-        &ck.params(),
-        &reference,
-        Some(&cal),
-        trained_for(&ck.config),
         &args.out,
     )? {
         eprintln!("wrote {}", p.display());
