@@ -13,12 +13,15 @@
 //! 4. [`elf`] reads flash and RAM sizes from the firmware images;
 //! 5. [`c_example`] does the same for the C firmware example, through the
 //!    C API;
-//! 6. [`layers`] measures instructions per MAC layer by layer.
+//! 6. [`layers`] measures instructions per MAC layer by layer;
+//! 7. [`plan`] says what a run covers: the models of each case set, their
+//!    clouds and option sets, and the cases built from them.
 
 pub mod c_example;
 pub mod compare;
 pub mod elf;
 pub mod hostile;
 pub mod layers;
+pub mod plan;
 pub mod qemu;
 pub mod vectors;
