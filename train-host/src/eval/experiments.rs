@@ -233,6 +233,11 @@ impl<'a> Recorder<'a> {
         }
     }
 
+    /// The experiment's name (its reports' and pair sets' prefix).
+    pub(super) fn name(&self) -> &'static str {
+        self.name
+    }
+
     pub(super) fn model(&mut self, name: &str) -> anyhow::Result<Model> {
         let m = super::recipes::model(self.ctx, name)?;
         if let Some(r) = Recipe::named(name) {

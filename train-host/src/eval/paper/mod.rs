@@ -1,0 +1,127 @@
+//! The experiments that repeat the paper's (Sarode et al. 2020):
+//! `generalisation`, `noise`, `partial`, `sparse`, `speed` (its Table 1)
+//! and `iterations`. They run on [`super::experiments`]' framework (pair
+//! sets, models, reports); this project's own questions are in
+//! [`super::trust`], [`super::resampled`] and [`super::heldout`].
+
+mod sweeps;
+mod timing;
+pub(super) use sweeps::{noise, partial, sparse};
+pub(super) use timing::{iterations, speed};
+
+use super::MethodScore;
+use super::experiments::{
+    Context, Recorder, Report, Run, SEEN, Table, UNSEEN, label, modelnet10, pair_set, success_chart,
+};
+use super::methods::{Method, MethodKind};
+use crate::train::data::PairConfig;
+
+/// The summary table's header.
+fn summary_header(first: &str) -> Vec<String> {
+    [
+        first,
+        "method",
+        "rot mean",
+        "rot median",
+        "rot std",
+        "trans mean",
+        "trans median",
+        "AUC",
+        "ok (5°, 0.05)",
+        "ok (10°, 0.1)",
+        "ok (20°, 0.2)",
+        "ms mean",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
+}
+
+fn summary_row(set: &str, run: &Run) -> Vec<String> {
+    let s = &run.summary;
+    let failed = if run.failures > 0 {
+        format!(", {} failed", run.failures)
+    } else {
+        String::new()
+    };
+    let mut row = vec![
+        set.to_string(),
+        format!("{}{failed}", label(&run.method, run.model.as_deref())),
+        format!("{:.2}°", s.rotation_deg.mean),
+        format!("{:.2}°", s.rotation_deg.median),
+        format!("{:.2}°", s.rotation_deg.std),
+        format!("{:.4}", s.translation.mean),
+        format!("{:.4}", s.translation.median),
+        format!("{:.3}", s.auc),
+    ];
+    row.extend(s.success.iter().map(|x| format!("{:.2}", x.ratio)));
+    row.push(s.time_ms.map_or("-".into(), |t| format!("{:.1}", t.mean)));
+    row
+}
+
+fn summary_table(caption: &str, first: &str, runs: &[Run]) -> Table {
+    Table {
+        caption: caption.to_string(),
+        header: summary_header(first),
+        rows: runs.iter().map(|r| summary_row(&r.set, r)).collect(),
+    }
+}
+
+fn icp() -> Method {
+    Method::new(MethodKind::Icp)
+}
+fn pcrnet() -> Method {
+    Method::new(MethodKind::Pcrnet)
+}
+fn ipcrnet() -> Method {
+    Method::new(MethodKind::Ipcrnet)
+}
+fn lk() -> Method {
+    Method::new(MethodKind::Pointnetlk)
+}
+
+pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
+    let started = std::time::Instant::now();
+    let mut rec = Recorder::new(ctx, "generalisation");
+    let gen5 = rec.model("mn10-seen5-ipcrnet")?;
+    let toilet = rec.model("mn10-toilet-ipcrnet")?;
+    let clean = PairConfig::default();
+    let sets: [(&str, &[&str]); 3] = [
+        ("seen classes", &SEEN),
+        ("unseen classes", &UNSEEN),
+        ("toilet (unseen)", &["toilet"]),
+    ];
+    for (set, classes) in sets {
+        let pairs = pair_set(
+            ctx,
+            &format!("gen-{}", set.split(' ').next().unwrap_or(set)),
+            modelnet10(ctx, Some(classes), clean),
+        )?;
+        rec.score(set, icp(), None, &pairs, true)?;
+        rec.score(set, lk(), gen5.f32(), &pairs, true)?;
+        rec.score(set, ipcrnet(), gen5.f32(), &pairs, true)?;
+        rec.score(set, ipcrnet(), gen5.int8(), &pairs, true)?;
+        if classes == ["toilet"] {
+            rec.score(set, ipcrnet(), toilet.int8(), &pairs, true)?;
+        }
+        let first = rec.raw.len() - if classes == ["toilet"] { 5 } else { 4 };
+        let runs: Vec<&MethodScore> = rec.raw[first..].iter().map(|r| &r.1).collect();
+        let chart = success_chart(&format!("Generalisation: {set}"), &runs, 90.0);
+        rec.plot(set.split(' ').next().unwrap_or(set), &chart)?;
+    }
+    let table = summary_table(
+        "Trained on bathtub, bed, chair, desk, dresser (mn10-seen5-ipcrnet); tested on those classes and on the other five; mn10-toilet-ipcrnet is trained on toilets only",
+        "test set",
+        &rec.runs,
+    );
+    rec.finish(
+        "Generalisation to unseen categories",
+        vec![
+            "ModelNet10, test split, clean sources, Euler angles U[-45°, 45°], translation U[-1, 1].".into(),
+            format!("Seen: {}. Unseen: {}.", SEEN.join(", "), UNSEEN.join(", ")),
+            "i-PCRNet: up to 20 passes, stopping at ||dT - I||_F < 1e-7. PointNetLK uses the same model's f32 encoder.".into(),
+        ],
+        vec![table],
+        started,
+    )
+}
