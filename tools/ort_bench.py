@@ -7,11 +7,12 @@ ReduceMax over the points, Concat with the template feature, the head), checks
 that ONNX Runtime's f32 outputs match ours, quantizes it statically with
 ONNX Runtime's own tool (QDQ, per-channel int8 weights, uint8 activations,
 calibrated on the benchmark clouds), times both sessions on one thread the
-same way ours were timed, and prints the ratios: of the median rounds, and
+in turn with ours round by round (`bench_timing.paired`, our rounds run by
+OURS, `ort_bench serve`), and prints the ratios: of the median rounds, and
 of the best rounds (on a shared machine the median moves with whatever else
 runs; the best round is the closest each side gets to its own cost).
 
-Usage: ort_bench.py DIR
+Usage: ort_bench.py DIR OURS
 """
 
 import json
@@ -24,7 +25,7 @@ import onnxruntime as ort
 from onnx import TensorProto, helper, numpy_helper
 from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
 
-from bench_timing import round_ms
+from bench_timing import ROUNDS, Ours, paired, time_round
 
 POINTS = 1024
 OPSET = 17
@@ -99,10 +100,10 @@ def session(path):
 
 
 def main():
-    if len(sys.argv) != 2:
+    if len(sys.argv) != 3:
         raise SystemExit(__doc__)
     root = pathlib.Path(sys.argv[1])
-    rounds = 5
+    ours_side = Ours(sys.argv[2], root)
     rows = []
     for name in ["embedded", "paper"]:
         d = root / name
@@ -128,26 +129,36 @@ def main():
         rel = float(np.max(np.abs(theirs - mine)) / max(float(np.max(np.abs(mine))), 1e-30))
         if rel > 1e-4:
             raise SystemExit(f"{name}: ONNX Runtime's f32 outputs differ from ours by {rel:.2e} (relative)")
-        ort_f32, ort_f32_best = round_ms(lambda c: f32_sess.run(None, {"points": c}), clouds, rounds)
-        ort_int8, ort_int8_best = round_ms(lambda c: int8_sess.run(None, {"points": c}), clouds, rounds)
+        times = {}
+        for precision, sess in [("f32", f32_sess), ("int8", int8_sess)]:
+            times[precision] = paired(
+                lambda: ours_side.round(f"{name} {precision}"),
+                lambda: time_round(lambda c: sess.run(None, {"points": c}), clouds),
+            )
+        (ours_f32, ours_f32_best), (ort_f32, ort_f32_best) = times["f32"]
+        (ours_int8, ours_int8_best), (ort_int8, ort_int8_best) = times["int8"]
         widths = "-".join(map(str, ours["encoder"])) + " / " + "-".join(map(str, ours["head"]))
         rows.append(
             {
                 "model": name,
                 "widths": widths,
-                "ours_f32_ms": ours["f32_ms"],
+                "ours_f32_ms": ours_f32,
                 "ort_f32_ms": ort_f32,
-                "ours_int8_ms": ours["int8_ms"],
+                "ours_int8_ms": ours_int8,
                 "ort_int8_ms": ort_int8,
-                "ours_f32_best_ms": ours["f32_best_ms"],
+                "ours_f32_best_ms": ours_f32_best,
                 "ort_f32_best_ms": ort_f32_best,
-                "ours_int8_best_ms": ours["int8_best_ms"],
+                "ours_int8_best_ms": ours_int8_best,
                 "ort_int8_best_ms": ort_int8_best,
                 "f32_max_rel_diff": rel,
             }
         )
+    ours_side.close()
     (root / "results.json").write_text(json.dumps(rows, indent=1))
-    print(f"onnxruntime {ort.__version__}, one thread; clouds: {(root / 'clouds.txt').read_text()}")
+    print(
+        f"onnxruntime {ort.__version__}, one thread, {ROUNDS} rounds each side in turn; "
+        f"clouds: {(root / 'clouds.txt').read_text()}"
+    )
     for rule, key in [("median round", ""), ("best round", "_best")]:
         print()
         print(f"| model ({rule}) | ours f32 ms | ORT f32 ms | ours / ORT | ours int8 ms | ORT int8 ms | ours / ORT | f32 outputs agree to |")

@@ -4,10 +4,11 @@
 //! ONNX Runtime, onnx and numpy are installed with pip into a virtual
 //! environment under `target/ort-venv` (pinned versions, first run only);
 //! nothing of it is on the test path. `train-host/examples/ort_bench.rs`
-//! writes the weights and clouds and times our f32 and int8 paths;
-//! `tools/ort_bench.py` rebuilds the network as an ONNX graph, checks its
-//! f32 outputs against ours, quantizes it with ONNX Runtime's static
-//! quantizer, times it the same way and prints the table.
+//! writes the weights, blobs and clouds; `tools/ort_bench.py` rebuilds the
+//! network as an ONNX graph, checks its f32 outputs against ours, quantizes
+//! it with ONNX Runtime's static quantizer, times it in turn with ours round
+//! by round (our rounds run in the example's `serve` mode, kept waiting
+//! between them) and prints the table.
 //!
 //! Then ICP: Open3D (`open3d-cpu`, pinned) is installed into the same
 //! environment when its wheel installs here, and `tools/icp_bench.py`
@@ -60,7 +61,9 @@ pub fn run(root: &Path, data: Option<&str>) -> Result<(), String> {
         args.extend(["--data", d.as_str()]);
     }
     crate::cargo(&args)?;
-    crate::run(python, &["tools/ort_bench.py", out])?;
+    let ours = root.join("target/release/examples/ort_bench");
+    let ours = ours.to_str().ok_or("the workspace path is not UTF-8")?;
+    crate::run(python, &["tools/ort_bench.py", out, ours])?;
     let has_open3d = |python: &str| {
         std::process::Command::new(python)
             .args(["-c", "import open3d"])
@@ -82,5 +85,5 @@ pub fn run(root: &Path, data: Option<&str>) -> Result<(), String> {
         }
     }
     println!();
-    crate::run(python, &["tools/icp_bench.py", out])
+    crate::run(python, &["tools/icp_bench.py", out, ours])
 }
