@@ -1,6 +1,6 @@
 /* pcrnet: learned point cloud registration (PCRNet) for microcontrollers, C API.
  *
- * Generated from capi/src/lib.rs by `cargo xtask c-header`; do not edit.
+ * Generated from the pcrnet-capi crate (capi/src/) by `cargo xtask c-header`; do not edit.
  * Ownership, alignment and errors: see capi/README.md. Every function that
  * can fail returns a PcrnetStatus (0 = PCRNET_OK); pcrnet_status_message()
  * explains each one. Nothing allocates, nothing aborts. */

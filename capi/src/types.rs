@@ -1,0 +1,239 @@
+//! The C types the functions exchange: the status every call returns, the
+//! registration options, and the result, each with its conversion from or
+//! to `pcrnet-core`'s Rust type.
+
+use PcrnetStatus::*;
+use pcrnet_core::{Degeneracy, Error, Metric, Options, Registration};
+
+/// Status of a call: `PCRNET_OK` (0) or what went wrong (negative).
+#[repr(i32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[allow(non_camel_case_types, clippy::upper_case_acronyms)]
+pub enum PcrnetStatus {
+    /// Success; outputs were written.
+    PCRNET_OK = 0,
+    /// A required pointer is null.
+    PCRNET_ERROR_NULL_POINTER = -1,
+    /// The point array is not 4-byte aligned.
+    PCRNET_ERROR_MISALIGNED = -2,
+    /// The model handle was not filled by a successful `pcrnet_model_load`.
+    PCRNET_ERROR_NOT_LOADED = -3,
+    /// The blob does not start with the magic bytes `PCRN`.
+    PCRNET_ERROR_BAD_MAGIC = -10,
+    /// The blob's format version is not one this build reads.
+    PCRNET_ERROR_UNSUPPORTED_VERSION = -11,
+    /// The blob holds another kind of model (the C API loads int8 blobs).
+    PCRNET_ERROR_WRONG_KIND = -12,
+    /// The blob is shorter than its header says.
+    PCRNET_ERROR_TRUNCATED = -13,
+    /// Bytes follow the blob's CRC.
+    PCRNET_ERROR_TRAILING_DATA = -14,
+    /// The blob's CRC does not match its contents.
+    PCRNET_ERROR_BAD_CRC = -15,
+    /// The payload does not decode.
+    PCRNET_ERROR_MALFORMED = -16,
+    /// Layer sizes disagree.
+    PCRNET_ERROR_INCONSISTENT_DIMENSIONS = -17,
+    /// A model parameter is outside its range.
+    PCRNET_ERROR_INVALID_PARAMETER = -18,
+    /// The scratch buffer is smaller than `pcrnet_model_scratch_len(model, 1)`.
+    PCRNET_ERROR_SCRATCH_TOO_SMALL = -20,
+    /// An output buffer is too small.
+    PCRNET_ERROR_BUFFER_TOO_SMALL = -21,
+    /// The cloud has no points.
+    PCRNET_ERROR_EMPTY_CLOUD = -30,
+    /// A coordinate is NaN or infinite.
+    PCRNET_ERROR_NON_FINITE_COORDINATE = -31,
+    /// Every point is outside the model's input range (points outside it
+    /// are left out and counted in `out_of_range`; with none left there is
+    /// no pose).
+    PCRNET_ERROR_NO_POINT_IN_RANGE = -32,
+    /// The network produced a zero quaternion.
+    PCRNET_ERROR_DEGENERATE_POSE = -33,
+    /// The pose or a residual came out non-finite.
+    PCRNET_ERROR_NON_FINITE_RESULT = -34,
+    /// A registration option is out of range.
+    PCRNET_ERROR_INVALID_OPTION = -40,
+    /// An error this version of the C API has no code for (a newer core).
+    PCRNET_ERROR_OTHER = -99,
+}
+
+impl From<Error> for PcrnetStatus {
+    fn from(e: Error) -> Self {
+        match e {
+            Error::BadMagic => PCRNET_ERROR_BAD_MAGIC,
+            Error::UnsupportedVersion { .. } => PCRNET_ERROR_UNSUPPORTED_VERSION,
+            Error::WrongKind { .. } => PCRNET_ERROR_WRONG_KIND,
+            Error::Truncated { .. } => PCRNET_ERROR_TRUNCATED,
+            Error::TrailingData { .. } => PCRNET_ERROR_TRAILING_DATA,
+            Error::BadCrc { .. } => PCRNET_ERROR_BAD_CRC,
+            Error::Malformed => PCRNET_ERROR_MALFORMED,
+            Error::InconsistentDimensions { .. } => PCRNET_ERROR_INCONSISTENT_DIMENSIONS,
+            Error::InvalidParameter { .. } => PCRNET_ERROR_INVALID_PARAMETER,
+            Error::ScratchTooSmall { .. } => PCRNET_ERROR_SCRATCH_TOO_SMALL,
+            Error::BufferTooSmall { .. } => PCRNET_ERROR_BUFFER_TOO_SMALL,
+            Error::EmptyCloud => PCRNET_ERROR_EMPTY_CLOUD,
+            Error::NonFiniteCoordinate { .. } => PCRNET_ERROR_NON_FINITE_COORDINATE,
+            Error::NoPointInRange => PCRNET_ERROR_NO_POINT_IN_RANGE,
+            Error::DegeneratePose => PCRNET_ERROR_DEGENERATE_POSE,
+            Error::NonFiniteResult => PCRNET_ERROR_NON_FINITE_RESULT,
+            Error::InvalidOption { .. } => PCRNET_ERROR_INVALID_OPTION,
+            _ => PCRNET_ERROR_OTHER,
+        }
+    }
+}
+
+/// `PcrnetOptions::metric`: point-to-point ICP.
+pub const PCRNET_METRIC_POINT_TO_POINT: u32 = 0;
+/// `PcrnetOptions::metric`: point-to-plane ICP (the default).
+pub const PCRNET_METRIC_POINT_TO_PLANE: u32 = 1;
+
+/// How to register (`pcrnet_core::Options`; distances in model units,
+/// i.e. shares of the template's size). Start from
+/// `pcrnet_options_default` and change what you need.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PcrnetOptions {
+    /// Network passes (1: PCRNet; more: i-PCRNet).
+    pub passes: u32,
+    /// i-PCRNet stops once a pass moves the pose by less than this (0: never).
+    pub tolerance: f32,
+    /// Starting poses of flip resolution, 1 up to 1 + the blob's turns.
+    pub hypotheses: u32,
+    /// ICP iterations every start gets before the two best continue.
+    pub screen_iterations: u32,
+    /// Most ICP iterations in all (0: no refinement).
+    pub icp_iterations: u32,
+    /// `PCRNET_METRIC_POINT_TO_PLANE` or `PCRNET_METRIC_POINT_TO_POINT`.
+    pub metric: u32,
+    /// ICP stops once an update moves the pose by less than this.
+    pub icp_tolerance: f32,
+    /// ICP leaves out pairs farther apart than this.
+    pub icp_distance: f32,
+    /// Residuals count a point at most this far; fitness counts points within it.
+    pub inlier_distance: f32,
+    /// Most source points scored and refined (every k-th point is used).
+    pub max_points: u32,
+    /// `reliable` when the relative plane residual is at most this.
+    pub max_residual: f32,
+}
+
+impl From<Options> for PcrnetOptions {
+    fn from(o: Options) -> Self {
+        let count = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        PcrnetOptions {
+            passes: count(o.passes),
+            tolerance: o.tolerance,
+            hypotheses: count(o.hypotheses),
+            screen_iterations: count(o.screen_iterations),
+            icp_iterations: count(o.icp_iterations),
+            metric: match o.metric {
+                Metric::PointToPoint => PCRNET_METRIC_POINT_TO_POINT,
+                Metric::PointToPlane => PCRNET_METRIC_POINT_TO_PLANE,
+            },
+            icp_tolerance: o.icp_tolerance,
+            icp_distance: o.icp_distance,
+            inlier_distance: o.inlier_distance,
+            max_points: count(o.max_points),
+            max_residual: o.max_residual,
+        }
+    }
+}
+
+impl TryFrom<&PcrnetOptions> for Options {
+    type Error = PcrnetStatus;
+
+    fn try_from(o: &PcrnetOptions) -> Result<Self, PcrnetStatus> {
+        let metric = match o.metric {
+            PCRNET_METRIC_POINT_TO_POINT => Metric::PointToPoint,
+            PCRNET_METRIC_POINT_TO_PLANE => Metric::PointToPlane,
+            _ => return Err(PCRNET_ERROR_INVALID_OPTION),
+        };
+        Ok(Options {
+            passes: o.passes as usize,
+            tolerance: o.tolerance,
+            hypotheses: o.hypotheses as usize,
+            screen_iterations: o.screen_iterations as usize,
+            icp_iterations: o.icp_iterations as usize,
+            metric,
+            icp_tolerance: o.icp_tolerance,
+            icp_distance: o.icp_distance,
+            inlier_distance: o.inlier_distance,
+            max_points: o.max_points as usize,
+            max_residual: o.max_residual,
+        })
+    }
+}
+
+/// `PcrnetRegistration::degenerate`: the source determines a pose.
+pub const PCRNET_DEGENERATE_NONE: u32 = 0;
+/// `PcrnetRegistration::degenerate`: all points (nearly) coincide.
+pub const PCRNET_DEGENERATE_POINT: u32 = 1;
+/// `PcrnetRegistration::degenerate`: the points (nearly) lie on a line.
+pub const PCRNET_DEGENERATE_LINE: u32 = 2;
+
+/// What a registration found and how far to trust it
+/// (`pcrnet_core::Registration`): `p_template = R p_source + t`, in the
+/// source's units.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PcrnetRegistration {
+    /// Unit quaternion `[w, x, y, z]`, `w >= 0`.
+    pub rotation: [f32; 4],
+    /// Translation `[x, y, z]`, source units.
+    pub translation: [f32; 3],
+    /// Mean distance to the nearest template point (capped), source units.
+    pub residual: f32,
+    /// The same as a share of the template's size.
+    pub relative_residual: f32,
+    /// Mean distance to the tangent plane at the nearest template point (capped), source units.
+    pub plane_residual: f32,
+    /// The same as a share of the template's size: what `reliable` is judged on.
+    pub relative_plane_residual: f32,
+    /// Share of used source points within the inlier distance.
+    pub fitness: f32,
+    /// RMS distance of those inliers, source units.
+    pub inlier_rmse: f32,
+    /// Winning start: 0 the network's pose, `k` it followed by turn `k - 1`.
+    pub hypothesis: u32,
+    /// Network passes run.
+    pub passes: u32,
+    /// ICP iterations from the winning start.
+    pub icp_iterations: u32,
+    /// int8 values that reached the top of their range.
+    pub saturated: u32,
+    /// Source points left out of the network: outside the model's input
+    /// range (stray points far from the object).
+    pub out_of_range: u32,
+    /// `PCRNET_DEGENERATE_NONE`, `_POINT` or `_LINE`.
+    pub degenerate: u32,
+    /// Not degenerate and the relative plane residual within `max_residual`.
+    pub reliable: bool,
+}
+
+impl From<&Registration> for PcrnetRegistration {
+    fn from(r: &Registration) -> Self {
+        let count = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        PcrnetRegistration {
+            rotation: r.pose.rotation,
+            translation: r.pose.translation,
+            residual: r.residual,
+            relative_residual: r.relative_residual,
+            plane_residual: r.plane_residual,
+            relative_plane_residual: r.relative_plane_residual,
+            fitness: r.fitness,
+            inlier_rmse: r.inlier_rmse,
+            hypothesis: count(r.hypothesis),
+            passes: count(r.passes),
+            icp_iterations: count(r.icp_iterations),
+            saturated: r.saturated,
+            out_of_range: r.out_of_range,
+            degenerate: match r.degenerate {
+                None => PCRNET_DEGENERATE_NONE,
+                Some(Degeneracy::Point) => PCRNET_DEGENERATE_POINT,
+                Some(Degeneracy::Line) => PCRNET_DEGENERATE_LINE,
+            },
+            reliable: r.reliable,
+        }
+    }
+}
