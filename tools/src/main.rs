@@ -300,67 +300,113 @@ fn firmware_run() -> Result<(), String> {
 }
 
 fn ci() -> Result<(), String> {
-    ensure_target()?;
-    cargo(&["fmt", "--all", "--", "--check"])?;
-    cargo(&[
-        "clippy",
-        "--workspace",
-        "--all-targets",
-        "--",
-        "-D",
-        "warnings",
-    ])?;
-    for dir in FIRMWARE_CRATES {
-        let dir = root().join(dir);
-        run_in(&dir, env!("CARGO"), &["fmt", "--", "--check"])?;
+    let mut steps = Steps::default();
+    steps.time("host lints (fmt, clippy)", || {
+        ensure_target()?;
+        cargo(&["fmt", "--all", "--", "--check"])?;
+        cargo(&[
+            "clippy",
+            "--workspace",
+            "--all-targets",
+            "--",
+            "-D",
+            "warnings",
+        ])
+    })?;
+    steps.time("firmware crates (fmt, clippy, defmt build)", || {
+        for dir in FIRMWARE_CRATES {
+            let dir = root().join(dir);
+            run_in(&dir, env!("CARGO"), &["fmt", "--", "--check"])?;
+            run_in(
+                &dir,
+                env!("CARGO"),
+                &["clippy", "--release", "--", "-D", "warnings"],
+            )?;
+        }
         run_in(
-            &dir,
+            &root().join("firmware-example"),
             env!("CARGO"),
-            &["clippy", "--release", "--", "-D", "warnings"],
+            &["build", "--release", "--features", "defmt"],
+        )
+    })?;
+    steps.time("no_std build and no-panic proof", || {
+        cargo(&["build", "-p", "pcrnet-core", "--target", TARGET])?;
+        no_panic::run(&root())
+    })?;
+    steps.time("C header, C API and device clippy", || {
+        c_header(true)?;
+        cargo(&[
+            "build",
+            "-p",
+            "pcrnet-capi",
+            "--release",
+            "--target",
+            TARGET,
+        ])?;
+        cargo(&[
+            "clippy",
+            "-p",
+            "pcrnet-core",
+            "--target",
+            TARGET,
+            "--",
+            "-D",
+            "warnings",
+        ])
+    })?;
+    steps.time("docs", || {
+        run_with_env(
+            env!("CARGO"),
+            &["doc", "--workspace", "--no-deps"],
+            &[("RUSTDOCFLAGS", "-D warnings")],
+        )
+    })?;
+    steps.time("QEMU harness, Cortex-M4F (qemu-test)", qemu_test)?;
+    steps.time("QEMU harness, other cores (cores)", cores)?;
+    steps.time("C example under QEMU", c_example)?;
+    steps.time("aarch64 kernels under qemu-aarch64", aarch64_test)?;
+    steps.time("fuzzing", || {
+        run_in(
+            &root().join("fuzz"),
+            env!("CARGO"),
+            &["fmt", "--", "--check"],
         )?;
+        fuzz::run(&root(), CI_FUZZ_SECONDS)
+    })?;
+    steps.time("host tests (cargo test --workspace)", || {
+        cargo(&["test", "--workspace"])
+    })?;
+    steps.report();
+    Ok(())
+}
+
+/// The wall-clock time of each of `ci`'s steps, printed at the end: where
+/// a run's minutes go.
+#[derive(Default)]
+struct Steps(Vec<(&'static str, std::time::Duration)>);
+
+impl Steps {
+    /// Runs `step`, recording its time under `name`.
+    fn time(
+        &mut self,
+        name: &'static str,
+        step: impl FnOnce() -> Result<(), String>,
+    ) -> Result<(), String> {
+        let started = std::time::Instant::now();
+        let result = step();
+        self.0.push((name, started.elapsed()));
+        result
     }
-    run_in(
-        &root().join("firmware-example"),
-        env!("CARGO"),
-        &["build", "--release", "--features", "defmt"],
-    )?;
-    cargo(&["build", "-p", "pcrnet-core", "--target", TARGET])?;
-    no_panic::run(&root())?;
-    c_header(true)?;
-    cargo(&[
-        "build",
-        "-p",
-        "pcrnet-capi",
-        "--release",
-        "--target",
-        TARGET,
-    ])?;
-    cargo(&[
-        "clippy",
-        "-p",
-        "pcrnet-core",
-        "--target",
-        TARGET,
-        "--",
-        "-D",
-        "warnings",
-    ])?;
-    run_with_env(
-        env!("CARGO"),
-        &["doc", "--workspace", "--no-deps"],
-        &[("RUSTDOCFLAGS", "-D warnings")],
-    )?;
-    qemu_test()?;
-    cores()?;
-    c_example()?;
-    aarch64_test()?;
-    run_in(
-        &root().join("fuzz"),
-        env!("CARGO"),
-        &["fmt", "--", "--check"],
-    )?;
-    fuzz::run(&root(), CI_FUZZ_SECONDS)?;
-    cargo(&["test", "--workspace"])
+
+    /// The table of steps and their minutes.
+    fn report(&self) {
+        println!("\n| CI step | minutes |\n|---|---|");
+        for (name, t) in &self.0 {
+            println!("| {name} | {:.1} |", t.as_secs_f64() / 60.0);
+        }
+        let total: std::time::Duration = self.0.iter().map(|(_, t)| *t).sum();
+        println!("| total | {:.1} |", total.as_secs_f64() / 60.0);
+    }
 }
 
 /// Runs a command in the workspace root with extra environment variables.
