@@ -104,6 +104,59 @@ fn bad_flag_values_are_errors_naming_the_flag() {
     }
 }
 
+/// Every field of the device pipeline's options can be set from the
+/// command line and reaches the pipeline: `--icp-tolerance 0` runs ICP to
+/// its iteration limit, a tiny `--inlier-distance` leaves points out of
+/// the fitness, `--max-residual 0` calls a small residual unreliable; out
+/// of range, each is an error naming its flag.
+#[test]
+fn device_options_reach_the_pipeline() {
+    let m = models();
+    let register = |extra: &[&str]| {
+        let out = pcrnet()
+            .arg("register")
+            .arg(m.join("embedded-default-source.xyz"))
+            .arg("--model")
+            .arg(m.join("embedded-default-int8.pcrn"))
+            .args(["--json", "-"])
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{extra:?}: {stderr}");
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let default = register(&[]);
+    assert_eq!(default["reliable"], true, "{default}");
+    assert_eq!(default["fitness"], 1.0, "{default}");
+    let iterations = |r: &serde_json::Value| r["icp_iterations"].as_u64().unwrap();
+    let to_the_limit = register(&["--icp-tolerance", "0"]);
+    assert!(
+        iterations(&to_the_limit) > iterations(&default),
+        "{to_the_limit}"
+    );
+    let tight = register(&["--inlier-distance", "1e-6"]);
+    assert!(tight["fitness"].as_f64().unwrap() < 1.0, "{tight}");
+    assert_eq!(register(&["--max-residual", "0"])["reliable"], false);
+    for (flag, value) in [
+        ("--icp-tolerance", "-1"),
+        ("--inlier-distance", "0"),
+        ("--max-residual", "nan"),
+    ] {
+        let out = pcrnet()
+            .arg("register")
+            .arg(m.join("embedded-default-source.xyz"))
+            .arg("--model")
+            .arg(m.join("embedded-default-int8.pcrn"))
+            .arg(format!("{flag}={value}"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{flag}: {stderr}");
+        assert!(stderr.contains(flag), "{flag}: {stderr}");
+    }
+}
+
 /// Issue 10, item 5: a large cloud is reduced before registration (by
 /// default to 8,192 points, seeded), says so, and still registers; voxel
 /// reduction without a cube size is refused with what to pass.

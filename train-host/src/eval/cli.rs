@@ -110,6 +110,19 @@ pub struct MethodOptions {
     /// the template's size.
     #[arg(long)]
     pub icp_distance: Option<f32>,
+    /// Device ICP stops once an update moves the pose by less than this
+    /// (`||dT - I||_F`).
+    #[arg(long)]
+    pub icp_tolerance: Option<f32>,
+    /// The device residual counts a point at most this far from the
+    /// template, and the fitness counts points within it (a share of the
+    /// template's size).
+    #[arg(long)]
+    pub inlier_distance: Option<f32>,
+    /// The device pipeline calls a pose reliable when its relative plane
+    /// residual is at most this (a share of the template's size).
+    #[arg(long)]
+    pub max_residual: Option<f32>,
     /// Template points the device pipeline stores when a template cloud is
     /// given in place of the blob's own (farthest-point subsampled, all of
     /// them when the cloud has fewer; 1 to 65535, default 512): its check
@@ -138,17 +151,30 @@ impl MethodOptions {
         for (flag, v) in at_least_one {
             anyhow::ensure!(v != Some(0), "{flag} must be at least 1");
         }
-        if let Some(d) = self.icp_distance {
-            anyhow::ensure!(
-                d.is_finite() && d > 0.0,
-                "--icp-distance {d} must be a finite share of the template's size above 0"
-            );
+        let above_zero = [
+            ("--icp-distance", self.icp_distance),
+            ("--inlier-distance", self.inlier_distance),
+        ];
+        for (flag, v) in above_zero {
+            if let Some(d) = v {
+                anyhow::ensure!(
+                    d.is_finite() && d > 0.0,
+                    "{flag} {d} must be a finite share of the template's size above 0"
+                );
+            }
         }
-        if let Some(t) = self.tolerance {
-            anyhow::ensure!(
-                t.is_finite() && t >= 0.0,
-                "--tolerance {t} must be finite and at least 0"
-            );
+        let at_least_zero = [
+            ("--tolerance", self.tolerance),
+            ("--icp-tolerance", self.icp_tolerance),
+            ("--max-residual", self.max_residual),
+        ];
+        for (flag, v) in at_least_zero {
+            if let Some(t) = v {
+                anyhow::ensure!(
+                    t.is_finite() && t >= 0.0,
+                    "{flag} {t} must be finite and at least 0"
+                );
+            }
         }
         Ok(())
     }
@@ -172,6 +198,9 @@ impl MethodOptions {
         m.max_points = self.max_points.unwrap_or(m.max_points);
         m.metric = self.metric.unwrap_or(m.metric);
         m.icp_distance = self.icp_distance.unwrap_or(m.icp_distance);
+        m.icp_tolerance = self.icp_tolerance.unwrap_or(m.icp_tolerance);
+        m.inlier_distance = self.inlier_distance.unwrap_or(m.inlier_distance);
+        m.max_residual = self.max_residual.unwrap_or(m.max_residual);
         m.template_points = self.template_points.unwrap_or(m.template_points);
         m
     }

@@ -107,6 +107,17 @@ pub struct Method {
     /// Device ICP pair distance (model units: share of the template's size).
     #[serde(default = "default_icp_distance")]
     pub icp_distance: f32,
+    /// Device ICP stops once an update's `||dT - I||_F` is below this.
+    #[serde(default = "default_icp_tolerance")]
+    pub icp_tolerance: f32,
+    /// The device residual's cap and the fitness's inlier radius (model
+    /// units).
+    #[serde(default = "default_inlier_distance")]
+    pub inlier_distance: f32,
+    /// The device pipeline calls a pose reliable when its relative plane
+    /// residual is at most this.
+    #[serde(default = "default_max_residual")]
+    pub max_residual: f32,
     /// Template points the device pipeline stores when a template cloud is
     /// bound in place of the blob's own (it checks and refines poses
     /// against them).
@@ -132,6 +143,18 @@ fn default_max_points() -> usize {
 
 fn default_icp_distance() -> f32 {
     pcrnet_core::Options::default().icp_distance
+}
+
+fn default_icp_tolerance() -> f32 {
+    pcrnet_core::Options::default().icp_tolerance
+}
+
+fn default_inlier_distance() -> f32 {
+    pcrnet_core::Options::default().inlier_distance
+}
+
+fn default_max_residual() -> f32 {
+    pcrnet_core::Options::default().max_residual
 }
 
 fn default_template_points() -> usize {
@@ -161,6 +184,9 @@ impl Method {
             max_points: default_max_points(),
             metric: DeviceMetric::default(),
             icp_distance: default_icp_distance(),
+            icp_tolerance: default_icp_tolerance(),
+            inlier_distance: default_inlier_distance(),
+            max_residual: default_max_residual(),
             template_points: default_template_points(),
         }
     }
@@ -176,7 +202,9 @@ impl Method {
             max_points: self.max_points,
             metric: self.metric.into(),
             icp_distance: self.icp_distance,
-            ..pcrnet_core::Options::default()
+            icp_tolerance: self.icp_tolerance,
+            inlier_distance: self.inlier_distance,
+            max_residual: self.max_residual,
         }
     }
 
