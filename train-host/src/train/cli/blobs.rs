@@ -91,15 +91,11 @@ pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
         centre,
         ..data::PairConfig::default()
     };
-    let cal = exp::calibration_clouds(&reference.normalised(), &pairs, 64, args.seed);
     let trained = crate::TrainedFor {
         centre_source: centre,
         passes: args.passes,
     };
-    for p in exp::export(&params, &reference, Some(&cal), trained, &args.out)? {
-        eprintln!("wrote {}", p.display());
-    }
-    Ok(())
+    write_blobs(&params, &reference, &pairs, args.seed, trained, &args.out)
 }
 
 /// How a training configuration's network should be run: centred
@@ -119,20 +115,34 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ck = Checkpoint::load(&args.checkpoint)?;
     let points = args.points.unwrap_or(ck.config.points);
     let reference = load_template(&args.template, points, args.template_points, ck.config.seed)?;
-    let cal = exp::calibration_clouds(
-        &reference.normalised(),
-        &ck.config.pairs,
-        64,
-        ck.config.seed,
-    );
-    for p in exp::export(
+    write_blobs(
         &ck.params(),
         &reference,
-        Some(&cal),
+        &ck.config.pairs,
+        ck.config.seed,
         trained_for(&ck.config),
         &args.out,
-    )? {
+    )
+}
+
+/// Calibration sources made from the template as `pairs` makes sources
+/// (seeded), then both blobs of `params` with `reference` as their
+/// template written to `out`, each path printed: what `train`, `export`
+/// and `upgrade` end with.
+pub(super) fn write_blobs(
+    params: &crate::F32Params,
+    reference: &Reference,
+    pairs: &data::PairConfig,
+    seed: u64,
+    trained: crate::TrainedFor,
+    out: &Path,
+) -> anyhow::Result<()> {
+    let cal = exp::calibration_clouds(&reference.normalised(), pairs, CALIBRATION_CLOUDS, seed);
+    for p in exp::export(params, reference, Some(&cal), trained, out)? {
         eprintln!("wrote {}", p.display());
     }
     Ok(())
 }
+
+/// Calibration sources per quantization.
+const CALIBRATION_CLOUDS: usize = 64;

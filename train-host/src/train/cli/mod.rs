@@ -4,7 +4,7 @@
 
 mod blobs;
 pub use blobs::{ExportArgs, UpgradeArgs, export, upgrade};
-use blobs::{load_template, trained_for};
+use blobs::{load_template, trained_for, write_blobs};
 
 use std::path::PathBuf;
 
@@ -13,7 +13,7 @@ use clap::{Args, ValueEnum};
 
 use super::{
     CHECKPOINT_FILE, Checkpoint, Dataset, LossKind, ModelKind, PairConfig, RunOptions, Sampling,
-    Schedule, Split, TrainConfig, Trainer, data, export as exp,
+    Schedule, Split, TrainConfig, Trainer, data,
 };
 use crate::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use crate::{EMBEDDED_ENCODER, EMBEDDED_HEAD};
@@ -535,22 +535,14 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         None => Reference::new(&trainer.train_data().clouds[0], args.template_points)?,
     };
     // Both blobs, as `pcrnet export` writes them.
-    let cal = exp::calibration_clouds(
-        &reference.normalised(),
-        &trainer.config.pairs,
-        64,
-        trainer.config.seed,
-    );
-    for p in exp::export(
+    write_blobs(
         &trainer.params,
         &reference,
-        Some(&cal),
+        &trainer.config.pairs,
+        trainer.config.seed,
         trained_for(&trainer.config),
         &args.out,
-    )? {
-        eprintln!("wrote {}", p.display());
-    }
-    Ok(())
+    )
 }
 
 #[cfg(test)]
