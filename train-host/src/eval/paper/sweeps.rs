@@ -8,7 +8,7 @@ use super::super::methods::Method;
 use super::super::metrics::Summary;
 use super::super::pairs::PairSetSpec;
 use super::super::plot::{Chart, Corner, Series};
-use super::super::recipes::{NamedBlob, PARTIAL_RECIPE};
+use super::super::recipes::{Model, NamedBlob, PARTIAL_RECIPE};
 use super::{icp, ipcrnet, lk, pcrnet, summary_table};
 use crate::train::data::PairConfig;
 
@@ -91,6 +91,18 @@ fn sweep(
     rec.finish(report.title, report.notes, vec![table], started)
 }
 
+/// The methods the ModelNet10 sweeps compare: ICP, PointNetLK on the
+/// i-PCRNet's f32 encoder, PCRNet, i-PCRNet and i-PCRNet + ICP (int8).
+fn modelnet10_methods<'m>(pc: &'m Model, ipc: &'m Model) -> [(Method, Option<NamedBlob<'m>>); 5] {
+    [
+        (icp(), None),
+        (lk(), ipc.f32()),
+        (pcrnet(), pc.int8()),
+        (ipcrnet(), ipc.int8()),
+        (ipcrnet().then_icp(), ipc.int8()),
+    ]
+}
+
 /// One point of a sweep: its value on the x axis, its name, its pairs.
 struct SweepSet {
     x: f64,
@@ -145,13 +157,7 @@ pub(in crate::eval) fn noise(ctx: &Context) -> anyhow::Result<Report> {
             }
         })
         .collect();
-    let methods = [
-        (icp(), None),
-        (lk(), ipc.f32()),
-        (pcrnet(), pc.int8()),
-        (ipcrnet(), ipc.int8()),
-        (ipcrnet().then_icp(), ipc.int8()),
-    ];
+    let methods = modelnet10_methods(&pc, &ipc);
     let report = SweepReport {
         title: "Gaussian noise on the source",
         notes: vec![
@@ -235,13 +241,7 @@ pub(in crate::eval) fn sparse(ctx: &Context) -> anyhow::Result<Report> {
             }
         })
         .collect();
-    let methods = [
-        (icp(), None),
-        (lk(), ipc.f32()),
-        (pcrnet(), pc.int8()),
-        (ipcrnet(), ipc.int8()),
-        (ipcrnet().then_icp(), ipc.int8()),
-    ];
+    let methods = modelnet10_methods(&pc, &ipc);
     let report = SweepReport {
         title: "Sparse source",
         notes: vec![
