@@ -15,6 +15,9 @@
 use crate::error::{Error, Result};
 use crate::format::TemplateCloud;
 
+mod layout;
+pub use layout::{BuildOut, build, build_len};
+
 /// Most cells per axis.
 pub const MAX_GRID: u8 = 32;
 /// Most template points a blob may hold (offsets are u16).
@@ -125,15 +128,11 @@ impl<'a> Template<'a> {
     }
 
     /// Point `i` in int16 steps (zero past the end; indices come from the search).
-    pub fn point(&self, i: usize) -> [i32; 3] {
-        match self.cloud.points.get(6 * i..6 * i + 6) {
-            Some(&[a, b, c, d, e, f]) => [
-                i16::from_le_bytes([a, b]) as i32,
-                i16::from_le_bytes([c, d]) as i32,
-                i16::from_le_bytes([e, f]) as i32,
-            ],
-            _ => [0; 3],
-        }
+    pub fn point(&self, i: usize) -> [i16; 3] {
+        self.cloud
+            .points
+            .get(6 * i..6 * i + 6)
+            .map_or([0; 3], stored_point)
     }
 
     /// The normal at point `i`, times 127 (zero past the end).
@@ -147,12 +146,12 @@ impl<'a> Template<'a> {
     /// How far `q` (int16 steps) lies from the tangent plane at point `i`,
     /// `n . (point_i - q)` in steps (signed), and that unit normal. The dot
     /// product is exact in integers; the one division by `|n|` rounds.
-    pub fn plane_offset(&self, i: usize, q: [i32; 3]) -> (f32, [f32; 3]) {
+    pub fn plane_offset(&self, i: usize, q: [i16; 3]) -> (f32, [f32; 3]) {
         let (t, ni) = (self.point(i), self.normal(i));
         let norm = libm::sqrtf((ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]) as f32);
         let mut dot = 0i64;
         for k in 0..3 {
-            dot += (t[k] - q[k]) as i64 * ni[k] as i64;
+            dot += (t[k] as i64 - q[k] as i64) * ni[k] as i64;
         }
         (dot as f32 / norm, ni.map(|v| v as f32 / norm))
     }
@@ -161,11 +160,11 @@ impl<'a> Template<'a> {
     /// `libm::roundf`, clamped to `-32767..=32767` (a clamped point is at
     /// least `32767 step - max|template|` away from every template point,
     /// so the clamp only matters beyond any correspondence distance).
-    pub fn quantize(&self, p: [f32; 3]) -> [i32; 3] {
+    pub fn quantize(&self, p: [f32; 3]) -> [i16; 3] {
         p.map(|x| {
             let r = libm::roundf(x / self.cloud.step);
             // NaN (not produced by finite inputs) maps to 0 via `as`.
-            r.clamp(-32767.0, 32767.0) as i32
+            r.clamp(-32767.0, 32767.0) as i16
         })
     }
 
@@ -178,8 +177,8 @@ impl<'a> Template<'a> {
 
     /// Cell coordinate of a value along an axis whose grid starts at
     /// `origin`, clamped into the grid.
-    fn axis_cell(&self, origin: i16, v: i32) -> i32 {
-        let rel = v - origin as i32;
+    fn axis_cell(&self, origin: i32, v: i32) -> i32 {
+        let rel = v - origin;
         // The cell size is positive (checked at load); `checked_` and
         // `min`/`max` instead of `clamp` leave the compiler no panic path.
         let c = rel.checked_div_euclid(self.cloud.cell as i32).unwrap_or(0);
@@ -187,10 +186,10 @@ impl<'a> Template<'a> {
     }
 
     /// The cell index of a point, `None` if it lies outside the grid.
-    fn cell_of(&self, p: [i32; 3]) -> Option<usize> {
+    fn cell_of(&self, p: [i16; 3]) -> Option<usize> {
         let mut index = 0usize;
         for (axis, &v) in p.iter().enumerate() {
-            let rel = v - self.cloud.origin[axis] as i32;
+            let rel = v as i32 - self.cloud.origin[axis] as i32;
             let c = rel.checked_div_euclid(self.cloud.cell as i32)?;
             if !(0..self.grid).contains(&c) {
                 return None;
@@ -208,253 +207,181 @@ impl<'a> Template<'a> {
     /// point than the best so far (or than `limit`): exact, not approximate.
     /// Of equally near points it returns the first it visits: the one in
     /// the nearest shell, then with the lowest index.
-    pub fn nearest(&self, q: [i32; 3], limit: u64) -> Option<Neighbour> {
+    ///
+    /// All of it is i32 arithmetic but the squared distances (`SMULL` /
+    /// `SMLAL` on a Cortex-M4): coordinates are int16, cell corners at most
+    /// `32767 + 32 x 65535`.
+    pub fn nearest(&self, q: [i16; 3], limit: u64) -> Option<Neighbour> {
         let ([x, y, z], [ox, oy, oz]) = (q, self.cloud.origin);
-        let centre = [
-            self.axis_cell(ox, x),
-            self.axis_cell(oy, y),
-            self.axis_cell(oz, z),
-        ];
-        let mut best: Option<Neighbour> = None;
-        let mut bound = limit;
-        let g = self.grid;
-        let cell = self.cloud.cell as i64;
-        // The squared distance from q to the slab of cells `c` along axis
-        // `a` (0 inside it), at most `u32::MAX`: a cell's box is at least
-        // the sum of its three slabs' away. (The cap can only make a cell
-        // look nearer than it is, and visiting a cell that holds no point
-        // below the bound changes nothing.)
-        let slab = |origin: i16, v: i32, c: i32| -> u32 {
-            let lo = origin as i64 + c as i64 * cell;
-            let hi = lo + cell - 1;
-            let v = v as i64;
-            let d = (lo - v).max(v - hi).max(0) as u64;
-            (d * d).min(u32::MAX as u64) as u32
+        let cell = self.cloud.cell as i32;
+        let axis = |origin: i16, v: i16| Axis {
+            origin: origin as i32,
+            cell,
+            v: v as i32,
         };
-        // The y and z slabs of the shell's box, by cell coordinate: each
-        // is computed once per shell, not once per cell. (u32: clearing
-        // the arrays costs every call.)
-        let (mut ys, mut zs) = ([0u32; MAX_GRID as usize], [0u32; MAX_GRID as usize]);
+        let axes = [axis(ox, x), axis(oy, y), axis(oz, z)];
+        let centre = axes.map(|a| self.axis_cell(a.origin, a.v));
+        let mut best = Best {
+            index: usize::MAX,
+            bound: limit,
+        };
+        let g = self.grid;
         for r in 0..g {
             let lo = centre.map(|c| (c - r).max(0));
             let hi = centre.map(|c| (c + r).min(g - 1));
-            for (slabs, lo, hi, o, v) in [
-                (&mut ys, lo[1], hi[1], oy, y),
-                (&mut zs, lo[2], hi[2], oz, z),
-            ] {
-                for c in lo..=hi {
-                    if let Some(s) = slabs.get_mut(c as usize) {
-                        *s = slab(o, v, c);
-                    }
-                }
-            }
             // The shell's cells (Chebyshev distance `r` from the centre
             // cell) in x, y, z order: every z of the box where x or y is on
-            // the shell, else only its two z faces.
+            // the shell, else only its two z faces. An x plane, or a z row,
+            // whose slabs are already no closer than the best so far is
+            // passed over whole: the bound only falls, so the per-cell test
+            // below would skip each of its cells anyway.
             for cx in lo[0]..=hi[0] {
-                let sx = slab(ox, x, cx) as u64;
+                let sx = axes[0].slab(cx) as u64;
+                if sx >= best.bound {
+                    continue;
+                }
+                let x_on_shell = (cx - centre[0]).abs() == r;
                 for cy in lo[1]..=hi[1] {
-                    let sxy = sx + ys.get(cy as usize).map_or(0, |&s| s as u64);
-                    let on_shell = (cx - centre[0]).abs().max((cy - centre[1]).abs()) == r;
+                    let sxy = sx + axes[1].slab(cy) as u64;
+                    if sxy >= best.bound {
+                        continue;
+                    }
+                    let row = (cx * g + cy) * g;
                     let mut visit = |cz: i32| {
                         // Skip a cell that cannot hold a point closer than
                         // the best so far: its box is at least this far.
-                        let gap2 = sxy + zs.get(cz as usize).map_or(0, |&s| s as u64);
-                        if gap2 < bound {
-                            let c = ((cx * g + cy) * g + cz) as usize;
-                            self.scan_cell(c, q, &mut bound, &mut best);
+                        if sxy + (axes[2].slab(cz) as u64) < best.bound {
+                            self.scan_cell((row + cz) as usize, q, &mut best);
                         }
                     };
-                    if on_shell {
+                    if x_on_shell || (cy - centre[1]).abs() == r {
                         (lo[2]..=hi[2]).for_each(&mut visit);
                     } else {
                         // r >= 1 here: two distinct faces, in z order.
-                        for cz in [centre[2] - r, centre[2] + r] {
-                            if (lo[2]..=hi[2]).contains(&cz) {
-                                visit(cz);
-                            }
+                        if centre[2] - r >= 0 {
+                            visit(centre[2] - r);
+                        }
+                        if centre[2] + r < g {
+                            visit(centre[2] + r);
                         }
                     }
                 }
             }
             // Distance from q to the nearest face of the visited box that
-            // still has cells beyond it: a lower bound for every unvisited point.
-            let mut gap: Option<i64> = None;
-            for a in 0..3 {
-                let origin = self.cloud.origin[a] as i64;
-                if lo[a] > 0 {
-                    let face = origin + lo[a] as i64 * cell;
-                    gap = Some(gap.map_or(q[a] as i64 - face, |g| g.min(q[a] as i64 - face)));
+            // still has cells beyond it: a lower bound for every unvisited
+            // point.
+            let mut gap = i32::MAX;
+            for ((axis, &lo), &hi) in axes.iter().zip(&lo).zip(&hi) {
+                if lo > 0 {
+                    gap = gap.min(axis.v - axis.corner(lo));
                 }
-                if hi[a] < g - 1 {
-                    let face = origin + (hi[a] as i64 + 1) * cell;
-                    gap = Some(gap.map_or(face - q[a] as i64, |g| g.min(face - q[a] as i64)));
+                if hi < g - 1 {
+                    gap = gap.min(axis.corner(hi + 1) - axis.v);
                 }
             }
-            match gap {
-                None => break,
-                Some(gap) if gap > 0 && (gap as u64) * (gap as u64) >= bound => break,
-                Some(_) => {}
+            if gap == i32::MAX || (gap > 0 && (gap as u64) * (gap as u64) >= best.bound) {
+                break;
             }
         }
-        best
+        (best.index != usize::MAX).then_some(Neighbour {
+            index: best.index,
+            distance_squared: best.bound,
+        })
     }
 
-    /// Offers cell `c`'s points to the nearest-point search: a point
-    /// strictly nearer than `bound` becomes the best and lowers it.
+    /// Offers cell `c`'s points to the nearest-point search (see
+    /// [`Best::scan`]); an empty cell costs no call.
     #[inline(always)]
-    fn scan_cell(&self, c: usize, q: [i32; 3], bound: &mut u64, best: &mut Option<Neighbour>) {
-        for i in self.offset(c)..self.offset(c + 1) {
-            let d = distance_squared(self.point(i), q);
-            if d < *bound {
-                *bound = d;
-                *best = Some(Neighbour {
-                    index: i,
-                    distance_squared: d,
-                });
+    fn scan_cell(&self, c: usize, q: [i16; 3], best: &mut Best) {
+        let (start, end) = (self.offset(c), self.offset(c + 1));
+        // Offsets ascend within the points (checked at load).
+        if let Some(points) = self.cloud.points.get(6 * start..6 * end)
+            && !points.is_empty()
+        {
+            best.scan(points, start, q);
+        }
+    }
+}
+
+/// The best point of a search so far (`usize::MAX`: none) and the squared
+/// distance a point must beat.
+struct Best {
+    index: usize,
+    bound: u64,
+}
+
+impl Best {
+    /// Offers the stored points `points` (6 bytes each), the first of
+    /// index `first`, to the search: a point strictly nearer than the
+    /// bound becomes the best and lowers it. (Not inlined: on its own the
+    /// loop keeps the query and the bound in registers instead of spilling
+    /// the whole search's state.)
+    #[inline(never)]
+    fn scan(&mut self, points: &[u8], first: usize, q: [i16; 3]) {
+        for (i, p) in (first..).zip(points.chunks_exact(6)) {
+            let d = distance_squared(stored_point(p), q);
+            if d < self.bound {
+                self.bound = d;
+                self.index = i;
             }
         }
     }
 }
 
-/// Squared Euclidean distance of two int16-step points (exact in u64).
-pub fn distance_squared(a: [i32; 3], b: [i32; 3]) -> u64 {
-    let mut d = 0u64;
+/// One axis of a search: the grid along it and the query's coordinate.
+#[derive(Clone, Copy)]
+struct Axis {
+    origin: i32,
+    cell: i32,
+    v: i32,
+}
+
+impl Axis {
+    /// The low corner of cell `c` along this axis (`c = grid` gives the
+    /// grid's far edge).
+    #[inline(always)]
+    fn corner(self, c: i32) -> i32 {
+        self.origin + c * self.cell
+    }
+
+    /// The squared distance from the query to the slab of cells `c` along
+    /// this axis (0 inside it), capped at `u32::MAX`: a cell's box is at
+    /// least the sum of its three slabs' away. (The cap can only make a
+    /// cell look nearer than it is, and visiting a cell that holds no
+    /// point below the bound changes nothing.)
+    #[inline(always)]
+    fn slab(self, c: i32) -> u32 {
+        let lo = self.corner(c);
+        let d = (lo - self.v).max(self.v - (lo + self.cell - 1)).max(0) as u32;
+        // Below 2^16 the square fits in u32.
+        if d > 0xFFFF { u32::MAX } else { d * d }
+    }
+}
+
+/// A stored point's six bytes (three int16 little-endian) as int16 steps
+/// (zeros if `bytes` is short: callers pass slices of six).
+#[inline(always)]
+fn stored_point(bytes: &[u8]) -> [i16; 3] {
+    match bytes {
+        &[a, b, c, d, e, f, ..] => [
+            i16::from_le_bytes([a, b]),
+            i16::from_le_bytes([c, d]),
+            i16::from_le_bytes([e, f]),
+        ],
+        _ => [0; 3],
+    }
+}
+
+/// Squared Euclidean distance of two int16-step points (exact: each
+/// difference fits in i32, the sum of squares in u64).
+#[inline(always)]
+pub fn distance_squared(a: [i16; 3], b: [i16; 3]) -> u64 {
+    let mut d = 0i64;
     for k in 0..3 {
-        let e = (a[k] - b[k]).unsigned_abs() as u64;
+        let e = (a[k] as i32 - b[k] as i32) as i64;
         d += e * e;
     }
-    d
-}
-
-/// Bytes [`build`] writes for `points` points on a `grid^3` grid:
-/// `(points bytes, normals bytes, cell offset bytes)`.
-pub const fn build_len(points: usize, grid: u8) -> (usize, usize, usize) {
-    let g = grid as usize;
-    (6 * points, 3 * points, 2 * (g * g * g + 1))
-}
-
-/// Where [`build`] writes: points, normals and cell offsets (sizes from [`build_len`]).
-#[derive(Debug)]
-pub struct BuildOut<'o> {
-    /// Points, 6 bytes each.
-    pub points: &'o mut [u8],
-    /// Normals, 3 bytes each.
-    pub normals: &'o mut [u8],
-    /// Cell offsets.
-    pub cells: &'o mut [u8],
-}
-
-/// Lays out quantized template points and their normals (127 x unit) for
-/// [`Template`]: picks the cell edge so the `grid^3` cells cover the
-/// points' bounding box, sorts points and normals by cell (counting sort,
-/// stable, no allocation) into `out` and writes the cell offsets. Returns
-/// the [`TemplateCloud`] borrowing `out`.
-pub fn build<'o>(
-    points: &[[i16; 3]],
-    normals: &[[i8; 3]],
-    step: f32,
-    grid: u8,
-    turns: &[[f32; 4]],
-    out: BuildOut<'o>,
-) -> Result<TemplateCloud<'o>> {
-    if normals.len() != points.len() {
-        return Err(Error::InconsistentDimensions {
-            what: "template normals: one per point",
-        });
-    }
-    let BuildOut {
-        points: points_out,
-        normals: normals_out,
-        cells: cells_out,
-    } = out;
-    if points.is_empty() || points.len() > MAX_POINTS {
-        return Err(Error::InconsistentDimensions {
-            what: "template point count outside 1..=65535",
-        });
-    }
-    if !(1..=MAX_GRID).contains(&grid) {
-        return Err(Error::InvalidParameter {
-            what: "template grid outside 1..=32",
-        });
-    }
-    let (np, nn, nc) = build_len(points.len(), grid);
-    for (needed, available) in [
-        (np, points_out.len()),
-        (nn, normals_out.len()),
-        (nc, cells_out.len()),
-    ] {
-        if available < needed {
-            return Err(Error::BufferTooSmall { needed, available });
-        }
-    }
-    let turns = heapless::Vec::from_slice(turns).map_err(|_| Error::InvalidParameter {
-        what: "more template turns than MAX_TURNS",
-    })?;
-    let mut lo = [i32::MAX; 3];
-    let mut hi = [i32::MIN; 3];
-    for p in points {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k] as i32);
-            hi[k] = hi[k].max(p[k] as i32);
-        }
-    }
-    let g = grid as i32;
-    let span = (0..3).map(|k| hi[k] - lo[k] + 1).max().unwrap_or(1);
-    // ceil(span / g), at least 1.
-    let cell = ((span + g - 1) / g).max(1);
-    let origin = lo.map(|v| v as i16);
-    let cell_of = |p: &[i16; 3]| -> usize {
-        let mut index = 0usize;
-        for k in 0..3 {
-            let c = ((p[k] as i32 - lo[k]) / cell).min(g - 1);
-            index = index * g as usize + c as usize;
-        }
-        index
-    };
-    let cells = (g * g * g) as usize;
-    let cells_out = &mut cells_out[..nc];
-    cells_out.fill(0);
-    let read = |b: &[u8], c: usize| u16::from_le_bytes([b[2 * c], b[2 * c + 1]]);
-    // Counts in slot c + 1, then prefix sums: slot c = start of cell c.
-    for p in points {
-        let c = cell_of(p) + 1;
-        let v = read(cells_out, c) + 1;
-        cells_out[2 * c..2 * c + 2].copy_from_slice(&v.to_le_bytes());
-    }
-    for c in 1..=cells {
-        let v = read(cells_out, c) + read(cells_out, c - 1);
-        cells_out[2 * c..2 * c + 2].copy_from_slice(&v.to_le_bytes());
-    }
-    // Place each point at its cell's cursor (slot c, advanced), then shift
-    // the cursors back into starts.
-    let points_out = &mut points_out[..np];
-    let normals_out = &mut normals_out[..nn];
-    for (p, n) in points.iter().zip(normals) {
-        let c = cell_of(p);
-        let at = read(cells_out, c) as usize;
-        for k in 0..3 {
-            points_out[6 * at + 2 * k..6 * at + 2 * k + 2].copy_from_slice(&p[k].to_le_bytes());
-            normals_out[3 * at + k] = n[k] as u8;
-        }
-        cells_out[2 * c..2 * c + 2].copy_from_slice(&(at as u16 + 1).to_le_bytes());
-    }
-    for c in (1..=cells).rev() {
-        let v = read(cells_out, c - 1);
-        cells_out[2 * c..2 * c + 2].copy_from_slice(&v.to_le_bytes());
-    }
-    cells_out[..2].copy_from_slice(&0u16.to_le_bytes());
-    let cloud = TemplateCloud {
-        step,
-        points: points_out,
-        normals: normals_out,
-        grid,
-        origin,
-        cell: cell as u16,
-        cells: cells_out,
-        turns,
-    };
-    Ok(cloud)
+    d as u64
 }
 
 #[cfg(test)]
@@ -462,10 +389,10 @@ mod tests {
     use super::*;
     use crate::testing::SplitMix64;
 
-    fn brute(points: &[[i16; 3]], q: [i32; 3]) -> u64 {
+    fn brute(points: &[[i16; 3]], q: [i16; 3]) -> u64 {
         points
             .iter()
-            .map(|p| distance_squared(p.map(|v| v as i32), q))
+            .map(|&p| distance_squared(p, q))
             .min()
             .unwrap()
     }
@@ -495,7 +422,7 @@ mod tests {
             with_template(&points, grid, |t| {
                 assert_eq!(t.len(), 300);
                 for _ in 0..500 {
-                    let q = [0; 3].map(|_: i32| rng.int(-32767, 32767));
+                    let q = [0; 3].map(|_: i32| rng.int(-32767, 32767) as i16);
                     let n = t.nearest(q, u64::MAX).unwrap();
                     assert_eq!(n.distance_squared, brute(&points, q));
                     assert_eq!(distance_squared(t.point(n.index), q), n.distance_squared);
@@ -521,14 +448,16 @@ mod tests {
             }
             with_template(&points, grid, |t| {
                 let g = t.grid;
-                let cell = |p: [i32; 3]| {
+                let cell = |p: [i16; 3]| {
                     let c = t.cell_of(p).unwrap() as i32;
                     [c / (g * g), c / g % g, c % g]
                 };
                 let (mut ties, mut shells) = (0, 0);
                 for _ in 0..400 {
-                    let q = [0; 3].map(|_: i32| rng.int(-5, 5) * 1500 + rng.int(-1, 1) * 750);
-                    let centre = [0, 1, 2].map(|a| t.axis_cell(t.cloud.origin[a], q[a]));
+                    let q =
+                        [0; 3].map(|_: i32| (rng.int(-5, 5) * 1500 + rng.int(-1, 1) * 750) as i16);
+                    let centre =
+                        [0, 1, 2].map(|a| t.axis_cell(t.cloud.origin[a] as i32, q[a] as i32));
                     let shell = |i: usize| {
                         let c = cell(t.point(i));
                         (0..3).map(|a| (c[a] - centre[a]).abs()).max().unwrap_or(0)
