@@ -8,9 +8,9 @@
 //! pass keeps the coordinates in three arrays and eight running maxima,
 //! one per lane of eight consecutive points, so the compiler can run it
 //! on vectors; each distance is still `(dx dx + dy dy) + dz dz` in f32,
-//! and the lanes' maxima, merged by value and then by the lowest index,
-//! pick the same point as a scan in order would: the result is the
-//! straightforward loop's, bit for bit (see the tests).
+//! and the first point at the largest distance, found by a second,
+//! early-stopping pass, is the one a scan in order would pick: the result
+//! is the straightforward loop's, bit for bit (see the tests).
 
 /// Points per group of running maxima.
 const LANES: usize = 8;
@@ -50,50 +50,59 @@ pub fn farthest_point_sampling_with(
 /// Lowers each point's distance to the nearest pick by the new pick `c`
 /// and returns the first point of the largest (0 if every distance is
 /// NaN, as the scan in order would).
+///
+/// Two passes: the first lowers the distances and keeps the largest per
+/// lane, values only, so the compiler keeps both on vectors (carrying each
+/// lane's index as well left it scalar); the second finds the first point
+/// at that distance, which is the point a scan in order picks.
 fn farthest(xs: &[f32], ys: &[f32], zs: &[f32], c: [f32; 3], dist: &mut [f32]) -> usize {
     let d2 = |x: f32, y: f32, z: f32| {
         let (dx, dy, dz) = (x - c[0], y - c[1], z - c[2]);
         dx * dx + dy * dy + dz * dz
     };
     let mut best = [-1f32; LANES];
-    let mut at = [0u32; LANES];
     let groups = dist.len() / LANES;
     let (head, tail) = dist.split_at_mut(groups * LANES);
     let coords = xs
         .chunks_exact(LANES)
         .zip(ys.chunks_exact(LANES))
         .zip(zs.chunks_exact(LANES));
-    for (g, (d, ((x, y), z))) in head.chunks_exact_mut(LANES).zip(coords).enumerate() {
+    for (d, ((x, y), z)) in head.chunks_exact_mut(LANES).zip(coords) {
         for l in 0..LANES {
-            let v = d2(x[l], y[l], z[l]).min(d[l]);
+            let v = lower(d2(x[l], y[l], z[l]), d[l]);
             d[l] = v;
-            let larger = v > best[l];
-            best[l] = if larger { v } else { best[l] };
-            at[l] = if larger {
-                (g * LANES + l) as u32
-            } else {
-                at[l]
-            };
+            best[l] = if v > best[l] { v } else { best[l] };
         }
     }
-    // The lanes' maxima: the largest value, then the lowest index.
-    let (mut top, mut index) = (-1f32, 0usize);
-    for (&v, &i) in best.iter().zip(&at) {
-        if v > top || (v == top && (i as usize) < index) {
-            (top, index) = (v, i as usize);
-        }
-    }
-    // The last points, after every lane's: a scan in order.
+    let mut top = best.iter().fold(-1f32, |t, &v| if v > t { v } else { t });
+    // The last points, after every lane's.
     let base = groups * LANES;
     let rest = xs[base..].iter().zip(&ys[base..]).zip(&zs[base..]);
-    for (i, (d, ((&x, &y), &z))) in tail.iter_mut().zip(rest).enumerate() {
-        let v = d2(x, y, z).min(*d);
+    for (d, ((&x, &y), &z)) in tail.iter_mut().zip(rest) {
+        let v = lower(d2(x, y, z), *d);
         *d = v;
         if v > top {
-            (top, index) = (v, base + i);
+            top = v;
         }
     }
-    index
+    // A group of eight at a time (compared on vectors), then the point in it.
+    let group = dist
+        .chunks(LANES)
+        .position(|g| g.iter().fold(false, |hit, &v| hit | (v == top)))
+        .unwrap_or(0);
+    let first = group * LANES;
+    dist.get(first..)
+        .and_then(|d| d.iter().position(|&v| v == top))
+        .map_or(0, |i| first + i)
+}
+
+/// `new.min(old)` for a distance `old` that is never NaN (it starts
+/// infinite and only takes values from here): a NaN `new` keeps `old`, as
+/// `f32::min` would, but as one compare and select (`MINPS`) instead of
+/// `f32::min`'s NaN fix-up around it.
+#[inline(always)]
+fn lower(new: f32, old: f32) -> f32 {
+    if new < old { new } else { old }
 }
 
 #[cfg(test)]
