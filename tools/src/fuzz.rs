@@ -2,10 +2,12 @@
 //! libFuzzer, nightly) for SECONDS each, from seed corpora generated here
 //! (valid blobs, clouds and files of every reader's format) plus the
 //! inputs committed under `fuzz/regressions/<target>/`, which are replayed
-//! first. Prints executions, coverage and corpus size per target.
+//! first. All targets are built at once, then run as many at a time as
+//! there are cores. Prints executions, coverage and corpus size per target.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use pcrnet_core::format::{CRC_LEN, HEADER_LEN};
 use pcrnet_core::testing::{random_f32_blob_into, random_int8_blob_into};
@@ -23,11 +25,14 @@ const TARGETS: [&str; 8] = [
 ];
 
 /// Runs every target for `seconds` (CI: a short run; campaigns: longer).
+/// Every target is built first in one `cargo fuzz build` (cargo compiles
+/// them side by side); the runs then go as many at a time as there are
+/// cores, each libFuzzer process on one thread, so each target still gets
+/// its `seconds` of a whole core.
 pub fn run(root: &Path, seconds: u64) -> Result<(), String> {
     ensure_tools()?;
     let corpora = root.join("target/fuzz-corpus");
     let seeds = seeds(root)?;
-    let mut summary = Vec::new();
     for target in TARGETS {
         let dir = corpora.join(target);
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -49,29 +54,38 @@ pub fn run(root: &Path, seconds: u64) -> Result<(), String> {
         for (name, bytes) in inputs {
             std::fs::write(dir.join(name), bytes).map_err(|e| e.to_string())?;
         }
-        let out = Command::new("cargo")
-            .current_dir(root.join("fuzz"))
-            .args(["+nightly", "fuzz", "run", target])
-            .arg(&dir)
-            .args([
-                "--",
-                &format!("-max_total_time={seconds}"),
-                "-rss_limit_mb=2048",
-                "-print_final_stats=1",
-            ])
-            .output()
-            .map_err(|e| format!("cannot run cargo fuzz: {e}"))?;
-        let log = String::from_utf8_lossy(&out.stderr);
-        if !out.status.success() {
-            let tail: Vec<&str> = log.lines().rev().take(40).collect();
-            let tail: Vec<&str> = tail.into_iter().rev().collect();
-            return Err(format!(
-                "fuzz target {target} found a failure (the input is under fuzz/artifacts/{target}/; \
-                 fix it, then add the input to fuzz/regressions/{target}/):\n{}",
-                tail.join("\n")
-            ));
-        }
-        summary.push((target, stats(&log)));
+    }
+    crate::run_in(&root.join("fuzz"), "cargo", &["+nightly", "fuzz", "build"])?;
+    let jobs = std::thread::available_parallelism().map_or(1, usize::from);
+    let next = AtomicUsize::new(0);
+    let mut results: Vec<(usize, &str, Result<Stats, String>)> = std::thread::scope(|s| {
+        let workers: Vec<_> = (0..jobs.min(TARGETS.len()))
+            .map(|_| {
+                s.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(&target) = TARGETS.get(i) else {
+                            return done;
+                        };
+                        let stats = run_target(root, target, &corpora.join(target), seconds);
+                        done.push((i, target, stats));
+                    }
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|w| {
+                w.join()
+                    .unwrap_or_else(|_| vec![(0, "?", Err("a fuzz worker thread panicked".into()))])
+            })
+            .collect()
+    });
+    results.sort_by_key(|(i, _, _)| *i);
+    let mut summary = Vec::new();
+    for (_, target, result) in results {
+        summary.push((target, result?));
     }
     println!(
         "\n| target | executions | coverage (edges) | features | corpus |\n|---|---|---|---|---|"
@@ -83,6 +97,34 @@ pub fn run(root: &Path, seconds: u64) -> Result<(), String> {
         );
     }
     Ok(())
+}
+
+/// One target's run from its corpus directory `dir`: its statistics, or
+/// the failure with the tail of libFuzzer's log.
+fn run_target(root: &Path, target: &str, dir: &Path, seconds: u64) -> Result<Stats, String> {
+    let out = Command::new("cargo")
+        .current_dir(root.join("fuzz"))
+        .args(["+nightly", "fuzz", "run", target])
+        .arg(dir)
+        .args([
+            "--",
+            &format!("-max_total_time={seconds}"),
+            "-rss_limit_mb=2048",
+            "-print_final_stats=1",
+        ])
+        .output()
+        .map_err(|e| format!("cannot run cargo fuzz: {e}"))?;
+    let log = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() {
+        let tail: Vec<&str> = log.lines().rev().take(40).collect();
+        let tail: Vec<&str> = tail.into_iter().rev().collect();
+        return Err(format!(
+            "fuzz target {target} found a failure (the input is under fuzz/artifacts/{target}/; \
+             fix it, then add the input to fuzz/regressions/{target}/):\n{}",
+            tail.join("\n")
+        ));
+    }
+    Ok(stats(&log))
 }
 
 /// nightly (for `-Zsanitizer`) and cargo-fuzz, installed if missing.
