@@ -84,9 +84,12 @@ pub(crate) struct HostBlockWords {
     /// each row padded to an even length (a pooled layer that runs on
     /// bytes copies its own only for blocks the byte kernel declines).
     pub weights: usize,
-    /// A pooled layer on bytes: its rows' weight sums (one per output),
-    /// then the list of its input quads that take the high-bit pass.
-    pub pooled: usize,
+    /// The rows' weight sums of every layer after the first (one per
+    /// output), for the byte kernels.
+    pub sums: usize,
+    /// A pooled layer on bytes: the list of its input quads that take the
+    /// AVX2 kernel's high-bit pass.
+    pub quads: usize,
     /// One activation buffer: [`HOST_BLOCK`] points x the widest layer
     /// input in int16 pairs (the coordinates count as four), or x the
     /// pooled layer's input as two sets of byte quads if that is more.
@@ -188,14 +191,15 @@ impl Arch {
 
     /// Bytes of scratch the int8 encoder's x86-64 host kernel uses past
     /// [`Self::int8_scratch_len`]: the encoder's weights as int16 (each
-    /// row padded to an even length); when the pooled layer's input is an
-    /// int8 activation, one word per output and per four of its inputs
-    /// for its byte kernel; and two buffers of [`HOST_BLOCK`] points x the
+    /// row padded to an even length); one word per output of every layer
+    /// after the first, and when the pooled layer's input is an int8
+    /// activation one per four of its inputs, for the byte kernels; and
+    /// two buffers of [`HOST_BLOCK`] points x the
     /// widest layer input as int16 (the coordinates count as four), plus 3
     /// for alignment.
     pub fn host_block_len(&self) -> usize {
         let w = self.host_block_words();
-        4 * (w.weights + w.pooled + 2 * w.buffer) + 3
+        4 * (w.weights + w.sums + w.quads + 2 * w.buffer) + 3
     }
 
     /// The host block kernel's scratch in words.
@@ -211,7 +215,8 @@ impl Arch {
         let bytes = pooled.map_or(0, |l| 2 * l.inputs.div_ceil(4));
         HostBlockWords {
             weights,
-            pooled: pooled.map_or(0, |l| l.outputs + l.inputs.div_ceil(4)),
+            sums: self.encoder_layers().skip(1).map(|l| l.outputs).sum(),
+            quads: pooled.map_or(0, |l| l.inputs.div_ceil(4)),
             buffer: HOST_BLOCK * pairs.chain([bytes]).max().unwrap_or(0),
         }
     }

@@ -25,13 +25,13 @@
 //! - the last (pooled) layer, most of the work, runs on bytes instead
 //!   when its input is an int8 activation ([`bytes`]): `VPMADDUBSW` on
 //!   the low seven bits of each input, a second pass only for the rare
-//!   quads of inputs with the top bit set; on a CPU with AVX-512 VNNI
-//!   ([`vnni`]), `VPDPBUSD` on whole bytes, sixteen points a vector, four
-//!   rows at a time;
-//! - on a CPU with AVX-512 VNNI the other layers run through [`wide`]
-//!   instead: the same int16 pairs, `VPDPWSSD` (a pair's two products
-//!   added to the accumulator in one instruction), sixteen points a
-//!   vector, four rows at a time.
+//!   quads of inputs with the top bit set;
+//! - on a CPU with AVX-512 VNNI the layers take another route: the first
+//!   (the coordinates, int16) through [`wide`], `VPDPWSSD` on the same
+//!   pairs, and every later one through [`vnni`], `VPDPBUSD` on byte quads
+//!   of `x + 128` (64 multiply-adds an instruction, twice `VPDPWSSD`'s),
+//!   each layer writing its activations straight into the next one's
+//!   quads; sixteen points a vector, four rows at a time.
 //!
 //! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`),
 //! and model loading bounds every partial sum (see [`super::dot`]), so the
@@ -51,29 +51,31 @@ use crate::format::{Int8Layer, le_i32s};
 mod bytes;
 mod vnni;
 mod wide;
-use bytes::{Pooled, pool_bytes};
-use vnni::pool_vnni;
+use bytes::{ByteLayer, pool_bytes};
+use vnni::{Out, layer_bytes};
 use wide::layer_wide;
 
 /// Vectors of eight points in a block.
 const VECTORS: usize = BLOCK / 8;
 
-/// A block encoder over a caller's scratch: the int16 weights, the pooled
-/// layer's row sums and quad list when it runs on bytes, and two
-/// activation buffers.
+/// A block encoder over a caller's scratch: the int16 weights, the row
+/// sums of every layer after the first, the pooled layer's quad list when
+/// it runs on bytes, and two activation buffers.
 pub(crate) struct BlockEncoder<'w> {
     weights: &'w [u32],
+    /// Each row's weight sum, for every layer after the first in order
+    /// (their byte kernels take `-128 * sum` into the bias).
+    sums: &'w [u32],
     pooled: Option<OnBytes<'w>>,
     acts: (&'w mut [u32], &'w mut [u32]),
-    /// The CPU has AVX-512 VNNI and BW: [`pool_vnni`] instead of
-    /// [`pool_bytes`], [`layer_wide`] instead of [`layer`].
+    /// The CPU has AVX-512 VNNI and BW: the first layer through
+    /// [`layer_wide`], every later one through [`layer_bytes`] on byte
+    /// quads, and only the first layer's weights are copied.
     vnni: bool,
 }
 
-/// The pooled layer's scratch when it runs on bytes.
+/// The pooled layer's scratch when it runs on bytes with AVX2.
 struct OnBytes<'w> {
-    /// Each row's weight sum.
-    sums: &'w [u32],
     /// Room for the list of quads that take the high-bit pass.
     quads: &'w mut [u32],
     /// Room for its int16 weights, copied the first time a block has too
@@ -91,50 +93,51 @@ impl<'w> BlockEncoder<'w> {
         if !std::is_x86_feature_detected!("avx2") || area.len() < arch.host_block_len() {
             return None;
         }
+        let vnni = vnni::has_vnni();
         let words = as_words(area);
         let sizes = arch.host_block_words();
         let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
-        let (pooled, rest) = rest.split_at_mut_checked(sizes.pooled)?;
+        let (sums, rest) = rest.split_at_mut_checked(sizes.sums)?;
+        let (quads, rest) = rest.split_at_mut_checked(sizes.quads)?;
         let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
         let b = rest.get_mut(..sizes.buffer)?;
+        let mut free = &mut *sums;
+        for (shape, layer) in arch.encoder_layers().zip(layers).skip(1) {
+            let (out, tail) = free.split_at_mut_checked(shape.outputs)?;
+            for (sum, row) in out.iter_mut().zip(super::rows(layer.weights, shape.inputs)) {
+                *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
+            }
+            free = tail;
+        }
         // A pooled layer on bytes: its int16 weights last, copied later if
-        // at all.
-        let last = arch.encoder_layers().zip(layers).last();
-        let on_bytes = last.filter(|_| sizes.pooled > 0);
-        let later = on_bytes.map_or(0, |(shape, _)| shape.pair_words());
+        // at all. With VNNI only the first layer's are ever used.
+        let last = arch.encoder_layers().last();
+        let on_bytes = last.filter(|_| sizes.quads > 0);
+        let later = on_bytes.map_or(0, |shape| shape.pair_words());
         let (weights, wide) = weights.split_at_mut_checked(sizes.weights.checked_sub(later)?)?;
-        let mut free = &mut *weights;
-        let now = arch.encoder_layers().zip(layers);
-        for (shape, layer) in now.take(
+        let widened = if vnni {
+            1
+        } else {
             arch.encoder
                 .len()
-                .saturating_sub(usize::from(on_bytes.is_some())),
-        ) {
+                .saturating_sub(usize::from(on_bytes.is_some()))
+        };
+        let mut free = &mut *weights;
+        for (shape, layer) in arch.encoder_layers().zip(layers).take(widened) {
             let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
             widen(layer.weights, shape.inputs, out);
             free = tail;
         }
-        let pooled = match on_bytes {
-            Some((shape, layer)) => {
-                let (sums, quads) = pooled.split_at_mut_checked(shape.outputs)?;
-                let rows = super::rows(layer.weights, shape.inputs);
-                for (sum, row) in sums.iter_mut().zip(rows) {
-                    *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
-                }
-                Some(OnBytes {
-                    sums,
-                    quads,
-                    wide,
-                    widened: false,
-                })
-            }
-            None => None,
-        };
         Some(BlockEncoder {
             weights,
-            pooled,
+            sums,
+            pooled: on_bytes.map(|_| OnBytes {
+                quads,
+                wide,
+                widened: false,
+            }),
             acts: (a, b),
-            vnni: vnni::has_vnni(),
+            vnni,
         })
     }
 
@@ -155,28 +158,35 @@ impl<'w> BlockEncoder<'w> {
             *z = pair(zc, 0);
         }
         let (mut input, mut output) = (a, b);
-        let (mut weights, vnni) = (self.weights, self.vnni);
+        if self.vnni {
+            // SAFETY: `BlockEncoder::new` found AVX-512 VNNI and BW (which
+            // imply F), all `encode_vnni` requires.
+            #[allow(unsafe_code)]
+            unsafe {
+                encode_vnni(self.weights, self.sums, input, output, layers, feature)
+            };
+            return;
+        }
+        let mut weights = self.weights;
         let mut layers = layers.peekable();
         while let Some((inputs, outputs, bytes, q)) = layers.next() {
             let pairs = inputs.div_ceil(2);
             let last = layers.peek().is_none();
             if let (true, Some(on)) = (last, self.pooled.as_mut()) {
-                let pooled = Pooled {
+                let pooled = ByteLayer {
                     weights: bytes,
                     inputs,
-                    sums: on.sums,
+                    // The pooled layer's sums are the last.
+                    sums: self
+                        .sums
+                        .get(self.sums.len().saturating_sub(outputs)..)
+                        .unwrap_or(&[]),
                 };
                 // SAFETY: `BlockEncoder::new` found AVX2, all `pool_bytes`
-                // and `layer` require, and AVX-512 VNNI and BW (which
-                // imply F) when `vnni`, all `pool_vnni` requires.
+                // and `layer` require.
                 #[allow(unsafe_code)]
                 unsafe {
-                    let done = if vnni {
-                        pool_vnni(&pooled, q, input, output, feature)
-                    } else {
-                        pool_bytes(&pooled, q, input, output, on.quads, feature)
-                    };
-                    if !done {
+                    if !pool_bytes(&pooled, q, input, output, on.quads, feature) {
                         if !on.widened {
                             widen(bytes, inputs, on.wide);
                             on.widened = true;
@@ -193,18 +203,54 @@ impl<'w> BlockEncoder<'w> {
             } else {
                 Dest::Pairs(&mut *output)
             };
-            // SAFETY: `BlockEncoder::new` found AVX2, all `layer` requires,
-            // and AVX-512 VNNI and BW when `vnni`, all `layer_wide` requires.
+            // SAFETY: `BlockEncoder::new` found AVX2, all `layer` requires.
             #[allow(unsafe_code)]
             unsafe {
-                if vnni {
-                    layer_wide(w, pairs, q, input, dest)
-                } else {
-                    layer(w, pairs, q, input, dest)
-                }
+                layer(w, pairs, q, input, dest)
             };
             core::mem::swap(&mut input, &mut output);
         }
+    }
+}
+
+/// [`BlockEncoder::encode`] with AVX-512 VNNI, from the coordinate pairs
+/// in `input`: the first layer on them ([`layer_wide`], its int16
+/// `weights`), every later one on the previous one's byte quads
+/// ([`layer_bytes`], their row `sums` in order), `output` and `input`
+/// taking turns.
+#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+fn encode_vnni<'a, 'q>(
+    weights: &[u32],
+    mut sums: &[u32],
+    mut input: &'a mut [u32],
+    mut output: &'a mut [u32],
+    layers: impl Iterator<Item = (usize, usize, &'q [u8], Requant<'q>)>,
+    feature: &mut [i8],
+) {
+    let mut layers = layers.peekable();
+    let mut first = true;
+    while let Some((inputs, outputs, bytes, q)) = layers.next() {
+        let out = if layers.peek().is_none() {
+            Out::Pool(&mut *feature)
+        } else {
+            Out::Quads(&mut *output)
+        };
+        if core::mem::take(&mut first) {
+            let w = weights.get(..outputs * inputs.div_ceil(2)).unwrap_or(&[]);
+            layer_wide(w, inputs.div_ceil(2), q, input, out);
+        } else {
+            let (s, rest) = sums.split_at(sums.len().min(outputs));
+            sums = rest;
+            let layer = ByteLayer {
+                weights: bytes,
+                inputs,
+                sums: s,
+            };
+            if !layer_bytes(&layer, q, input, out) {
+                return;
+            }
+        }
+        core::mem::swap(&mut input, &mut output);
     }
 }
 

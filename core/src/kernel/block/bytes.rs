@@ -13,9 +13,10 @@ use super::{BLOCK, VECTORS, largest};
 use crate::fixed::OutputStep;
 use crate::format::le_i32s;
 
-/// The pooled layer on bytes: its int8 weight rows as stored (`inputs`
-/// bytes each) and each row's weight sum.
-pub(super) struct Pooled<'a> {
+/// A layer on bytes (the pooled one here, every one after the first with
+/// VNNI): its int8 weight rows as stored (`inputs` bytes each) and each
+/// row's weight sum.
+pub(super) struct ByteLayer<'a> {
     pub weights: &'a [u8],
     pub inputs: usize,
     pub sums: &'a [u32],
@@ -61,7 +62,7 @@ pub(super) struct Pooled<'a> {
 /// the portable kernel's, so the pooled feature is too.
 #[target_feature(enable = "avx2")]
 pub(super) fn pool_bytes(
-    pooled: &Pooled<'_>,
+    pooled: &ByteLayer<'_>,
     q: Requant<'_>,
     input: &[u32],
     bytes: &mut [u32],
@@ -283,7 +284,7 @@ mod tests {
         let sums: Vec<u32> = rows(&layer.weights, inputs)
             .map(|r| r.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32)
             .collect();
-        let pooled = Pooled {
+        let pooled = ByteLayer {
             weights: &layer.weights,
             inputs,
             sums: &sums,

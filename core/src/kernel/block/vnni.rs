@@ -1,15 +1,17 @@
-//! The pooled (last) encoder layer of the block kernel with AVX-512 VNNI
-//! (`VPDPBUSD`), when its input is an int8 activation and the CPU has it.
+//! The block kernel's layers on byte quads with AVX-512 VNNI
+//! (`VPDPBUSD`): every encoder layer after the first, when the CPU has it.
 
 use core::arch::x86_64::{
-    __m512i, _mm256_and_si256, _mm256_or_si256, _mm256_set1_epi32, _mm256_slli_epi32,
-    _mm256_storeu_si256, _mm512_dpbusd_epi32, _mm512_loadu_si512, _mm512_max_epi32,
-    _mm512_reduce_max_epi32, _mm512_set1_epi32, _mm512_setzero_si512,
+    __m512i, _mm_cvtsi32_si128, _mm512_add_epi32, _mm512_and_si512, _mm512_dpbusd_epi32,
+    _mm512_loadu_si512, _mm512_mask_blend_epi32, _mm512_max_epi32, _mm512_min_epi32,
+    _mm512_mul_epi32, _mm512_or_si512, _mm512_reduce_max_epi32, _mm512_set1_epi32,
+    _mm512_setzero_si512, _mm512_slli_epi32, _mm512_sra_epi32, _mm512_srli_epi64,
+    _mm512_storeu_si512, _mm512_xor_si512,
 };
 
-use super::super::{Requant, Sink, rows, rows_mut};
-use super::bytes::{Pooled, bytes_of, quad};
-use super::{BLOCK, VECTORS};
+use super::super::{Requant, Sink, rows};
+use super::BLOCK;
+use super::bytes::{ByteLayer, quad};
 use crate::fixed::OutputStep;
 
 /// Rows that share each load of the block's inputs (here and in
@@ -25,82 +27,87 @@ pub(super) fn has_vnni() -> bool {
     std::is_x86_feature_detected!("avx512vnni") && std::is_x86_feature_detected!("avx512bw")
 }
 
-/// The pooled (last) layer, its input an int8 activation, on a CPU with
-/// AVX-512 VNNI. `VPDPBUSD` multiplies 64 unsigned bytes by 64 signed ones
-/// and adds each lane's four products to its i32 accumulator, with no
-/// intermediate saturation, so no input needs splitting as in
+/// Where a layer's activations go on the VNNI path.
+pub(super) enum Out<'a> {
+    /// The next layer's input as byte quads: word `j * BLOCK + p` holds
+    /// point `p`'s activations of outputs `4j..4j + 4`, each plus 128 (a
+    /// missing output past the last reads 128, activation 0).
+    Quads(&'a mut [u32]),
+    /// The max-pooled feature.
+    Pool(&'a mut [i8]),
+}
+
+/// A layer whose input is an int8 activation, on a CPU with AVX-512 VNNI.
+/// `VPDPBUSD` multiplies 64 unsigned bytes by 64 signed ones and adds each
+/// lane's four products to its i32 accumulator, with no intermediate
+/// saturation, so no input needs splitting as in
 /// [`super::bytes::pool_bytes`]:
 ///
-/// - each input `x` is moved to `u = x + 128` (0..=255) and the bias takes
+/// - each input `x` is held as `u = x + 128` (0..=255) and the bias takes
 ///   `-128 * sum(w)`, so `b + sum(w x) = b - 128 sum(w) + sum(w u)`;
-/// - the inputs are laid out as byte quads by point (word `j * BLOCK + p`
-///   holds point `p`'s inputs `4j..4j + 4`, zero past `inputs`, where the
-///   weights are zero too), three vectors of sixteen points per quad;
+/// - `quads` holds the inputs as byte quads by point (word `j * BLOCK + p`
+///   holds point `p`'s inputs `4j..4j + 4`; past `inputs` the weights are
+///   zero, so whatever is there adds nothing), three vectors of sixteen
+///   points per quad, as [`Out::Quads`] writes them;
 /// - four rows at a time share each load: each row's weight quad is
 ///   broadcast and `VPDPBUSD` adds 64 products into sixteen points' lanes,
-///   twelve accumulators in all; the largest of a row's 48 accumulators
-///   goes to the max-pool.
+///   twelve accumulators in all, then [`finish`] requantizes them into the
+///   next layer's quads or takes each row's largest for the max-pool.
 ///
 /// Each lane's four products are at most `4 * 255 * 128` in magnitude,
 /// and the accumulator is the portable kernel's (its sums wrap in i32 the
-/// same way and model loading bounds them), so the pooled feature is too.
-///
-/// `input` holds the block's input as int16 pairs by point (as
-/// [`super::layer`]'s), `bytes` room for the byte quads. Returns `false`,
-/// having written nothing, when a buffer is short.
+/// same way and model loading bounds them), so the activations are too.
+/// Returns `false`, having written nothing, when `quads` is short.
 #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
-pub(super) fn pool_vnni(
-    pooled: &Pooled<'_>,
+pub(super) fn layer_bytes(
+    layer: &ByteLayer<'_>,
     q: Requant<'_>,
-    input: &[u32],
-    bytes: &mut [u32],
-    feature: &mut [i8],
+    quads: &[u32],
+    mut out: Out<'_>,
 ) -> bool {
-    let count = pooled.inputs.div_ceil(4);
-    let (Some(input), Some(bytes)) = (
-        input.get(..pooled.inputs.div_ceil(2) * BLOCK),
-        bytes.get_mut(..count * BLOCK),
-    ) else {
+    let (inputs, full) = (layer.inputs, layer.inputs / 4);
+    let Some(quads) = quads.get(..inputs.div_ceil(4) * BLOCK) else {
         return false;
     };
-    quads_of(input, pooled.inputs, bytes);
-    let bytes = &*bytes;
-    let (inputs, full) = (pooled.inputs, pooled.inputs / 4);
-    let outputs = pooled.sums.len();
-    let mut sink = Sink::Pool(feature);
+    let outputs = layer.sums.len();
     // Channels by index, not by a chain of iterators: per group of rows
     // that chain cost as much as a sixth of the layer's time.
     let (bias, mult) = (q.bias.as_chunks::<4>().0, q.multiplier.as_chunks::<4>().0);
     for o in (0..outputs).step_by(ROWS) {
         let n = (outputs - o).min(ROWS);
-        // Missing rows repeat the last with a zero bias; never taken.
+        // Missing rows repeat the last with a zero bias and no step; never
+        // taken.
         let mut rs = [&[][..]; ROWS];
-        let mut bs = [0i32; ROWS];
-        for (r, (row, b)) in rs.iter_mut().zip(&mut bs).enumerate() {
+        let mut acc = [[_mm512_setzero_si512(); WIDE]; ROWS];
+        let mut steps = [None; ROWS];
+        for (r, ((row, acc), step)) in rs.iter_mut().zip(&mut acc).zip(&mut steps).enumerate() {
             let ch = o + r.min(n - 1);
-            *row = pooled
+            *row = layer
                 .weights
                 .get(ch * inputs..(ch + 1) * inputs)
                 .unwrap_or(&[]);
-            if r < n {
-                let b0 = bias.get(ch).copied().unwrap_or_default();
-                let sum = pooled.sums.get(ch).copied().unwrap_or_default();
-                *b = i32::from_le_bytes(b0).wrapping_sub((sum as i32).wrapping_mul(128));
+            if let (true, Some(&b), Some(&sum), Some(&m), Some(&s)) = (
+                r < n,
+                bias.get(ch),
+                layer.sums.get(ch),
+                mult.get(ch),
+                q.shift.get(ch),
+            ) {
+                let b = i32::from_le_bytes(b).wrapping_sub((sum as i32).wrapping_mul(128));
+                *acc = [_mm512_set1_epi32(b); WIDE];
+                let m = i32::from_le_bytes(m);
+                *step = Some(OutputStep::new(m, s as i8, q.zero_point, q.act_min));
             }
         }
         let [r0, r1, r2, r3] = rs;
-        let mut acc = [[_mm512_setzero_si512(); WIDE]; ROWS];
-        for (acc, &b) in acc.iter_mut().zip(&bs) {
-            *acc = [_mm512_set1_epi32(b); WIDE];
-        }
         // (Plain loops: a closure would not inherit the target features,
         // and its intrinsics would become calls.)
-        let quads = r0.as_chunks::<4>().0.iter();
-        let quads = quads.zip(r1.as_chunks::<4>().0);
-        let quads = quads.zip(r2.as_chunks::<4>().0);
-        let quads = quads.zip(r3.as_chunks::<4>().0);
-        let mut x = rows(bytes, BLOCK);
-        for (((&a, &b), &c), &d) in quads {
+        let words = r0.as_chunks::<4>().0.iter();
+        let words = words.zip(r1.as_chunks::<4>().0);
+        let words = words.zip(r2.as_chunks::<4>().0);
+        let words = words.zip(r3.as_chunks::<4>().0);
+        let mut x = rows(quads, BLOCK);
+        for (((&a, &b), &c), &d) in words {
             let w = [a, b, c, d].map(i32::from_le_bytes);
             if let Some(x) = x.next() {
                 dot_step(&mut acc, w, x);
@@ -111,14 +118,7 @@ pub(super) fn pool_vnni(
             let w = [r0, r1, r2, r3].map(|r| quad(r, full));
             dot_step(&mut acc, w, x);
         }
-        for (r, acc) in acc.iter().enumerate().take(n) {
-            let ch = o + r;
-            let (Some(&m), Some(&s)) = (mult.get(ch), q.shift.get(ch)) else {
-                break;
-            };
-            let step = OutputStep::new(i32::from_le_bytes(m), s as i8, q.zero_point, q.act_min);
-            sink.take(ch, 0, &[largest_wide(acc)], &step);
-        }
+        finish(acc, &steps, o, &mut out);
     }
     true
 }
@@ -158,83 +158,186 @@ pub(super) fn block_vectors(x: &[u32]) -> Option<[__m512i; WIDE]> {
     Some(xs)
 }
 
-/// The largest lane of a row's accumulators over the block.
-#[inline]
-#[target_feature(enable = "avx512f")]
-pub(super) fn largest_wide(acc: &[__m512i; WIDE]) -> i32 {
-    _mm512_reduce_max_epi32(_mm512_max_epi32(_mm512_max_epi32(acc[0], acc[1]), acc[2]))
-}
-
-/// The block's int16 input pairs as byte quads of `x + 128` by point (word
-/// `j * BLOCK + p` holds point `p`'s inputs `4j..4j + 4`, zero past
-/// `inputs`).
-#[target_feature(enable = "avx2")]
-fn quads_of(input: &[u32], inputs: usize, out: &mut [u32]) {
-    let mut pairs = rows(input, BLOCK).map(Some).chain(core::iter::repeat(None));
-    for (j, out) in rows_mut(out, BLOCK).enumerate() {
-        let (a, b) = (pairs.next().flatten(), pairs.next().flatten());
-        let valid = inputs.saturating_sub(4 * j).min(4) as u32;
-        let mask = u64::MAX.checked_shr(64 - 8 * valid).unwrap_or(0);
-        let mask = _mm256_set1_epi32(mask as u32 as i32);
-        let a = a.map(|a| a.as_chunks::<8>().0);
-        let b = b.map(|b| b.as_chunks::<8>().0);
-        for (v, out) in out
-            .as_chunks_mut::<8>()
-            .0
-            .iter_mut()
-            .enumerate()
-            .take(VECTORS)
-        {
-            let lo = bytes_of(a.and_then(|a| a.get(v)));
-            let hi = bytes_of(b.and_then(|b| b.get(v)));
-            let u = _mm256_and_si256(_mm256_or_si256(lo, _mm256_slli_epi32::<16>(hi)), mask);
-            // SAFETY: `out` is eight words (32 bytes); unaligned stores are
-            // allowed.
-            #[allow(unsafe_code)]
-            unsafe {
-                _mm256_storeu_si256(out.as_mut_ptr().cast(), u)
+/// The end of a group of rows `o..o + ROWS` (here and in [`super::wide`]):
+/// each row with a step takes its accumulators over the block to `out`,
+/// the largest to the max-pool (the output step is non-decreasing) or all
+/// through the step into the next layer's quads, word `o / 4` of each
+/// point. Not inlined: taking the accumulators by reference in the caller
+/// would keep them in memory in its loop.
+#[inline(never)]
+#[target_feature(enable = "avx512f,avx512bw")]
+pub(super) fn finish(
+    acc: [[__m512i; WIDE]; ROWS],
+    steps: &[Option<OutputStep>; ROWS],
+    o: usize,
+    out: &mut Out<'_>,
+) {
+    match out {
+        Out::Pool(feature) => {
+            let mut sink = Sink::Pool(feature);
+            for (r, (acc, step)) in acc.iter().zip(steps).enumerate() {
+                if let Some(step) = step {
+                    let v = _mm512_max_epi32(_mm512_max_epi32(acc[0], acc[1]), acc[2]);
+                    sink.take(o + r, 0, &[_mm512_reduce_max_epi32(v)], step);
+                }
+            }
+        }
+        Out::Quads(quads) => {
+            let Some(words) = quads
+                .get_mut(o / ROWS * BLOCK..)
+                .and_then(|q| q.first_chunk_mut::<BLOCK>())
+            else {
+                return;
             };
+            for (v, words) in words.as_chunks_mut::<16>().0.iter_mut().enumerate() {
+                // Each row's activations, its byte in the row's place.
+                let mut word = _mm512_setzero_si512();
+                for (r, (acc, step)) in acc.iter().zip(steps).enumerate() {
+                    if let (Some(step), Some(&a)) = (step, acc.get(v)) {
+                        let byte = _mm512_and_si512(activations(a, step), _mm512_set1_epi32(0xFF));
+                        word = _mm512_or_si512(word, shift_left(byte, 8 * r as u32));
+                    }
+                }
+                // x + 128 is x with its top bit flipped.
+                let word = _mm512_xor_si512(word, _mm512_set1_epi32(0x8080_8080_u32 as i32));
+                // SAFETY: `words` is sixteen words (64 bytes); unaligned
+                // stores are allowed.
+                #[allow(unsafe_code)]
+                unsafe {
+                    _mm512_storeu_si512(words.as_mut_ptr().cast(), word)
+                };
+            }
         }
     }
 }
 
+/// Every lane of `v` shifted left by `bits` (below 32).
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn shift_left(v: __m512i, bits: u32) -> __m512i {
+    match bits {
+        0 => v,
+        8 => _mm512_slli_epi32::<8>(v),
+        16 => _mm512_slli_epi32::<16>(v),
+        _ => _mm512_slli_epi32::<24>(v),
+    }
+}
+
+/// `OutputStep::apply` on sixteen accumulators: on the fast path the high
+/// words of the sixteen i64 products (`VPMULDQ` on the even lanes, then on
+/// the odd lanes moved down), the folded offset, the arithmetic shift and
+/// the clamp, the same integer operations as the scalar step; lane by lane
+/// on the general one.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn activations(acc: __m512i, step: &OutputStep) -> __m512i {
+    let Some((m, offset, high_shift, act_min)) = step.fast_parts() else {
+        let mut lanes = [0i32; 16];
+        // SAFETY: `lanes` is sixteen i32 (64 bytes); unaligned stores and
+        // loads are allowed.
+        #[allow(unsafe_code)]
+        unsafe {
+            _mm512_storeu_si512(lanes.as_mut_ptr().cast(), acc);
+            let lanes = lanes.map(|a| step.apply(a) as i32);
+            return _mm512_loadu_si512(lanes.as_ptr().cast());
+        }
+    };
+    let m = _mm512_set1_epi32(m);
+    let even = _mm512_mul_epi32(acc, m);
+    let odd = _mm512_mul_epi32(_mm512_srli_epi64::<32>(acc), m);
+    let hi = _mm512_mask_blend_epi32(0xAAAA, _mm512_srli_epi64::<32>(even), odd);
+    let v = _mm512_sra_epi32(
+        _mm512_add_epi32(hi, _mm512_set1_epi32(offset)),
+        _mm_cvtsi32_si128(high_shift as i32),
+    );
+    let v = _mm512_min_epi32(v, _mm512_set1_epi32(i8::MAX as i32));
+    _mm512_max_epi32(v, _mm512_set1_epi32(act_min as i32))
+}
+
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::super::super::dense_tile;
     use super::super::super::test_layer::{TestLayer, byte};
-    use super::super::tests::by_point;
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
 
-    /// Whether this CPU can run the kernel (the tests say when it cannot).
-    fn vnni() -> bool {
+    /// Whether this CPU can run the kernels (the tests say when it cannot).
+    pub(in super::super) fn vnni() -> bool {
         let found = has_vnni();
         if !found {
-            std::eprintln!("no AVX-512 VNNI on this CPU: pool_vnni not tested");
+            std::eprintln!("no AVX-512 VNNI on this CPU: the VNNI block kernels not tested");
         }
         found
     }
 
-    /// The pooled feature of `pool_vnni` against the portable kernel's.
+    /// The activations a block's [`Out::Quads`] holds, `BLOCK` rows of
+    /// `outputs`; checks that the bytes past the last output read 128.
+    pub(in super::super) fn from_quads(quads: &[u32], outputs: usize) -> Vec<i8> {
+        for o in outputs..outputs.next_multiple_of(4) {
+            for p in 0..BLOCK {
+                assert_eq!(quads[o / 4 * BLOCK + p] >> (8 * (o % 4)) & 0xFF, 128);
+            }
+        }
+        (0..BLOCK * outputs)
+            .map(|i| {
+                let (p, o) = (i / outputs, i % outputs);
+                ((quads[o / 4 * BLOCK + p] >> (8 * (o % 4))) as u8 ^ 0x80) as i8
+            })
+            .collect()
+    }
+
+    /// A block's inputs (`BLOCK` rows of `inputs`) as byte quads of `x +
+    /// 128` by point, `pad` in the bytes past `inputs`.
+    fn quads_by_point(x: &[i8], inputs: usize, pad: u8) -> Vec<u32> {
+        let count = inputs.div_ceil(4);
+        let mut quads = std::vec![0u32; count * BLOCK];
+        for (p, row) in x.chunks(inputs).enumerate() {
+            for j in 0..count {
+                let byte = |k: usize| row.get(k).map_or(pad, |&v| v as u8 ^ 0x80);
+                quads[j * BLOCK + p] = u32::from_le_bytes([0, 1, 2, 3].map(|k| byte(4 * j + k)));
+            }
+        }
+        quads
+    }
+
+    /// `layer_bytes`' activations, stored as quads and max-pooled, against
+    /// the portable kernel's.
     fn check(layer: &TestLayer, inputs: usize, outputs: usize, x: &[i8], what: &str) {
         let q = layer.requant();
         let sums: Vec<u32> = rows(&layer.weights, inputs)
             .map(|r| r.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32)
             .collect();
-        let pooled = Pooled {
+        let bytes = ByteLayer {
             weights: &layer.weights,
             inputs,
             sums: &sums,
         };
-        let mut bytes = std::vec![0u32; inputs.div_ceil(4) * BLOCK];
-        let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
-        dense_tile(&layer.weights, inputs, q, x, &mut Sink::Pool(&mut want));
+        // What lies past the inputs must not matter.
+        let quads = quads_by_point(x, inputs, 0x5A);
+        let mut want = std::vec![0i8; BLOCK * outputs];
+        let sink = &mut Sink::Store {
+            out: &mut want,
+            outputs,
+        };
+        dense_tile(&layer.weights, inputs, q, x, sink);
+        let mut got = std::vec![0u32; outputs.div_ceil(4) * BLOCK];
         // SAFETY: the caller checked for AVX-512 VNNI and BW.
         #[allow(unsafe_code)]
-        let done = unsafe { pool_vnni(&pooled, q, &by_point(x, inputs), &mut bytes, &mut got) };
+        let done = unsafe { layer_bytes(&bytes, q, &quads, Out::Quads(&mut got)) };
         assert!(done, "{what}: buffers");
-        assert_eq!(got, want, "{what}, {inputs} -> {outputs}");
+        assert_eq!(
+            from_quads(&got, outputs),
+            want,
+            "{what}, stored, {inputs} -> {outputs}"
+        );
+        let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+        dense_tile(&layer.weights, inputs, q, x, &mut Sink::Pool(&mut want));
+        // SAFETY: as above.
+        #[allow(unsafe_code)]
+        let done = unsafe { layer_bytes(&bytes, q, &quads, Out::Pool(&mut got)) };
+        assert!(done, "{what}: buffers");
+        assert_eq!(got, want, "{what}, pooled, {inputs} -> {outputs}");
     }
 
     /// Random layers of widths that are and are not multiples of four,
@@ -242,7 +345,7 @@ mod tests {
     /// together, both requantization paths; inputs over the whole int8
     /// range, in its lower or upper half only, and at either end.
     #[test]
-    fn pooled_vnni_matches_portable() {
+    fn byte_layer_matches_portable() {
         if !vnni() {
             return;
         }
@@ -286,7 +389,7 @@ mod tests {
     /// 400 and the output step divides by 8, so the activation is 50, far
     /// from either clamp: an accumulator off by more than 4 would show.
     #[test]
-    fn pooled_vnni_extremes() {
+    fn byte_layer_extremes() {
         if !vnni() {
             return;
         }
