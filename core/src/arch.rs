@@ -90,6 +90,9 @@ pub(crate) struct HostBlockWords {
     /// A pooled layer on bytes: the list of its input quads that take the
     /// AVX2 kernel's high-bit pass.
     pub quads: usize,
+    /// The pooled layer's largest accumulators over the blocks so far (one
+    /// per output), with AVX-512 VNNI.
+    pub maxima: usize,
     /// One activation buffer: [`HOST_BLOCK`] points x the widest layer
     /// input in int16 pairs (the coordinates count as four), or x the
     /// pooled layer's input as two sets of byte quads if that is more.
@@ -193,13 +196,13 @@ impl Arch {
     /// [`Self::int8_scratch_len`]: the encoder's weights as int16 (each
     /// row padded to an even length); one word per output of every layer
     /// after the first, and when the pooled layer's input is an int8
-    /// activation one per four of its inputs, for the byte kernels; and
-    /// two buffers of [`HOST_BLOCK`] points x the
+    /// activation one per four of its inputs, for the byte kernels; one per
+    /// output of the pooled layer, for its running maxima; and two buffers of [`HOST_BLOCK`] points x the
     /// widest layer input as int16 (the coordinates count as four), plus 3
     /// for alignment.
     pub fn host_block_len(&self) -> usize {
         let w = self.host_block_words();
-        4 * (w.weights + w.sums + w.quads + 2 * w.buffer) + 3
+        4 * (w.weights + w.sums + w.quads + w.maxima + 2 * w.buffer) + 3
     }
 
     /// The host block kernel's scratch in words.
@@ -217,6 +220,7 @@ impl Arch {
             weights,
             sums: self.encoder_layers().skip(1).map(|l| l.outputs).sum(),
             quads: pooled.map_or(0, |l| l.inputs.div_ceil(4)),
+            maxima: last.map_or(0, |l| l.outputs),
             buffer: HOST_BLOCK * pairs.chain([bytes]).max().unwrap_or(0),
         }
     }

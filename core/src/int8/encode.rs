@@ -106,6 +106,26 @@ impl Int8Model<'_> {
             encoded += filled;
             filled = 0;
         }
+        #[cfg(all(target_arch = "x86_64", feature = "std"))]
+        if let Some(block) = block.as_mut() {
+            // The last points (fewer than a block) fill one with copies of
+            // the first of them: a repeated point leaves the max-pool as it
+            // was, and a block costs less than tiles.
+            if let Some(&first) = points.first().filter(|_| filled > 0) {
+                if let Some(spare) = points.get_mut(filled..) {
+                    spare.fill(first);
+                }
+                let layers = self.p.arch.encoder_layers().zip(self.p.encoder.iter());
+                let layers =
+                    layers.map(|(s, l)| (s.inputs, s.outputs, l.weights, requant(l, true)));
+                block.encode(&points, layers, feature);
+                encoded += filled;
+                filled = 0;
+            }
+            if let Some(last) = self.p.encoder.last() {
+                block.pool(requant(last, true), feature);
+            }
+        }
         // The last points, in tiles (fewer than a block).
         let mut rest = prefix(&points, filled)?;
         while !rest.is_empty() {

@@ -52,7 +52,7 @@ mod bytes;
 mod vnni;
 mod wide;
 use bytes::{ByteLayer, pool_bytes};
-use vnni::{Out, layer_bytes};
+use vnni::{Out, layer_bytes, pool_maxima};
 use wide::layer_wide;
 
 /// Vectors of eight points in a block.
@@ -67,6 +67,10 @@ pub(crate) struct BlockEncoder<'w> {
     /// (their byte kernels take `-128 * sum` into the bias).
     sums: &'w [u32],
     pooled: Option<OnBytes<'w>>,
+    /// With VNNI, the pooled layer's largest accumulators over the blocks
+    /// so far ([`Out::Maxima`]), and whether any block has been encoded.
+    maxima: &'w mut [u32],
+    blocks: bool,
     acts: (&'w mut [u32], &'w mut [u32]),
     /// The CPU has AVX-512 VNNI and BW: the first layer through
     /// [`layer_wide`], every later one through [`layer_bytes`] on byte
@@ -99,6 +103,8 @@ impl<'w> BlockEncoder<'w> {
         let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
         let (sums, rest) = rest.split_at_mut_checked(sizes.sums)?;
         let (quads, rest) = rest.split_at_mut_checked(sizes.quads)?;
+        let (maxima, rest) = rest.split_at_mut_checked(sizes.maxima)?;
+        maxima.fill(i32::MIN as u32);
         let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
         let b = rest.get_mut(..sizes.buffer)?;
         let mut free = &mut *sums;
@@ -136,13 +142,16 @@ impl<'w> BlockEncoder<'w> {
                 wide,
                 widened: false,
             }),
+            maxima,
+            blocks: false,
             acts: (a, b),
             vnni,
         })
     }
 
     /// Encodes a block of quantized points and max-pools the last layer
-    /// into `feature`. `layers` holds each encoder layer's input and output
+    /// into `feature` (with AVX-512 VNNI into the running maxima, which
+    /// [`Self::pool`] then takes into `feature`). `layers` holds each encoder layer's input and output
     /// widths, int8 weights and requantization, first to last, as in
     /// [`Self::new`].
     pub(crate) fn encode<'q>(
@@ -159,11 +168,12 @@ impl<'w> BlockEncoder<'w> {
         }
         let (mut input, mut output) = (a, b);
         if self.vnni {
+            self.blocks = true;
             // SAFETY: `BlockEncoder::new` found AVX-512 VNNI and BW (which
             // imply F), all `encode_vnni` requires.
             #[allow(unsafe_code)]
             unsafe {
-                encode_vnni(self.weights, self.sums, input, output, layers, feature)
+                encode_vnni(self.weights, self.sums, input, output, layers, self.maxima)
             };
             return;
         }
@@ -213,11 +223,23 @@ impl<'w> BlockEncoder<'w> {
     }
 }
 
+impl BlockEncoder<'_> {
+    /// Takes what the blocks left in the running maxima (with AVX-512 VNNI)
+    /// into `feature`, through the pooled layer's output steps `q`; with
+    /// AVX2 alone the blocks wrote to `feature` themselves. Call it once
+    /// the last block is in.
+    pub(crate) fn pool(&self, q: Requant<'_>, feature: &mut [i8]) {
+        if self.blocks {
+            pool_maxima(self.maxima, q, feature);
+        }
+    }
+}
+
 /// [`BlockEncoder::encode`] with AVX-512 VNNI, from the coordinate pairs
 /// in `input`: the first layer on them ([`layer_wide`], its int16
 /// `weights`), every later one on the previous one's byte quads
 /// ([`layer_bytes`], their row `sums` in order), `output` and `input`
-/// taking turns.
+/// taking turns; the pooled layer's largest accumulators into `maxima`.
 #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
 fn encode_vnni<'a, 'q>(
     weights: &[u32],
@@ -225,13 +247,13 @@ fn encode_vnni<'a, 'q>(
     mut input: &'a mut [u32],
     mut output: &'a mut [u32],
     layers: impl Iterator<Item = (usize, usize, &'q [u8], Requant<'q>)>,
-    feature: &mut [i8],
+    maxima: &mut [u32],
 ) {
     let mut layers = layers.peekable();
     let mut first = true;
     while let Some((inputs, outputs, bytes, q)) = layers.next() {
         let out = if layers.peek().is_none() {
-            Out::Pool(&mut *feature)
+            Out::Maxima(&mut *maxima)
         } else {
             Out::Quads(&mut *output)
         };

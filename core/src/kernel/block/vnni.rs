@@ -2,17 +2,20 @@
 //! (`VPDPBUSD`): every encoder layer after the first, when the CPU has it.
 
 use core::arch::x86_64::{
-    __m512i, _mm_cvtsi32_si128, _mm512_add_epi32, _mm512_and_si512, _mm512_dpbusd_epi32,
-    _mm512_loadu_si512, _mm512_mask_blend_epi32, _mm512_max_epi32, _mm512_min_epi32,
-    _mm512_mul_epi32, _mm512_or_si512, _mm512_reduce_max_epi32, _mm512_set1_epi32,
-    _mm512_setzero_si512, _mm512_slli_epi32, _mm512_sra_epi32, _mm512_srli_epi64,
-    _mm512_storeu_si512, _mm512_xor_si512,
+    __m512i, _mm_cvtsi32_si128, _mm_max_epi32, _mm_storeu_si128, _mm256_castsi256_si128,
+    _mm256_extracti128_si256, _mm256_max_epi32, _mm512_add_epi32, _mm512_and_si512,
+    _mm512_castsi512_si256, _mm512_dpbusd_epi32, _mm512_extracti64x4_epi64, _mm512_loadu_si512,
+    _mm512_mask_blend_epi32, _mm512_max_epi32, _mm512_min_epi32, _mm512_mul_epi32, _mm512_or_si512,
+    _mm512_set1_epi32, _mm512_setzero_si512, _mm512_slli_epi32, _mm512_sra_epi32,
+    _mm512_srli_epi64, _mm512_storeu_si512, _mm512_unpackhi_epi32, _mm512_unpackhi_epi64,
+    _mm512_unpacklo_epi32, _mm512_unpacklo_epi64, _mm512_xor_si512,
 };
 
-use super::super::{Requant, Sink, rows};
+use super::super::{Requant, rows};
 use super::BLOCK;
 use super::bytes::{ByteLayer, quad};
 use crate::fixed::OutputStep;
+use crate::format::le_i32s;
 
 /// Rows that share each load of the block's inputs (here and in
 /// [`super::wide`]).
@@ -33,8 +36,13 @@ pub(super) enum Out<'a> {
     /// point `p`'s activations of outputs `4j..4j + 4`, each plus 128 (a
     /// missing output past the last reads 128, activation 0).
     Quads(&'a mut [u32]),
-    /// The max-pooled feature.
-    Pool(&'a mut [i8]),
+    /// The max-pool before its output step: each output's largest
+    /// accumulator so far (an i32 in each word), to which [`pool_maxima`]
+    /// applies the steps once the last block is in. The output step is
+    /// non-decreasing (see [`Sink::Pool`](super::super::Sink::Pool)), so the step of the largest
+    /// accumulator is the largest activation, and one step per output
+    /// replaces one per output and block.
+    Maxima(&'a mut [u32]),
 }
 
 /// A layer whose input is an int8 activation, on a CPU with AVX-512 VNNI.
@@ -160,9 +168,8 @@ pub(super) fn block_vectors(x: &[u32]) -> Option<[__m512i; WIDE]> {
 
 /// The end of a group of rows `o..o + ROWS` (here and in [`super::wide`]):
 /// each row with a step takes its accumulators over the block to `out`,
-/// the largest to the max-pool (the output step is non-decreasing) or all
-/// through the step into the next layer's quads, word `o / 4` of each
-/// point. Not inlined: taking the accumulators by reference in the caller
+/// the largest to the running maxima or all through the step into the
+/// next layer's quads, word `o / 4` of each point. Not inlined: taking the accumulators by reference in the caller
 /// would keep them in memory in its loop.
 #[inline(never)]
 #[target_feature(enable = "avx512f,avx512bw")]
@@ -173,12 +180,33 @@ pub(super) fn finish(
     out: &mut Out<'_>,
 ) {
     match out {
-        Out::Pool(feature) => {
-            let mut sink = Sink::Pool(feature);
-            for (r, (acc, step)) in acc.iter().zip(steps).enumerate() {
-                if let Some(step) = step {
-                    let v = _mm512_max_epi32(_mm512_max_epi32(acc[0], acc[1]), acc[2]);
-                    sink.take(o + r, 0, &[_mm512_reduce_max_epi32(v)], step);
+        Out::Maxima(maxima) => {
+            // Each row's largest lane, the four rows at once: within each
+            // 128-bit block, pairs of lanes, then pairs of pairs, leave
+            // lane r holding row r's largest; then across the blocks.
+            let m = acc.map(|a| _mm512_max_epi32(_mm512_max_epi32(a[0], a[1]), a[2]));
+            let t0 = _mm512_max_epi32(
+                _mm512_unpacklo_epi32(m[0], m[1]),
+                _mm512_unpackhi_epi32(m[0], m[1]),
+            );
+            let t1 = _mm512_max_epi32(
+                _mm512_unpacklo_epi32(m[2], m[3]),
+                _mm512_unpackhi_epi32(m[2], m[3]),
+            );
+            let u = _mm512_max_epi32(_mm512_unpacklo_epi64(t0, t1), _mm512_unpackhi_epi64(t0, t1));
+            let v = _mm256_max_epi32(_mm512_castsi512_si256(u), _mm512_extracti64x4_epi64::<1>(u));
+            let w = _mm_max_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256::<1>(v));
+            let mut largest = [0i32; ROWS];
+            // SAFETY: `largest` is four i32 (16 bytes); unaligned stores
+            // are allowed.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm_storeu_si128(largest.as_mut_ptr().cast(), w)
+            };
+            let slots = maxima.iter_mut().skip(o);
+            for ((slot, &v), step) in slots.zip(&largest).zip(steps) {
+                if step.is_some() && v > *slot as i32 {
+                    *slot = v as u32;
                 }
             }
         }
@@ -208,6 +236,16 @@ pub(super) fn finish(
                 };
             }
         }
+    }
+}
+
+/// Applies the pooled layer's output steps to the largest accumulators that
+/// [`Out::Maxima`] gathered and raises `feature` to each activation.
+pub(super) fn pool_maxima(maxima: &[u32], q: Requant<'_>, feature: &mut [i8]) {
+    let steps = le_i32s(q.multiplier).zip(q.shift);
+    for ((f, &acc), (m, &s)) in feature.iter_mut().zip(maxima).zip(steps) {
+        let v = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc as i32);
+        *f = (*f).max(v);
     }
 }
 
@@ -256,8 +294,8 @@ fn activations(acc: __m512i, step: &OutputStep) -> __m512i {
 
 #[cfg(test)]
 pub(super) mod tests {
-    use super::super::super::dense_tile;
     use super::super::super::test_layer::{TestLayer, byte};
+    use super::super::super::{Sink, dense_tile};
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
@@ -332,11 +370,13 @@ pub(super) mod tests {
             "{what}, stored, {inputs} -> {outputs}"
         );
         let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+        let mut maxima = std::vec![i32::MIN as u32; outputs];
         dense_tile(&layer.weights, inputs, q, x, &mut Sink::Pool(&mut want));
         // SAFETY: as above.
         #[allow(unsafe_code)]
-        let done = unsafe { layer_bytes(&bytes, q, &quads, Out::Pool(&mut got)) };
+        let done = unsafe { layer_bytes(&bytes, q, &quads, Out::Maxima(&mut maxima)) };
         assert!(done, "{what}: buffers");
+        pool_maxima(&maxima, q, &mut got);
         assert_eq!(got, want, "{what}, pooled, {inputs} -> {outputs}");
     }
 

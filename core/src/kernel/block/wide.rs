@@ -81,6 +81,7 @@ mod tests {
     use super::super::super::test_layer::{TestLayer, byte};
     use super::super::super::{Sink, dense_tile};
     use super::super::tests::by_point;
+    use super::super::vnni::pool_maxima;
     use super::super::vnni::tests::{from_quads, vnni};
     use super::super::widen;
     use super::*;
@@ -135,11 +136,13 @@ mod tests {
                 let (mut want, mut got) =
                     (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
                 dense_tile(weights, inputs, q, &x, &mut Sink::Pool(&mut want));
+                let mut maxima = std::vec![i32::MIN as u32; outputs];
                 // SAFETY: as above.
                 #[allow(unsafe_code)]
                 unsafe {
-                    layer_wide(&wide, pairs, q, &input, Out::Pool(&mut got))
+                    layer_wide(&wide, pairs, q, &input, Out::Maxima(&mut maxima))
                 };
+                pool_maxima(&maxima, q, &mut got);
                 assert_eq!(got, want, "pooled, {inputs} -> {outputs}");
             }
         }
