@@ -72,26 +72,33 @@ pub(crate) struct VectorCase {
 }
 
 /// The vector kernels' cases: one part or two, with and without a tail
-/// past 16 inputs, row counts that are and are not multiples of four.
+/// past 16 (or 64) inputs, row counts that are and are not multiples of
+/// four.
 pub(crate) fn vector_cases(seed: u64) -> Vec<VectorCase> {
     let mut rng = SplitMix64(seed);
-    [(8, 16, 4), (0, 40, 7), (256, 512, 256), (20, 41, 9)]
-        .into_iter()
-        .map(|(split, inputs, outputs)| {
-            let layer = TestLayer::new(&mut rng, inputs, outputs, (-31, 31));
-            let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng) as u8).collect();
-            let mut want = std::vec![0i8; outputs];
-            let sink = &mut Sink::Store {
-                out: &mut want,
-                outputs,
-            };
-            super::dense_tile(&layer.weights, inputs, layer.requant(), &x, sink);
-            VectorCase {
-                layer,
-                x,
-                split,
-                want,
-            }
-        })
-        .collect()
+    [
+        (8, 16, 4),
+        (0, 40, 7),
+        (256, 512, 256),
+        (20, 41, 9),
+        (100, 230, 13),
+    ]
+    .into_iter()
+    .map(|(split, inputs, outputs)| {
+        let layer = TestLayer::new(&mut rng, inputs, outputs, (-31, 31));
+        let x: Vec<u8> = (0..inputs).map(|_| byte(&mut rng) as u8).collect();
+        let mut want = std::vec![0i8; outputs];
+        let sink = &mut Sink::Store {
+            out: &mut want,
+            outputs,
+        };
+        super::dense_tile(&layer.weights, inputs, layer.requant(), &x, sink);
+        VectorCase {
+            layer,
+            x,
+            split,
+            want,
+        }
+    })
+    .collect()
 }

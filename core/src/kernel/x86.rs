@@ -25,7 +25,10 @@ use core::arch::x86_64::{
 };
 
 use super::{OutputStep, Requant, Sink, rows, scalar_dot};
+
+mod vnni;
 use crate::format::le_i32s;
+pub(super) use vnni::has_vnni;
 
 /// Points per tile of this kernel (the int8 path's largest tile).
 const ROWS: usize = crate::arch::MAX_TILE;
@@ -157,13 +160,13 @@ fn points8(weights: &[u8], q: Requant<'_>, points: &[i16; 3 * ROWS], sink: &mut 
 }
 
 /// [`super::dense_vector`]'s contract and results for a vector of at
-/// least 16 inputs (the concatenation of `parts`) on a CPU with AVX2: the
-/// vector is copied to int16 once, then each weight row is read 16 bytes at
-/// a time, sign-extended (`VPMOVSXBW`) and multiplied with the vector by
-/// `VPMADDWD`, four rows at once; lane sums, the scalar tail past the last
-/// multiple of 16, the bias and the output step follow. Returns `false`,
-/// having done nothing, on any other vector or CPU, or when `expanded`
-/// cannot hold the int16 copy.
+/// least 16 inputs (the concatenation of `parts`) on a CPU with AVX2: with
+/// AVX-512 VNNI [`vnni::vector`]; otherwise the vector is copied to int16
+/// once, then each weight row is read 16 bytes at a time, sign-extended
+/// (`VPMOVSXBW`) and multiplied with the vector by `VPMADDWD`, four rows at
+/// once; lane sums, the scalar tail past the last multiple of 16, the bias
+/// and the output step follow. Returns `false`, having done nothing, on any
+/// other vector or CPU, or when `expanded` cannot hold the int16 copy.
 pub(super) fn dense_vector(
     weights: &[u8],
     parts: &[&[u8]],
@@ -175,6 +178,28 @@ pub(super) fn dense_vector(
     if inputs < LANES || !std::is_x86_feature_detected!("avx2") {
         return false;
     }
+    if vnni::has_vnni() {
+        // SAFETY: the CPU has AVX-512 VNNI and BW (which imply F), all
+        // `vnni::vector` requires.
+        #[allow(unsafe_code)]
+        unsafe {
+            vnni::vector(weights, parts, q, out)
+        };
+        return true;
+    }
+    dense_vector_avx2(weights, parts, inputs, q, expanded, out)
+}
+
+/// [`dense_vector`] on AVX2 alone (which the caller found), for `inputs`
+/// (at least 16) in all.
+fn dense_vector_avx2(
+    weights: &[u8],
+    parts: &[&[u8]],
+    inputs: usize,
+    q: Requant<'_>,
+    expanded: &mut [u32],
+    out: &mut [i8],
+) -> bool {
     let Some(xs) = as_i16(expanded).get_mut(..inputs) else {
         return false;
     };
@@ -481,12 +506,17 @@ mod tests {
         }
     }
 
-    /// The head's vector kernel gives the portable kernel's activations
+    /// The head's vector kernels, AVX2 and (where the CPU has it) AVX-512
+    /// VNNI, give the portable kernel's activations
     /// ([`super::super::test_layer::vector_cases`]).
     #[test]
-    fn avx2_vector_matches_portable() {
+    fn vector_kernels_match_portable() {
         if !std::is_x86_feature_detected!("avx2") {
             return;
+        }
+        let vnni = has_vnni();
+        if !vnni {
+            std::eprintln!("no AVX-512 VNNI on this CPU: vnni::vector not tested");
         }
         for c in vector_cases(13) {
             let (inputs, outputs) = (c.x.len(), c.want.len());
@@ -494,14 +524,25 @@ mod tests {
             let mut expanded = std::vec![0u32; inputs.div_ceil(2)];
             let mut got = std::vec![0i8; outputs];
             let q = c.layer.requant();
-            assert!(dense_vector(
-                &c.layer.weights,
+            let w = &c.layer.weights;
+            assert!(dense_vector_avx2(
+                w,
                 &[a, b],
+                inputs,
                 q,
                 &mut expanded,
                 &mut got
             ));
-            assert_eq!(got, c.want, "{inputs} -> {outputs}");
+            assert_eq!(got, c.want, "AVX2, {inputs} -> {outputs}");
+            if vnni {
+                got.fill(0);
+                // SAFETY: the CPU has AVX-512 VNNI and BW (checked above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    vnni::vector(w, &[a, b], q, &mut got)
+                };
+                assert_eq!(got, c.want, "VNNI, {inputs} -> {outputs}");
+            }
         }
     }
 

@@ -11,6 +11,7 @@ use core::arch::x86_64::{
     _mm512_unpacklo_epi32, _mm512_unpacklo_epi64, _mm512_xor_si512,
 };
 
+pub(super) use super::super::x86::has_vnni;
 use super::super::{Requant, rows};
 use super::BLOCK;
 use super::bytes::{ByteLayer, quad};
@@ -23,12 +24,6 @@ pub(super) const ROWS: usize = 4;
 
 /// Vectors of sixteen points in a block.
 pub(super) const WIDE: usize = BLOCK / 16;
-
-/// Whether the CPU has what the AVX-512 VNNI kernels need (VNNI and BW,
-/// which imply F).
-pub(super) fn has_vnni() -> bool {
-    std::is_x86_feature_detected!("avx512vnni") && std::is_x86_feature_detected!("avx512bw")
-}
 
 /// Where a layer's activations go on the VNNI path.
 pub(super) enum Out<'a> {
