@@ -94,10 +94,20 @@ impl<'w> BlockEncoder<'w> {
     /// [`Arch::host_block_len`] bytes) and returns the encoder; `None`,
     /// having done nothing that matters, without AVX2 or room.
     pub(crate) fn new(arch: &Arch, layers: &[Int8Layer<'_>], area: &'w mut [i8]) -> Option<Self> {
+        Self::with_route(arch, layers, area, vnni::has_vnni())
+    }
+
+    /// [`Self::new`] on the VNNI kernels or not, as `vnni` says (it must
+    /// not say so on a CPU without them).
+    fn with_route(
+        arch: &Arch,
+        layers: &[Int8Layer<'_>],
+        area: &'w mut [i8],
+        vnni: bool,
+    ) -> Option<Self> {
         if !std::is_x86_feature_detected!("avx2") || area.len() < arch.host_block_len() {
             return None;
         }
-        let vnni = vnni::has_vnni();
         let words = as_words(area);
         let sizes = arch.host_block_words();
         let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
@@ -441,6 +451,97 @@ mod tests {
                     layer(&wide, pairs, q, &input, Dest::Pool(&mut got))
                 };
                 assert_eq!(got, want, "pooled, {inputs} -> {outputs}");
+            }
+        }
+    }
+
+    /// The whole block encoder, on the VNNI kernels (where the CPU has
+    /// them) and on AVX2 alone, gives the pooled feature of the portable
+    /// kernels over two blocks: encoders of one layer, of odd widths and of
+    /// the embedded widths, both requantization paths.
+    #[test]
+    fn block_encoder_matches_portable_on_every_route() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let routes: &[bool] = if vnni::has_vnni() {
+            &[false, true]
+        } else {
+            std::eprintln!("no AVX-512 VNNI on this CPU: its route not tested");
+            &[false]
+        };
+        let mut rng = SplitMix64(40);
+        let encoders: [&[u16]; 4] = [&[8], &[7, 33, 65], &[32, 64, 128, 256], &[16, 16]];
+        for widths in encoders {
+            for shifts in [(-22, -2), (-31, 31)] {
+                let arch = Arch::new(widths, &[]).unwrap();
+                let shapes: Vec<_> = arch.encoder_layers().collect();
+                let random: Vec<TestLayer> = shapes
+                    .iter()
+                    .map(|s| TestLayer::new(&mut rng, s.inputs, s.outputs, shifts))
+                    .collect();
+                let layers: Vec<Int8Layer<'_>> = random
+                    .iter()
+                    .map(|l| Int8Layer {
+                        out_scale: 1.0,
+                        out_zero_point: l.zero_point,
+                        weights: &l.weights,
+                        bias: &l.bias,
+                        multiplier: &l.multiplier,
+                        shift: &l.shift,
+                    })
+                    .collect();
+                let blocks: Vec<[[i16; INPUT_DIM]; BLOCK]> = (0..2)
+                    .map(|_| core::array::from_fn(|_| [0; 3].map(|_| rng.int(-2000, 2000) as i16)))
+                    .collect();
+                // The portable kernels, point by point.
+                let mut want = std::vec![i8::MIN; *widths.last().unwrap() as usize];
+                for points in &blocks {
+                    let (first, q) = (&random[0], random[0].requant());
+                    let mut x: Vec<i8> = points
+                        .iter()
+                        .flat_map(|p| {
+                            let rows = super::super::rows(&first.weights, 3);
+                            let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
+                            rows.zip(params).map(move |(w, ((b, m), &s))| {
+                                let dot = w.iter().zip(p).fold(b, |a, (&w, &c)| {
+                                    a.wrapping_add(w as i8 as i32 * c as i32)
+                                });
+                                OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(dot)
+                            })
+                        })
+                        .collect();
+                    for (l, shape) in random.iter().zip(&shapes).skip(1) {
+                        let mut out = std::vec![0i8; BLOCK * shape.outputs];
+                        let sink = &mut Sink::Store {
+                            out: &mut out,
+                            outputs: shape.outputs,
+                        };
+                        super::super::dense_tile(&l.weights, shape.inputs, l.requant(), &x, sink);
+                        x = out;
+                    }
+                    let last = shapes.last().unwrap().outputs;
+                    for acts in x.chunks(last) {
+                        for (f, &v) in want.iter_mut().zip(acts) {
+                            *f = (*f).max(v);
+                        }
+                    }
+                }
+                for &vnni in routes {
+                    let mut area = std::vec![0i8; arch.host_block_len()];
+                    let mut encoder =
+                        BlockEncoder::with_route(&arch, &layers, &mut area, vnni).unwrap();
+                    let mut got = std::vec![i8::MIN; want.len()];
+                    for points in &blocks {
+                        let steps = shapes
+                            .iter()
+                            .zip(&random)
+                            .map(|(s, l)| (s.inputs, s.outputs, &l.weights[..], l.requant()));
+                        encoder.encode(points, steps, &mut got);
+                    }
+                    encoder.pool(random.last().unwrap().requant(), &mut got);
+                    assert_eq!(got, want, "{widths:?}, {shifts:?}, VNNI {vnni}");
+                }
             }
         }
     }
