@@ -9,7 +9,7 @@ use crate::fixed::quantize_coordinate;
 use crate::kernel::{Sink, as_words, dense_points, dense_tile_i8};
 use crate::pose::PointMap;
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
-use crate::{arch::HOST_BLOCK, kernel::block::BlockEncoder};
+use crate::{arch::HOST_BLOCK, kernel::Requant, kernel::block::BlockEncoder};
 
 /// Points collected before they go through the encoder: a host block
 /// where the block kernel exists, a tile elsewhere.
@@ -94,10 +94,7 @@ impl Int8Model<'_> {
             }
             #[cfg(all(target_arch = "x86_64", feature = "std"))]
             if let Some(block) = block.as_mut() {
-                let layers = self.p.arch.encoder_layers().zip(self.p.encoder.iter());
-                let layers =
-                    layers.map(|(s, l)| (s.inputs, s.outputs, l.weights, requant(l, true)));
-                block.encode(&points, layers, feature);
+                block.encode(&points, self.block_layers(), feature);
                 encoded += filled;
                 filled = 0;
                 continue;
@@ -115,10 +112,7 @@ impl Int8Model<'_> {
                 if let Some(spare) = points.get_mut(filled..) {
                     spare.fill(first);
                 }
-                let layers = self.p.arch.encoder_layers().zip(self.p.encoder.iter());
-                let layers =
-                    layers.map(|(s, l)| (s.inputs, s.outputs, l.weights, requant(l, true)));
-                block.encode(&points, layers, feature);
+                block.encode(&points, self.block_layers(), feature);
                 encoded += filled;
                 filled = 0;
             }
@@ -138,6 +132,14 @@ impl Int8Model<'_> {
             return Err(Error::NoPointInRange);
         }
         Ok(left_out)
+    }
+
+    /// The encoder's layers as the block kernel takes them: input and
+    /// output widths, weights and requantization (ReLU on), first to last.
+    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    fn block_layers(&self) -> impl Iterator<Item = (usize, usize, &[u8], Requant<'_>)> {
+        let layers = self.p.arch.encoder_layers().zip(self.p.encoder.iter());
+        layers.map(|(s, l)| (s.inputs, s.outputs, l.weights, requant(l, true)))
     }
 
     /// Runs the encoder's layers on one tile of quantized points (at most

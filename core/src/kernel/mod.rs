@@ -204,6 +204,39 @@ pub(crate) fn rows<T>(values: &[T], len: usize) -> core::slice::ChunksExact<'_, 
     }
 }
 
+/// One output of a dense layer on a vector: its bias, its output step and
+/// where its activation goes.
+#[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
+pub(crate) type Channel<'a> = (i32, OutputStep, &'a mut i8);
+
+/// A dense layer on one vector taken four outputs at a time (the host's
+/// vector kernels): each group's four weight rows of `inputs` bytes and its
+/// outputs. A group past the last output reads the group's first row again
+/// in its place, with no output, so a kernel can always run four rows.
+#[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
+pub(crate) fn row_groups<'a>(
+    weights: &'a [u8],
+    inputs: usize,
+    q: Requant<'a>,
+    out: &'a mut [i8],
+) -> impl Iterator<Item = ([&'a [u8]; 4], [Option<Channel<'a>>; 4])> {
+    let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
+    let mut channels = rows(weights, inputs).zip(params).zip(out.iter_mut()).map(
+        move |((row, ((bias, m), &s)), y)| {
+            let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
+            (row, (bias, step, y))
+        },
+    );
+    core::iter::from_fn(move || {
+        let group: [_; 4] = core::array::from_fn(|_| channels.next());
+        let first = group[0].as_ref()?.0;
+        let rows = group
+            .each_ref()
+            .map(|g| g.as_ref().map_or(first, |(r, _)| *r));
+        Some((rows, group.map(|g| g.map(|(_, channel)| channel))))
+    })
+}
+
 /// [`rows`] for a mutable slice.
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
 #[inline(always)]

@@ -29,7 +29,7 @@ use core::arch::aarch64::{
     vpadalq_s16,
 };
 
-use super::{OutputStep, Requant, Sink, rows, scalar_dot};
+use super::{OutputStep, Requant, Sink, row_groups, rows, scalar_dot};
 use crate::format::le_i32s;
 
 /// Points per tile of this kernel (the int8 path's largest tile).
@@ -208,18 +208,7 @@ fn vector_sdot(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i8], out: &m
 unsafe fn vector<D: Dot>(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i8], out: &mut [i8]) {
     let full = inputs / LANES * LANES;
     let (body, tail) = xs.split_at(full.min(xs.len()));
-    let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
-    let mut channels = rows(weights, inputs).zip(params).zip(out.iter_mut());
-    loop {
-        let group: [_; 4] = core::array::from_fn(|_| channels.next());
-        let Some(((first, _), _)) = &group[0] else {
-            return;
-        };
-        // Missing rows (past the last) read the first row's weights; their
-        // sums are dropped.
-        let rs = group
-            .each_ref()
-            .map(|g| g.as_ref().map_or(*first, |((r, _), _)| *r));
+    for (rs, channels) in row_groups(weights, inputs, q, out) {
         // SAFETY: NEON is part of every aarch64 CPU.
         let mut acc = [unsafe { vdupq_n_s32(0) }; 4];
         for (c, x) in body.chunks_exact(LANES).enumerate() {
@@ -235,15 +224,14 @@ unsafe fn vector<D: Dot>(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i8
                 }
             }
         }
-        for ((channel, row), acc) in group.into_iter().zip(rs).zip(acc) {
-            let Some(((_, ((bias, m), &s)), y)) = channel else {
+        for ((channel, row), acc) in channels.into_iter().zip(rs).zip(acc) {
+            let Some((bias, step, y)) = channel else {
                 continue;
             };
             // SAFETY: NEON is part of every aarch64 CPU.
             let lanes = unsafe { vaddvq_s32(acc) };
             let rest = scalar_dot(row.get(full..).unwrap_or(&[]), tail);
-            let acc = bias.wrapping_add(lanes).wrapping_add(rest);
-            *y = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc);
+            *y = step.apply(bias.wrapping_add(lanes).wrapping_add(rest));
         }
     }
 }

@@ -24,7 +24,7 @@ use core::arch::x86_64::{
     _mm256_sra_epi32, _mm256_srli_epi64, _mm256_storeu_si256,
 };
 
-use super::{OutputStep, Requant, Sink, rows, scalar_dot};
+use super::{OutputStep, Requant, Sink, row_groups, rows, scalar_dot};
 
 mod vnni;
 use crate::format::le_i32s;
@@ -218,18 +218,7 @@ fn dense_vector_avx2(
 fn vector(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i16], out: &mut [i8]) {
     let full = inputs / LANES * LANES;
     let (body, tail) = xs.split_at(full.min(xs.len()));
-    let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
-    let mut channels = rows(weights, inputs).zip(params).zip(out.iter_mut());
-    loop {
-        let group: [_; 4] = core::array::from_fn(|_| channels.next());
-        let Some(((first, _), _)) = &group[0] else {
-            return;
-        };
-        // Missing rows (past the last) read the first row's weights; their
-        // sums are dropped.
-        let rs = group
-            .each_ref()
-            .map(|g| g.as_ref().map_or(*first, |((r, _), _)| *r));
+    for (rs, channels) in row_groups(weights, inputs, q, out) {
         let mut acc = [_mm256_setzero_si256(); ROWS];
         for (c, x) in body.chunks_exact(LANES).enumerate() {
             // SAFETY: `x` is 16 values (32 bytes) and every row holds
@@ -245,16 +234,15 @@ fn vector(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i16], out: &mut [
             }
         }
         let sums = store(reduce(acc));
-        for ((channel, row), sum) in group.into_iter().zip(rs).zip(sums) {
-            let Some(((_, ((bias, m), &s)), y)) = channel else {
+        for ((channel, row), sum) in channels.into_iter().zip(rs).zip(sums) {
+            let Some((bias, step, y)) = channel else {
                 continue;
             };
             let rest = row.get(full..).unwrap_or(&[]).iter().zip(tail);
             let rest = rest.fold(0i32, |a, (&w, &x)| {
                 a.wrapping_add(w as i8 as i32 * x as i32)
             });
-            let acc = bias.wrapping_add(sum).wrapping_add(rest);
-            *y = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc);
+            *y = step.apply(bias.wrapping_add(sum).wrapping_add(rest));
         }
     }
 }

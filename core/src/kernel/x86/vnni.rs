@@ -5,9 +5,7 @@ use core::arch::x86_64::{
     _mm512_setzero_si512, _mm512_xor_si512,
 };
 
-use super::super::{Requant, dot, rows};
-use crate::fixed::OutputStep;
-use crate::format::le_i32s;
+use super::super::{Requant, dot, row_groups};
 
 /// Bytes per `VPDPBUSD`.
 const LANES: usize = 64;
@@ -48,18 +46,7 @@ pub(super) fn vector(weights: &[u8], parts: &[&[u8]], q: Requant<'_>, out: &mut 
     }
     let correction = sum.wrapping_mul(128);
     let flip = _mm512_set1_epi8(i8::MIN);
-    let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
-    let mut channels = rows(weights, inputs).zip(params).zip(out.iter_mut());
-    loop {
-        let group: [_; 4] = core::array::from_fn(|_| channels.next());
-        let Some(((first, _), _)) = &group[0] else {
-            return;
-        };
-        // Missing rows (past the last) read the first row's weights; their
-        // sums are dropped.
-        let rs = group
-            .each_ref()
-            .map(|g| g.as_ref().map_or(*first, |((r, _), _)| *r));
+    for (rs, channels) in row_groups(weights, inputs, q, out) {
         let mut acc = [_mm512_setzero_si512(); 4];
         let mut tails = [0i32; 4];
         let mut offset = 0;
@@ -81,13 +68,11 @@ pub(super) fn vector(weights: &[u8], parts: &[&[u8]], q: Requant<'_>, out: &mut 
             }
             offset += part.len();
         }
-        for ((channel, acc), tail) in group.into_iter().zip(acc).zip(tails) {
-            let Some(((_, ((bias, m), &s)), y)) = channel else {
-                continue;
-            };
-            let sum = _mm512_reduce_add_epi32(acc).wrapping_sub(correction);
-            let acc = bias.wrapping_add(sum).wrapping_add(tail);
-            *y = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc);
+        for ((channel, acc), tail) in channels.into_iter().zip(acc).zip(tails) {
+            if let Some((bias, step, y)) = channel {
+                let sum = _mm512_reduce_add_epi32(acc).wrapping_sub(correction);
+                *y = step.apply(bias.wrapping_add(sum).wrapping_add(tail));
+            }
         }
     }
 }
