@@ -34,9 +34,9 @@ pub(super) enum Out<'a> {
     /// The max-pool before its output step: each output's largest
     /// accumulator so far (an i32 in each word), to which [`pool_maxima`]
     /// applies the steps once the last block is in. The output step is
-    /// non-decreasing (see [`Sink::Pool`](super::super::Sink::Pool)), so the step of the largest
-    /// accumulator is the largest activation, and one step per output
-    /// replaces one per output and block.
+    /// non-decreasing (see [`Sink::Pool`](super::super::Sink::Pool)), so
+    /// the step of the largest accumulator is the largest activation, and
+    /// one step per output replaces one per output and block.
     Maxima(&'a mut [u32]),
 }
 
