@@ -94,7 +94,7 @@ impl Int8Model<'_> {
             }
             #[cfg(all(target_arch = "x86_64", feature = "std"))]
             if let Some(block) = block.as_mut() {
-                block.encode(&points, self.block_layers(), feature);
+                block.encode(&points, self.block_layers());
                 encoded += filled;
                 filled = 0;
                 continue;
@@ -112,7 +112,7 @@ impl Int8Model<'_> {
                 if let Some(spare) = points.get_mut(filled..) {
                     spare.fill(first);
                 }
-                block.encode(&points, self.block_layers(), feature);
+                block.encode(&points, self.block_layers());
                 encoded += filled;
                 filled = 0;
             }

@@ -20,8 +20,9 @@
 //!   from the biases;
 //! - the output step runs on eight points at once, and the two outputs'
 //!   activations are interleaved straight into the next layer's pairs; the
-//!   last layer takes the largest accumulator of each output for the
-//!   max-pool (the output step is non-decreasing, see [`Sink::Pool`]);
+//!   last layer keeps each output's largest accumulator over the blocks
+//!   ([`raise`]) and its output steps run once, after the last block
+//!   (the step is non-decreasing, so that is the max-pool);
 //! - the last (pooled) layer, most of the work, runs on bytes instead
 //!   when its input is an int8 activation ([`bytes`]): `VPMADDUBSW` on
 //!   the low seven bits of each input, a second pass only for the rare
@@ -43,7 +44,7 @@ use core::arch::x86_64::{
 };
 
 use super::x86::{activations, as_i16, max};
-use super::{Requant, Sink, as_words};
+use super::{Requant, as_words};
 use crate::arch::{Arch, HOST_BLOCK as BLOCK, INPUT_DIM};
 use crate::fixed::OutputStep;
 use crate::format::{Int8Layer, le_i32s};
@@ -52,7 +53,7 @@ mod bytes;
 mod vnni;
 mod wide;
 use bytes::{ByteLayer, pool_bytes};
-use vnni::{Out, layer_bytes, pool_maxima};
+use vnni::{Out, layer_bytes};
 use wide::layer_wide;
 
 /// Vectors of eight points in a block.
@@ -67,8 +68,8 @@ pub(crate) struct BlockEncoder<'w> {
     /// (their byte kernels take `-128 * sum` into the bias).
     sums: &'w [u32],
     pooled: Option<OnBytes<'w>>,
-    /// With VNNI, the pooled layer's largest accumulators over the blocks
-    /// so far ([`Out::Maxima`]), and whether any block has been encoded.
+    /// The pooled layer's largest accumulators over the blocks so far
+    /// ([`raise`]), and whether any block has been encoded.
     maxima: &'w mut [u32],
     blocks: bool,
     acts: (&'w mut [u32], &'w mut [u32]),
@@ -159,17 +160,17 @@ impl<'w> BlockEncoder<'w> {
         })
     }
 
-    /// Encodes a block of quantized points and max-pools the last layer
-    /// into `feature` (with AVX-512 VNNI into the running maxima, which
-    /// [`Self::pool`] then takes into `feature`). `layers` holds each encoder layer's input and output
+    /// Encodes a block of quantized points and max-pools the last layer's
+    /// accumulators into the running maxima, which [`Self::pool`] then
+    /// takes into a feature. `layers` holds each encoder layer's input and output
     /// widths, int8 weights and requantization, first to last, as in
     /// [`Self::new`].
     pub(crate) fn encode<'q>(
         &mut self,
         points: &[[i16; INPUT_DIM]; BLOCK],
         layers: impl Iterator<Item = (usize, usize, &'q [u8], Requant<'q>)>,
-        feature: &mut [i8],
     ) {
+        self.blocks = true;
         let (a, b) = (&mut *self.acts.0, &mut *self.acts.1);
         let (xy, z) = a.split_at_mut(BLOCK.min(a.len()));
         for ((xy, z), &[x, y, zc]) in xy.iter_mut().zip(z.iter_mut()).zip(points) {
@@ -178,7 +179,6 @@ impl<'w> BlockEncoder<'w> {
         }
         let (mut input, mut output) = (a, b);
         if self.vnni {
-            self.blocks = true;
             // SAFETY: `BlockEncoder::new` found AVX-512 VNNI and BW (which
             // imply F), all `encode_vnni` requires.
             #[allow(unsafe_code)]
@@ -202,16 +202,17 @@ impl<'w> BlockEncoder<'w> {
                         .get(self.sums.len().saturating_sub(outputs)..)
                         .unwrap_or(&[]),
                 };
+                let maxima = &mut *self.maxima;
                 // SAFETY: `BlockEncoder::new` found AVX2, all `pool_bytes`
                 // and `layer` require.
                 #[allow(unsafe_code)]
                 unsafe {
-                    if !pool_bytes(&pooled, q, input, output, on.quads, feature) {
+                    if !pool_bytes(&pooled, q, input, output, on.quads, maxima) {
                         if !on.widened {
                             widen(bytes, inputs, on.wide);
                             on.widened = true;
                         }
-                        layer(on.wide, pairs, q, input, Dest::Pool(feature));
+                        layer(on.wide, pairs, q, input, Dest::Maxima(maxima));
                     }
                 };
                 return;
@@ -219,7 +220,7 @@ impl<'w> BlockEncoder<'w> {
             let (w, rest) = weights.split_at(weights.len().min(outputs * pairs));
             weights = rest;
             let dest = if last {
-                Dest::Pool(&mut *feature)
+                Dest::Maxima(&mut *self.maxima)
             } else {
                 Dest::Pairs(&mut *output)
             };
@@ -234,10 +235,9 @@ impl<'w> BlockEncoder<'w> {
 }
 
 impl BlockEncoder<'_> {
-    /// Takes what the blocks left in the running maxima (with AVX-512 VNNI)
-    /// into `feature`, through the pooled layer's output steps `q`; with
-    /// AVX2 alone the blocks wrote to `feature` themselves. Call it once
-    /// the last block is in.
+    /// Takes what the blocks left in the running maxima into `feature`,
+    /// through the pooled layer's output steps `q`. Call it once the last
+    /// block is in.
     pub(crate) fn pool(&self, q: Requant<'_>, feature: &mut [i8]) {
         if self.blocks {
             pool_maxima(self.maxima, q, feature);
@@ -314,8 +314,34 @@ fn pair(lo: i16, hi: i16) -> u32 {
 enum Dest<'a> {
     /// The next layer's input pairs.
     Pairs(&'a mut [u32]),
-    /// The max-pooled feature.
-    Pool(&'a mut [i8]),
+    /// The running maxima of the pooled layer's accumulators ([`raise`]).
+    Maxima(&'a mut [u32]),
+}
+
+/// Raises output `o`'s running maximum (an i32 in each word of `maxima`,
+/// `i32::MIN` at first) to `acc`. The pooled layer keeps its largest
+/// accumulators over the blocks and [`pool_maxima`] applies the output
+/// steps once the last block is in: the step is non-decreasing (see
+/// [`Sink::Pool`](super::Sink::Pool)), so the step of the largest accumulator is the largest
+/// activation, and one step per output replaces one per output and block.
+#[inline]
+fn raise(maxima: &mut [u32], o: usize, acc: i32) {
+    if let Some(slot) = maxima.get_mut(o)
+        && acc > *slot as i32
+    {
+        *slot = acc as u32;
+    }
+}
+
+/// Applies the pooled layer's output steps to the largest accumulators
+/// that the blocks left in `maxima` and raises `feature` to each
+/// activation.
+fn pool_maxima(maxima: &[u32], q: Requant<'_>, feature: &mut [i8]) {
+    let steps = le_i32s(q.multiplier).zip(q.shift);
+    for ((f, &acc), (m, &s)) in feature.iter_mut().zip(maxima).zip(steps) {
+        let v = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc as i32);
+        *f = (*f).max(v);
+    }
 }
 
 /// One layer on a block: `weights` holds `outputs` rows of `pairs` words,
@@ -332,7 +358,7 @@ fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], dest: Des
     let mut rows = super::rows(weights, pairs);
     let (mut out, mut pool) = match dest {
         Dest::Pairs(output) => (Some(super::rows_mut(output, BLOCK)), None),
-        Dest::Pool(feature) => (None, Some(Sink::Pool(feature))),
+        Dest::Maxima(maxima) => (None, Some(maxima)),
     };
     let mut o = 0;
     while let (Some(r0), Some((b0, s0))) = (rows.next(), params.next()) {
@@ -351,10 +377,10 @@ fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], dest: Des
                 *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(x, w1));
             }
         }
-        if let Some(sink) = &mut pool {
-            sink.take(o, 0, &[largest(acc0)], &s0);
-            if let Some((_, (_, s1))) = &second {
-                sink.take(o + 1, 0, &[largest(acc1)], s1);
+        if let Some(maxima) = &mut pool {
+            raise(maxima, o, largest(acc0));
+            if second.is_some() {
+                raise(maxima, o + 1, largest(acc1));
             }
         } else if let Some(out) = out.as_mut().and_then(|rows| rows.next()) {
             let s1 = second.as_ref().map(|(_, (_, s))| s);
@@ -387,6 +413,7 @@ fn largest<const N: usize>(acc: [__m256i; N]) -> i32 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::Sink;
     use super::super::test_layer::{TestLayer, byte};
     use super::*;
     use crate::testing::SplitMix64;
@@ -445,11 +472,13 @@ mod tests {
                 let (mut want, mut got) =
                     (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
                 super::super::dense_tile(weights, inputs, q, &x, &mut Sink::Pool(&mut want));
+                let mut maxima = std::vec![i32::MIN as u32; outputs];
                 // SAFETY: as above.
                 #[allow(unsafe_code)]
                 unsafe {
-                    layer(&wide, pairs, q, &input, Dest::Pool(&mut got))
+                    layer(&wide, pairs, q, &input, Dest::Maxima(&mut maxima))
                 };
+                pool_maxima(&maxima, q, &mut got);
                 assert_eq!(got, want, "pooled, {inputs} -> {outputs}");
             }
         }
@@ -537,7 +566,7 @@ mod tests {
                             .iter()
                             .zip(&random)
                             .map(|(s, l)| (s.inputs, s.outputs, &l.weights[..], l.requant()));
-                        encoder.encode(points, steps, &mut got);
+                        encoder.encode(points, steps);
                     }
                     encoder.pool(random.last().unwrap().requant(), &mut got);
                     assert_eq!(got, want, "{widths:?}, {shifts:?}, VNNI {vnni}");

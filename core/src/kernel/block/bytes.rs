@@ -8,9 +8,8 @@ use core::arch::x86_64::{
     _mm256_storeu_si256, _mm256_testz_si256,
 };
 
-use super::super::{Requant, Sink, rows, rows_mut};
-use super::{BLOCK, VECTORS, largest};
-use crate::fixed::OutputStep;
+use super::super::{Requant, rows, rows_mut};
+use super::{BLOCK, VECTORS, largest, raise};
 use crate::format::le_i32s;
 
 /// A layer on bytes (the pooled one here, every one after the first with
@@ -58,8 +57,10 @@ pub(super) struct ByteLayer<'a> {
 ///
 /// `input` holds the block's input as int16 pairs by point (as
 /// [`super::layer`]'s), `bytes` room for the two byte buffers, `quads` for
-/// the list of quads with a high bit. The accumulator of every point is
-/// the portable kernel's, so the pooled feature is too.
+/// the list of quads with a high bit; each output's largest accumulator
+/// raises its entry of `maxima` (see [`super::pool_maxima`]). The
+/// accumulator of every point is the portable kernel's, so the pooled
+/// feature is too.
 #[target_feature(enable = "avx2")]
 pub(super) fn pool_bytes(
     pooled: &ByteLayer<'_>,
@@ -67,7 +68,7 @@ pub(super) fn pool_bytes(
     input: &[u32],
     bytes: &mut [u32],
     quads: &mut [u32],
-    feature: &mut [i8],
+    maxima: &mut [u32],
 ) -> bool {
     let count = pooled.inputs.div_ceil(4);
     let Some(input) = input.get(..pooled.inputs.div_ceil(2) * BLOCK) else {
@@ -81,22 +82,16 @@ pub(super) fn pool_bytes(
     let (Some(hot), Some(high)) = (quads.get(..hot), high.get(..hot * BLOCK)) else {
         return false;
     };
-    let params = le_i32s(q.bias)
+    let biases = le_i32s(q.bias)
         .zip(pooled.sums)
-        .zip(le_i32s(q.multiplier))
-        .zip(q.shift)
-        .map(|(((b, &sum), m), &s)| {
-            let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
-            (b.wrapping_sub((sum as i32).wrapping_mul(128)), step)
-        });
+        .map(|(b, &sum)| b.wrapping_sub((sum as i32).wrapping_mul(128)));
     let ones = _mm256_set1_epi16(1);
     let top = _mm256_set1_epi16(128);
-    let mut sink = Sink::Pool(feature);
-    let mut channels = rows(pooled.weights, pooled.inputs).zip(params);
+    let mut channels = rows(pooled.weights, pooled.inputs).zip(biases);
     let mut o = 0;
-    while let Some((r0, (b0, s0))) = channels.next() {
+    while let Some((r0, b0)) = channels.next() {
         let second = channels.next();
-        let (r1, b1) = second.as_ref().map_or((r0, 0), |&(r, (b, _))| (r, b));
+        let (r1, b1) = second.unwrap_or((r0, 0));
         let (f0, f1) = (r0.as_chunks::<4>().0, r1.as_chunks::<4>().0);
         let (mut m0, mut m1) = (i32::MIN, i32::MIN);
         // Two rows share each load: half a block at a time keeps the
@@ -120,9 +115,9 @@ pub(super) fn pool_bytes(
             m0 = m0.max(largest(acc0));
             m1 = m1.max(largest(acc1));
         }
-        sink.take(o, 0, &[m0], &s0);
-        if let Some((_, (_, s1))) = &second {
-            sink.take(o + 1, 0, &[m1], s1);
+        raise(maxima, o, m0);
+        if second.is_some() {
+            raise(maxima, o + 1, m1);
         }
         o += 2;
     }
@@ -270,7 +265,9 @@ fn split_bytes(
 
 #[cfg(test)]
 mod tests {
+    use super::super::super::Sink;
     use super::super::super::test_layer::{TestLayer, byte};
+    use super::super::pool_maxima;
     use super::super::tests::by_point;
     use super::*;
     use crate::testing::SplitMix64;
@@ -295,6 +292,7 @@ mod tests {
             std::vec![0u32; 2 * count],
         );
         let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+        let mut maxima = std::vec![i32::MIN as u32; outputs];
         let sink = &mut Sink::Pool(&mut want);
         super::super::super::dense_tile(&layer.weights, inputs, q, x, sink);
         // SAFETY: the caller checked for AVX2.
@@ -306,9 +304,10 @@ mod tests {
                 &by_point(x, inputs),
                 &mut bytes,
                 &mut lists,
-                &mut got,
+                &mut maxima,
             )
         };
+        pool_maxima(&maxima, q, &mut got);
         let hot = (0..count)
             .filter(|&j| {
                 let quad = |row: &[i8]| row.iter().skip(4 * j).take(4).any(|&v| v >= 0);

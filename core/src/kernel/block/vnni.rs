@@ -13,10 +13,9 @@ use core::arch::x86_64::{
 
 pub(super) use super::super::x86::has_vnni;
 use super::super::{Requant, rows};
-use super::BLOCK;
 use super::bytes::{ByteLayer, quad};
+use super::{BLOCK, raise};
 use crate::fixed::OutputStep;
-use crate::format::le_i32s;
 
 /// Rows that share each load of the block's inputs (here and in
 /// [`super::wide`]).
@@ -32,7 +31,8 @@ pub(super) enum Out<'a> {
     /// missing output past the last reads 128, activation 0).
     Quads(&'a mut [u32]),
     /// The max-pool before its output step: each output's largest
-    /// accumulator so far (an i32 in each word), to which [`pool_maxima`]
+    /// accumulator so far (an i32 in each word), to which
+    /// [`pool_maxima`](super::pool_maxima)
     /// applies the steps once the last block is in. The output step is
     /// non-decreasing (see [`Sink::Pool`](super::super::Sink::Pool)), so
     /// the step of the largest accumulator is the largest activation, and
@@ -198,10 +198,9 @@ pub(super) fn finish(
             unsafe {
                 _mm_storeu_si128(largest.as_mut_ptr().cast(), w)
             };
-            let slots = maxima.iter_mut().skip(o);
-            for ((slot, &v), step) in slots.zip(&largest).zip(steps) {
-                if step.is_some() && v > *slot as i32 {
-                    *slot = v as u32;
+            for (r, (&v, step)) in largest.iter().zip(steps).enumerate() {
+                if step.is_some() {
+                    raise(maxima, o + r, v);
                 }
             }
         }
@@ -231,16 +230,6 @@ pub(super) fn finish(
                 };
             }
         }
-    }
-}
-
-/// Applies the pooled layer's output steps to the largest accumulators that
-/// [`Out::Maxima`] gathered and raises `feature` to each activation.
-pub(super) fn pool_maxima(maxima: &[u32], q: Requant<'_>, feature: &mut [i8]) {
-    let steps = le_i32s(q.multiplier).zip(q.shift);
-    for ((f, &acc), (m, &s)) in feature.iter_mut().zip(maxima).zip(steps) {
-        let v = OutputStep::new(m, s as i8, q.zero_point, q.act_min).apply(acc as i32);
-        *f = (*f).max(v);
     }
 }
 
@@ -291,6 +280,7 @@ fn activations(acc: __m512i, step: &OutputStep) -> __m512i {
 pub(super) mod tests {
     use super::super::super::test_layer::{TestLayer, byte};
     use super::super::super::{Sink, dense_tile};
+    use super::super::pool_maxima;
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
