@@ -118,11 +118,15 @@ impl<'w> BlockEncoder<'w> {
         maxima.fill(i32::MIN as u32);
         let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
         let b = rest.get_mut(..sizes.buffer)?;
+        // The AVX2 route reads only the pooled layer's sums (the last).
+        let later = arch.encoder.len().saturating_sub(1);
         let mut free = &mut *sums;
-        for (shape, layer) in arch.encoder_layers().zip(layers).skip(1) {
+        for (l, (shape, layer)) in arch.encoder_layers().zip(layers).enumerate().skip(1) {
             let (out, tail) = free.split_at_mut_checked(shape.outputs)?;
-            for (sum, row) in out.iter_mut().zip(super::rows(layer.weights, shape.inputs)) {
-                *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
+            if vnni || l == later {
+                for (sum, row) in out.iter_mut().zip(super::rows(layer.weights, shape.inputs)) {
+                    *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
+                }
             }
             free = tail;
         }
