@@ -91,7 +91,7 @@ pub(crate) struct HostBlockWords {
     /// AVX2 kernel's high-bit pass.
     pub quads: usize,
     /// The pooled layer's largest accumulators over the blocks so far (one
-    /// per output), with AVX-512 VNNI.
+    /// per output).
     pub maxima: usize,
     /// One activation buffer: [`HOST_BLOCK`] points x the widest layer
     /// input in int16 pairs (the coordinates count as four), or x the
@@ -197,9 +197,9 @@ impl Arch {
     /// row padded to an even length); one word per output of every layer
     /// after the first, and when the pooled layer's input is an int8
     /// activation one per four of its inputs, for the byte kernels; one per
-    /// output of the pooled layer, for its running maxima; and two buffers of [`HOST_BLOCK`] points x the
-    /// widest layer input as int16 (the coordinates count as four), plus 3
-    /// for alignment.
+    /// output of the pooled layer, for its running maxima; and two buffers
+    /// of [`HOST_BLOCK`] points x the widest layer input as int16 (the
+    /// coordinates count as four), plus 3 for alignment.
     pub fn host_block_len(&self) -> usize {
         let w = self.host_block_words();
         4 * (w.weights + w.sums + w.quads + w.maxima + 2 * w.buffer) + 3
