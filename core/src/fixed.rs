@@ -122,6 +122,12 @@ impl OutputStep {
             .map(|offset| (self.multiplier, offset, self.high_shift, self.act_min))
     }
 
+    /// The ReLU floor of the clamp (the activation of a negative
+    /// accumulator, or -128 without ReLU).
+    pub(crate) fn act_min(&self) -> i8 {
+        self.act_min
+    }
+
     /// The int8 activation of accumulator `acc`.
     #[inline(always)]
     pub(crate) fn apply(&self, acc: i32) -> i8 {

@@ -2,13 +2,14 @@
 //! (`VPDPBUSD`): every encoder layer after the first, when the CPU has it.
 
 use core::arch::x86_64::{
-    __m512i, _mm_cvtsi32_si128, _mm_max_epi32, _mm_storeu_si128, _mm256_castsi256_si128,
-    _mm256_extracti128_si256, _mm256_max_epi32, _mm512_add_epi32, _mm512_and_si512,
-    _mm512_castsi512_si256, _mm512_dpbusd_epi32, _mm512_extracti64x4_epi64, _mm512_loadu_si512,
-    _mm512_mask_blend_epi32, _mm512_max_epi32, _mm512_min_epi32, _mm512_mul_epi32, _mm512_or_si512,
-    _mm512_set1_epi32, _mm512_setzero_si512, _mm512_slli_epi32, _mm512_sra_epi32,
-    _mm512_srli_epi64, _mm512_storeu_si512, _mm512_unpackhi_epi32, _mm512_unpackhi_epi64,
-    _mm512_unpacklo_epi32, _mm512_unpacklo_epi64, _mm512_xor_si512,
+    __m512i, _mm_cvtsi32_si128, _mm_max_epi32, _mm_setr_epi8, _mm_storeu_si128,
+    _mm256_castsi256_si128, _mm256_extracti128_si256, _mm256_max_epi32, _mm512_add_epi32,
+    _mm512_broadcast_i32x4, _mm512_castsi512_si256, _mm512_dpbusd_epi32, _mm512_extracti64x4_epi64,
+    _mm512_loadu_si512, _mm512_mask_shuffle_epi32, _mm512_max_epi8, _mm512_max_epi32,
+    _mm512_mul_epi32, _mm512_packs_epi16, _mm512_packs_epi32, _mm512_set1_epi32,
+    _mm512_setzero_si512, _mm512_shuffle_epi8, _mm512_sra_epi32, _mm512_srli_epi64,
+    _mm512_storeu_si512, _mm512_unpackhi_epi32, _mm512_unpackhi_epi64, _mm512_unpacklo_epi32,
+    _mm512_unpacklo_epi64, _mm512_xor_si512,
 };
 
 pub(super) use super::super::x86::has_vnni;
@@ -176,10 +177,18 @@ pub(super) fn finish(
 ) {
     match out {
         Out::Maxima(maxima) => {
-            // Each row's largest lane, the four rows at once: within each
-            // 128-bit block, pairs of lanes, then pairs of pairs, leave
-            // lane r holding row r's largest; then across the blocks.
-            let m = acc.map(|a| _mm512_max_epi32(_mm512_max_epi32(a[0], a[1]), a[2]));
+            // Each row's largest lane over its vectors, then the four rows
+            // at once: within each 128-bit block, pairs of lanes, then pairs
+            // of pairs, leave lane r holding row r's largest; then across
+            // the blocks.
+            let m = acc.map(|a| {
+                let [first, rest @ ..] = a;
+                let mut m = first;
+                for v in rest {
+                    m = _mm512_max_epi32(m, v);
+                }
+                m
+            });
             let t0 = _mm512_max_epi32(
                 _mm512_unpacklo_epi32(m[0], m[1]),
                 _mm512_unpackhi_epi32(m[0], m[1]),
@@ -211,16 +220,21 @@ pub(super) fn finish(
             else {
                 return;
             };
+            // The ReLU floor in each row's byte of a word; a missing row's
+            // byte stays 0 under -128.
+            let floor = steps.map(|s| s.map_or(i8::MIN, |s| s.act_min()) as u8);
+            let floor = _mm512_set1_epi32(i32::from_le_bytes(floor));
             for (v, words) in words.as_chunks_mut::<16>().0.iter_mut().enumerate() {
-                // Each row's activations, its byte in the row's place.
-                let mut word = _mm512_setzero_si512();
-                for (r, (acc, step)) in acc.iter().zip(steps).enumerate() {
+                // Each row's stepped accumulators (0 for a missing row).
+                let mut rows = [_mm512_setzero_si512(); ROWS];
+                for ((y, acc), step) in rows.iter_mut().zip(&acc).zip(steps) {
                     if let (Some(step), Some(&a)) = (step, acc.get(v)) {
-                        let byte = _mm512_and_si512(activations(a, step), _mm512_set1_epi32(0xFF));
-                        word = _mm512_or_si512(word, shift_left(byte, 8 * r as u32));
+                        *y = stepped(a, step);
                     }
                 }
-                // x + 128 is x with its top bit flipped.
+                let word = pack_quads(rows);
+                // The floor, then x + 128: x with its top bit flipped.
+                let word = _mm512_max_epi8(word, floor);
                 let word = _mm512_xor_si512(word, _mm512_set1_epi32(0x8080_8080_u32 as i32));
                 // SAFETY: `words` is sixteen words (64 bytes); unaligned
                 // stores are allowed.
@@ -233,27 +247,35 @@ pub(super) fn finish(
     }
 }
 
-/// Every lane of `v` shifted left by `bits` (below 32).
+/// Four rows' stepped accumulators of sixteen points (any i32 lanes) as
+/// sixteen words, point `p`'s holding row `r`'s value in byte `r`, each
+/// saturated to int8: the step's clamp but for its ReLU floor, which the
+/// caller takes (`VPMAXSB`; the floor is -128 or above, so flooring after
+/// the saturation is flooring before). `VPACKSSDW` then `VPACKSSWB`
+/// saturate exactly as a clamp to [-128, 127] does and leave, in each
+/// 128-bit block, four points' bytes row after row; one byte shuffle
+/// turns that point after point.
 #[inline]
-#[target_feature(enable = "avx512f")]
-fn shift_left(v: __m512i, bits: u32) -> __m512i {
-    match bits {
-        0 => v,
-        8 => _mm512_slli_epi32::<8>(v),
-        16 => _mm512_slli_epi32::<16>(v),
-        _ => _mm512_slli_epi32::<24>(v),
-    }
+#[target_feature(enable = "avx512f,avx512bw")]
+fn pack_quads(rows: [__m512i; ROWS]) -> __m512i {
+    let [r0, r1, r2, r3] = rows;
+    let by_row = _mm512_packs_epi16(_mm512_packs_epi32(r0, r1), _mm512_packs_epi32(r2, r3));
+    let by_point = _mm512_broadcast_i32x4(_mm_setr_epi8(
+        0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15,
+    ));
+    _mm512_shuffle_epi8(by_row, by_point)
 }
 
-/// `OutputStep::apply` on sixteen accumulators: on the fast path the high
-/// words of the sixteen i64 products (`VPMULDQ` on the even lanes, then on
-/// the odd lanes moved down), the folded offset, the arithmetic shift and
-/// the clamp, the same integer operations as the scalar step; lane by lane
-/// on the general one.
+/// `OutputStep::apply` on sixteen accumulators but for the clamp (the
+/// caller's, see [`pack_quads`]): on the fast path the high words of the
+/// sixteen i64 products (`VPMULDQ` on the even lanes, then on the odd
+/// lanes moved down), the folded offset and the arithmetic shift, the same
+/// integer operations as the scalar step; lane by lane (clamped, which
+/// changes nothing after) on the general one.
 #[inline]
 #[target_feature(enable = "avx512f")]
-fn activations(acc: __m512i, step: &OutputStep) -> __m512i {
-    let Some((m, offset, high_shift, act_min)) = step.fast_parts() else {
+fn stepped(acc: __m512i, step: &OutputStep) -> __m512i {
+    let Some((m, offset, high_shift, _)) = step.fast_parts() else {
         let mut lanes = [0i32; 16];
         // SAFETY: `lanes` is sixteen i32 (64 bytes); unaligned stores and
         // loads are allowed.
@@ -267,13 +289,13 @@ fn activations(acc: __m512i, step: &OutputStep) -> __m512i {
     let m = _mm512_set1_epi32(m);
     let even = _mm512_mul_epi32(acc, m);
     let odd = _mm512_mul_epi32(_mm512_srli_epi64::<32>(acc), m);
-    let hi = _mm512_mask_blend_epi32(0xAAAA, _mm512_srli_epi64::<32>(even), odd);
-    let v = _mm512_sra_epi32(
+    // The even lanes take their product's high word (lane 2i + 1 of
+    // `even`); the odd lanes already hold theirs.
+    let hi = _mm512_mask_shuffle_epi32::<0xF5>(odd, 0x5555, even);
+    _mm512_sra_epi32(
         _mm512_add_epi32(hi, _mm512_set1_epi32(offset)),
         _mm_cvtsi32_si128(high_shift as i32),
-    );
-    let v = _mm512_min_epi32(v, _mm512_set1_epi32(i8::MAX as i32));
-    _mm512_max_epi32(v, _mm512_set1_epi32(act_min as i32))
+    )
 }
 
 #[cfg(test)]
