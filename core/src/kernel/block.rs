@@ -16,8 +16,9 @@
 //! - for two outputs at a time and every input pair, the two weight words
 //!   are broadcast and `VPMADDWD` multiplies them with the pairs of eight
 //!   points at once (16 multiplies, pairs summed into eight i32 lanes),
-//!   six vectors of points per weight word; the twelve accumulators start
-//!   from the biases;
+//!   half a block (four vectors of points) per weight word at a time, so
+//!   the sixteen vectors of work stay in registers; the eight accumulators
+//!   start from the biases;
 //! - the output step runs on eight points at once, and the two outputs'
 //!   activations are interleaved straight into the next layer's pairs; the
 //!   last layer keeps each output's largest accumulator over the blocks
@@ -32,7 +33,8 @@
 //!   pairs, and every later one through [`vnni`], `VPDPBUSD` on byte quads
 //!   of `x + 128` (64 multiply-adds an instruction, twice `VPDPWSSD`'s),
 //!   each layer writing its activations straight into the next one's
-//!   quads; sixteen points a vector, four rows at a time.
+//!   quads; sixteen points a vector, four vectors a block, four rows at a
+//!   time.
 //!
 //! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`),
 //! and model loading bounds every partial sum (see [`super::dot`]), so the
@@ -368,26 +370,37 @@ fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], dest: Des
     while let (Some(r0), Some((b0, s0))) = (rows.next(), params.next()) {
         let second = rows.next().zip(params.next());
         let (r1, b1) = second.as_ref().map_or((r0, 0), |&(r, (b, _))| (r, b));
-        let mut acc0 = [_mm256_set1_epi32(b0); VECTORS];
-        let mut acc1 = [_mm256_set1_epi32(b1); VECTORS];
-        for ((&w0, &w1), x) in r0.iter().zip(r1).zip(super::rows(input, BLOCK)) {
-            let (w0, w1) = (_mm256_set1_epi32(w0 as i32), _mm256_set1_epi32(w1 as i32));
-            for ((a0, a1), x) in acc0.iter_mut().zip(&mut acc1).zip(x.as_chunks::<8>().0) {
-                // SAFETY: `x` is eight words (32 bytes); unaligned loads
-                // are allowed.
-                #[allow(unsafe_code)]
-                let x = unsafe { _mm256_loadu_si256(x.as_ptr().cast::<__m256i>()) };
-                *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(x, w0));
-                *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(x, w1));
+        let s1 = second.as_ref().map(|(_, (_, s))| s);
+        let mut out = out.as_mut().and_then(|rows| rows.next());
+        let (mut m0, mut m1) = (i32::MIN, i32::MIN);
+        // Two rows share each load: half a block at a time keeps the
+        // sixteen vectors of work in registers.
+        for half in 0..2 {
+            let mut acc0 = [_mm256_set1_epi32(b0); HALF];
+            let mut acc1 = [_mm256_set1_epi32(b1); HALF];
+            for ((&w0, &w1), x) in r0.iter().zip(r1).zip(super::rows(input, BLOCK)) {
+                let (w0, w1) = (_mm256_set1_epi32(w0 as i32), _mm256_set1_epi32(w1 as i32));
+                let x = half_of(x, half);
+                for ((a0, a1), x) in acc0.iter_mut().zip(&mut acc1).zip(x.as_chunks::<8>().0) {
+                    // SAFETY: `x` is eight words (32 bytes); unaligned
+                    // loads are allowed.
+                    #[allow(unsafe_code)]
+                    let x = unsafe { _mm256_loadu_si256(x.as_ptr().cast::<__m256i>()) };
+                    *a0 = _mm256_add_epi32(*a0, _mm256_madd_epi16(x, w0));
+                    *a1 = _mm256_add_epi32(*a1, _mm256_madd_epi16(x, w1));
+                }
             }
-        }
-        if let Some(maxima) = &mut pool {
-            raise(maxima, o, largest(acc0));
-            if second.is_some() {
-                raise(maxima, o + 1, largest(acc1));
+            if pool.is_some() {
+                m0 = m0.max(largest(acc0));
+                m1 = m1.max(largest(acc1));
+                continue;
             }
-        } else if let Some(out) = out.as_mut().and_then(|rows| rows.next()) {
-            let s1 = second.as_ref().map(|(_, (_, s))| s);
+            let Some(out) = out
+                .as_deref_mut()
+                .and_then(|out| out.get_mut(half * HALF * 8..))
+            else {
+                continue;
+            };
             for ((a0, a1), out) in acc0.into_iter().zip(acc1).zip(out.as_chunks_mut::<8>().0) {
                 let lo = activations(a0, &s0);
                 let hi = s1.map_or(_mm256_set1_epi32(0), |s| activations(a1, s));
@@ -403,8 +416,28 @@ fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], dest: Des
                 };
             }
         }
+        if let Some(maxima) = &mut pool {
+            raise(maxima, o, m0);
+            if second.is_some() {
+                raise(maxima, o + 1, m1);
+            }
+        }
         o += 2;
     }
+}
+
+/// Vectors of eight points in half a block.
+const HALF: usize = VECTORS / 2;
+
+/// Half a block's words of one input (pair or quad).
+type Half = [u32; HALF * 8];
+
+/// Half `half` of an input's words in a block (zeros if `x` is short).
+#[inline(always)]
+fn half_of(x: &[u32], half: usize) -> &Half {
+    x.get(half * HALF * 8..)
+        .and_then(|x| x.first_chunk())
+        .unwrap_or(&[0; HALF * 8])
 }
 
 /// The largest lane of the block's accumulators.

@@ -9,7 +9,7 @@ use core::arch::x86_64::{
 };
 
 use super::super::{Requant, rows, rows_mut};
-use super::{BLOCK, VECTORS, largest, raise};
+use super::{BLOCK, HALF, Half, VECTORS, half_of, largest, raise};
 use crate::format::le_i32s;
 
 /// A layer on bytes (the pooled one here, every one after the first with
@@ -35,14 +35,14 @@ pub(super) struct ByteLayer<'a> {
 ///   its i32 lane;
 /// - the high bits are 1 only where the activation is in the upper half of
 ///   its range, which after a ReLU is rare (in 3.4% of the quads of a
-///   48-point block at the pooled layer's input, on the ModelNet10
-///   benchmark clouds). Only the quads where some point of the block has
+///   block at the pooled layer's input, on the ModelNet10 benchmark
+///   clouds, measured with blocks of 48 points). Only the quads where some point of the block has
 ///   one take a second pass, `VPMADDUBSW` on `h`, then `VPMADDWD` with 128.
 ///
 /// Per 32 products that is still two multiply instructions, as in
 /// [`super::layer`], but one `VPADDD` instead of two, half the loads of
 /// inputs, and the int8 weights read as stored, not copied to int16 first.
-/// On the Zen 3 here the layer (128 -> 1024, a block of 48 points) runs at
+/// On a Zen 3 the layer (128 -> 1024, a block of 48 points then) ran at
 /// 28 multiply-adds a cycle against 23 for the int16 kernel.
 ///
 /// A quad with a high bit costs a second pass as long as the first, so
@@ -95,7 +95,7 @@ pub(super) fn pool_bytes(
         let (f0, f1) = (r0.as_chunks::<4>().0, r1.as_chunks::<4>().0);
         let (mut m0, mut m1) = (i32::MIN, i32::MIN);
         // Two rows share each load: half a block at a time keeps the
-        // twelve vectors of work in registers.
+        // sixteen vectors of work in registers.
         for half in 0..2 {
             let mut acc0 = [_mm256_set1_epi32(b0); HALF];
             let mut acc1 = [_mm256_set1_epi32(b1); HALF];
@@ -122,20 +122,6 @@ pub(super) fn pool_bytes(
         o += 2;
     }
     true
-}
-
-/// Vectors of eight points in half a block.
-const HALF: usize = VECTORS / 2;
-
-/// Half a block's words of one quad.
-type Half = [u32; HALF * 8];
-
-/// Half `half` of a quad's words in a block (zeros if `x` is short).
-#[inline(always)]
-fn half_of(x: &[u32], half: usize) -> &Half {
-    x.get(half * HALF * 8..)
-        .and_then(|x| x.first_chunk())
-        .unwrap_or(&[0; HALF * 8])
 }
 
 /// Weights `4j..4j + 4` of a row as one word, zeros past its end.

@@ -51,11 +51,11 @@ pub(super) enum Out<'a> {
 ///   `-128 * sum(w)`, so `b + sum(w x) = b - 128 sum(w) + sum(w u)`;
 /// - `quads` holds the inputs as byte quads by point (word `j * BLOCK + p`
 ///   holds point `p`'s inputs `4j..4j + 4`; past `inputs` the weights are
-///   zero, so whatever is there adds nothing), three vectors of sixteen
+///   zero, so whatever is there adds nothing), four vectors of sixteen
 ///   points per quad, as [`Out::Quads`] writes them;
 /// - four rows at a time share each load: each row's weight quad is
 ///   broadcast and `VPDPBUSD` adds 64 products into sixteen points' lanes,
-///   twelve accumulators in all, then [`finish`] requantizes them into the
+///   sixteen accumulators in all, then [`finish`] requantizes them into the
 ///   next layer's quads or takes each row's largest for the max-pool.
 ///
 /// Each lane's four products are at most `4 * 255 * 128` in magnitude,
@@ -149,16 +149,12 @@ fn dot_step(acc: &mut [[__m512i; WIDE]; ROWS], w: [i32; ROWS], x: &[u32]) {
 #[target_feature(enable = "avx512f")]
 pub(super) fn block_vectors(x: &[u32]) -> Option<[__m512i; WIDE]> {
     let x = x.first_chunk::<BLOCK>()?;
-    // SAFETY: `x` is `BLOCK` = 16 * WIDE words, 64 bytes from each word
-    // `16 v`; unaligned loads are allowed.
+    // (A block of another size than four vectors fails to compile here.)
+    let [a, b, c, d]: &[[u32; 16]; WIDE] = x.as_chunks::<16>().0.try_into().ok()?;
+    // SAFETY: each of `a..d` is sixteen words (64 bytes); unaligned loads
+    // are allowed.
     #[allow(unsafe_code)]
-    let xs = unsafe {
-        [
-            _mm512_loadu_si512(x.as_ptr().cast()),
-            _mm512_loadu_si512(x[16..].as_ptr().cast()),
-            _mm512_loadu_si512(x[32..].as_ptr().cast()),
-        ]
-    };
+    let xs = unsafe { [a, b, c, d].map(|v| _mm512_loadu_si512(v.as_ptr().cast())) };
     Some(xs)
 }
 

@@ -14,7 +14,7 @@ use crate::fixed::OutputStep;
 /// point (as [`super::layer`]'s). `VPDPWSSD` multiplies each point's input
 /// pair with a broadcast weight pair and adds both products to the point's
 /// i32 accumulator in one instruction (no saturation), sixteen points a
-/// vector, three vectors a block, four rows sharing each load; the
+/// vector, four vectors a block, four rows sharing each load; the
 /// activations go to `out` as [`finish`] takes them. The sums are the
 /// portable kernel's exact integers (`|w| <= 128`, `|x| <= 32767`), so the
 /// results are its bits.
