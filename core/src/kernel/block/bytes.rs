@@ -9,7 +9,8 @@ use core::arch::x86_64::{
 };
 
 use super::super::{Requant, rows, rows_mut};
-use super::{BLOCK, HALF, Half, VECTORS, half_of, largest, raise};
+use super::pairs::{HALF, Half, VECTORS, half_of, largest};
+use super::{BLOCK, raise};
 use crate::format::le_i32s;
 
 /// A layer on bytes (the pooled one here, every one after the first with
@@ -253,8 +254,8 @@ fn split_bytes(
 mod tests {
     use super::super::super::Sink;
     use super::super::super::test_layer::{TestLayer, byte};
+    use super::super::pairs::tests::by_point;
     use super::super::pool_maxima;
-    use super::super::tests::by_point;
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;

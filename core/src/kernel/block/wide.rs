@@ -80,8 +80,8 @@ fn pair_step(acc: &mut [[__m512i; WIDE]; ROWS], w: [u32; ROWS], x: &[u32]) {
 mod tests {
     use super::super::super::test_layer::{TestLayer, byte};
     use super::super::super::{Sink, dense_tile};
+    use super::super::pairs::tests::by_point;
     use super::super::pool_maxima;
-    use super::super::tests::by_point;
     use super::super::vnni::tests::{from_quads, vnni};
     use super::super::widen;
     use super::*;
