@@ -124,6 +124,7 @@ impl OutputStep {
 
     /// The ReLU floor of the clamp (the activation of a negative
     /// accumulator, or -128 without ReLU).
+    #[cfg(all(target_arch = "x86_64", feature = "std"))]
     pub(crate) fn act_min(&self) -> i8 {
         self.act_min
     }
