@@ -22,11 +22,11 @@ pub const POSE_DIM: usize = 7;
 pub const MAX_LAYERS: usize = 8;
 /// Most points the int8 encoder pushes through the layers together (see [`crate::int8`]).
 pub const MAX_TILE: usize = 8;
-/// Points the int8 encoder's x86-64 host kernel pushes through the layers
-/// together, given [`Arch::host_block_len`] more bytes of scratch (see
-/// [`crate::Int8Model::host_scratch_len`]): four vectors of sixteen points
-/// (AVX-512), sixteen accumulators with four rows at a time; 1,024 points
-/// make 16 whole blocks. 64 points ran 14% faster than 48 (A/B, best
+/// Points the int8 encoder's host block kernel (x86-64, aarch64) pushes
+/// through the layers together, given [`Arch::host_block_len`] more bytes
+/// of scratch (see [`crate::Int8Model::host_scratch_len`]): four vectors
+/// of sixteen points with AVX-512, sixteen accumulators with four rows at
+/// a time; 1,024 points make 16 whole blocks. 64 points ran 14% faster than 48 (A/B, best
 /// rounds, Xeon with AVX-512 VNNI; 7-9% on its AVX2 route).
 pub const HOST_BLOCK: usize = 64;
 /// Points the f32 encoder's host kernel pushes through the layers together
@@ -80,8 +80,7 @@ impl LayerShape {
     }
 }
 
-/// The x86-64 host block kernel's scratch ([`Arch::host_block_len`]), in
-/// words.
+/// The host block kernel's scratch ([`Arch::host_block_len`]), in words.
 pub(crate) struct HostBlockWords {
     /// The encoder's weights as int16 pairs ([`LayerShape::pair_words`]),
     /// each row padded to an even length (a pooled layer that runs on
@@ -195,7 +194,7 @@ impl Arch {
         int8_scratch_len(&self.encoder, &self.head, tile)
     }
 
-    /// Bytes of scratch the int8 encoder's x86-64 host kernel uses past
+    /// Bytes of scratch the int8 encoder's host block kernel uses past
     /// [`Self::int8_scratch_len`]: the encoder's weights as int16 (each
     /// row padded to an even length); one word per output of every layer
     /// after the first, and when the pooled layer's input is an int8

@@ -115,7 +115,7 @@ impl OutputStep {
     /// at once: the activation is `clamp((hi(acc * multiplier) + offset)
     /// >> high_shift, act_min, 127)`, `hi` the high 32 bits of the i64
     /// product. `None` for the general path (use [`Self::apply`]).
-    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
     #[inline(always)]
     pub(crate) fn fast_parts(&self) -> Option<(i32, i32, u32, i8)> {
         self.offset
@@ -124,7 +124,7 @@ impl OutputStep {
 
     /// The ReLU floor of the clamp (the activation of a negative
     /// accumulator, or -128 without ReLU).
-    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
     pub(crate) fn act_min(&self) -> i8 {
         self.act_min
     }

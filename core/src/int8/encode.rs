@@ -8,14 +8,14 @@ use crate::error::{Error, Result};
 use crate::fixed::quantize_coordinate;
 use crate::kernel::{Sink, as_words, dense_points, dense_tile_i8};
 use crate::pose::PointMap;
-#[cfg(all(target_arch = "x86_64", feature = "std"))]
+#[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
 use crate::{arch::HOST_BLOCK, kernel::Requant, kernel::block::BlockEncoder};
 
 /// Points collected before they go through the encoder: a host block
 /// where the block kernel exists, a tile elsewhere.
-#[cfg(all(target_arch = "x86_64", feature = "std"))]
+#[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
 const COLLECT: usize = HOST_BLOCK;
-#[cfg(not(all(target_arch = "x86_64", feature = "std")))]
+#[cfg(not(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std")))]
 const COLLECT: usize = MAX_TILE;
 
 impl Int8Model<'_> {
@@ -46,9 +46,10 @@ impl Int8Model<'_> {
     /// `tile` points in source order, so the feature does not depend on the
     /// tile size. No point inside the range: [`Error::NoPointInRange`].
     ///
-    /// On x86-64 with the `std` feature, when `extra` holds
-    /// [`crate::arch::Arch::host_block_len`] bytes and the CPU has AVX2, every full
-    /// block of [`crate::arch::HOST_BLOCK`] points goes through the block kernel
+    /// With the `std` feature, when `extra` holds
+    /// [`crate::arch::Arch::host_block_len`] bytes and the CPU has a block
+    /// kernel (x86-64 with AVX2, aarch64 with the dot-product extension),
+    /// every block of [`crate::arch::HOST_BLOCK`] points goes through it
     /// instead (`kernel::block`; same values, bit for bit).
     pub(super) fn encode_into(
         &self,
@@ -70,13 +71,13 @@ impl Int8Model<'_> {
         let expanded = as_words(spare);
         // The block kernel copies the weights first: not worth it when no
         // block can fill.
-        #[cfg(all(target_arch = "x86_64", feature = "std"))]
+        #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
         let mut block = (source.len() >= HOST_BLOCK)
             .then(|| BlockEncoder::new(&self.p.arch, &self.p.encoder, extra))
             .flatten();
-        #[cfg(all(target_arch = "x86_64", feature = "std"))]
+        #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
         let batch = if block.is_some() { HOST_BLOCK } else { tile };
-        #[cfg(not(all(target_arch = "x86_64", feature = "std")))]
+        #[cfg(not(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std")))]
         let (batch, _) = (tile, extra);
         let mut points = [[0i16; INPUT_DIM]; COLLECT];
         let (mut filled, mut encoded, mut left_out) = (0usize, 0usize, 0u32);
@@ -92,7 +93,7 @@ impl Int8Model<'_> {
             if filled < batch {
                 continue;
             }
-            #[cfg(all(target_arch = "x86_64", feature = "std"))]
+            #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
             if let Some(block) = block.as_mut() {
                 block.encode(&points, self.block_layers());
                 encoded += filled;
@@ -103,7 +104,7 @@ impl Int8Model<'_> {
             encoded += filled;
             filled = 0;
         }
-        #[cfg(all(target_arch = "x86_64", feature = "std"))]
+        #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
         if let Some(block) = block.as_mut() {
             // The last points (fewer than a block) fill one with copies of
             // the first of them: a repeated point leaves the max-pool as it
@@ -136,7 +137,7 @@ impl Int8Model<'_> {
 
     /// The encoder's layers as the block kernel takes them: input and
     /// output widths, weights and requantization (ReLU on), first to last.
-    #[cfg(all(target_arch = "x86_64", feature = "std"))]
+    #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
     fn block_layers(&self) -> impl Iterator<Item = (usize, usize, &[u8], Requant<'_>)> {
         let layers = self.p.arch.encoder_layers().zip(self.p.encoder.iter());
         layers.map(|(s, l)| (s.inputs, s.outputs, l.weights, requant(l, true)))

@@ -16,7 +16,8 @@
 //!   are the raw head output.
 //!
 //! Points go through the encoder in tiles of up to [`MAX_TILE`] points; a
-//! weight row is then read once per tile. On an x86-64 host with AVX2 and
+//! weight row is then read once per tile. On an x86-64 host with AVX2 or
+//! an aarch64 host with the dot-product extension, given
 //! [`Int8Model::host_scratch_len`] bytes of scratch, blocks of
 //! [`crate::arch::HOST_BLOCK`] points take the block kernel instead. The
 //! result depends on neither (bit for bit).
@@ -124,8 +125,9 @@ impl<'a> Int8Model<'a> {
         self.p.arch.int8_scratch_len(tile)
     }
 
-    /// Bytes of scratch with which an x86-64 host with AVX2 (`std`
-    /// feature) encodes [`crate::arch::HOST_BLOCK`] points at a time
+    /// Bytes of scratch with which a host (`std` feature; x86-64 with AVX2,
+    /// aarch64 with the dot-product extension) encodes
+    /// [`crate::arch::HOST_BLOCK`] points at a time
     /// (several times faster; same results, bit for bit): a full tile's
     /// [`Self::scratch_len`] plus [`Arch::host_block_len`]. Elsewhere the
     /// extra bytes go unused.

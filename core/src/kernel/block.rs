@@ -1,8 +1,10 @@
-//! The x86-64 AVX2 (and AVX-512 VNNI) block encoder (`std` feature):
+//! The host block encoder (`std` feature; x86-64 with AVX2 or AVX-512
+//! VNNI, aarch64 with the dot-product extension, see [`Route`]):
 //! [`HOST_BLOCK`](crate::arch::HOST_BLOCK) points through every encoder
-//! layer, each layer a small matrix product.
+//! layer, each layer a small matrix product. The aarch64 route
+//! (`sdot`) is described there; what follows is the x86-64 routes.
 //!
-//! The tile kernel ([`super::x86`]) multiplies one weight row with eight
+//! The tile kernel (`super::x86`) multiplies one weight row with eight
 //! points' activations along the input axis and must add each point's
 //! eight partial sums horizontally, for every output. Here the vector
 //! lanes run along the points instead, so no lane sum is ever needed:
@@ -13,7 +15,7 @@
 //! - a layer's input is kept as int16 pairs *by point*: word `j * BLOCK +
 //!   p` holds point `p`'s inputs `2j` and `2j + 1`. The first layer's
 //!   input is the coordinates: `(x, y)` then `(z, 0)`;
-//! - for two outputs at a time and every input pair ([`pairs`]), the two
+//! - for two outputs at a time and every input pair (`pairs`), the two
 //!   weight words are broadcast and `VPMADDWD` multiplies them with the
 //!   pairs of eight points at once (16 multiplies, pairs summed into eight
 //!   i32 lanes), half a block (four vectors of points) per weight word at
@@ -25,12 +27,12 @@
 //!   ([`raise`]) and its output steps run once, after the last block
 //!   (the step is non-decreasing, so that is the max-pool);
 //! - the last (pooled) layer, most of the work, runs on bytes instead
-//!   when its input is an int8 activation ([`bytes`]): `VPMADDUBSW` on
+//!   when its input is an int8 activation (`bytes`): `VPMADDUBSW` on
 //!   the low seven bits of each input, a second pass only for the rare
 //!   quads of inputs with the top bit set;
 //! - on a CPU with AVX-512 VNNI the layers take another route: the first
-//!   (the coordinates, int16) through [`wide`], `VPDPWSSD` on the same
-//!   pairs, and every later one through [`vnni`], `VPDPBUSD` on byte quads
+//!   (the coordinates, int16) through `wide`, `VPDPWSSD` on the same
+//!   pairs, and every later one through `vnni`, `VPDPBUSD` on byte quads
 //!   of `x + 128` (64 multiply-adds an instruction, twice `VPDPWSSD`'s),
 //!   each layer writing its activations straight into the next one's
 //!   quads; sixteen points a vector, four vectors a block, four rows at a
@@ -40,41 +42,137 @@
 //! and model loading bounds every partial sum (see [`super::dot`]), so the
 //! result is the portable kernel's, bit for bit, in any order.
 
-use super::{Requant, as_words};
+use super::{Requant, as_words, rows, rows_mut};
 use crate::arch::{Arch, HOST_BLOCK as BLOCK, INPUT_DIM};
 use crate::fixed::OutputStep;
 use crate::format::{Int8Layer, le_i32s};
 
+#[cfg(target_arch = "x86_64")]
 mod bytes;
+#[cfg(target_arch = "x86_64")]
 mod pairs;
+#[cfg(target_arch = "aarch64")]
+#[allow(unsafe_code)]
+mod sdot;
+#[cfg(target_arch = "x86_64")]
 mod vnni;
+#[cfg(target_arch = "x86_64")]
 mod wide;
-use bytes::{ByteLayer, pool_bytes};
-use pairs::{Dest, layer, pair, widen};
-use vnni::{Out, layer_bytes};
-use wide::layer_wide;
+#[cfg(target_arch = "x86_64")]
+use {
+    bytes::pool_bytes,
+    pairs::{Dest, layer},
+};
+
+/// The kernels a block encoder runs, by what the CPU has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Route {
+    /// x86-64 with AVX2: every layer on int16 pairs (`pairs`) but the
+    /// pooled one, which runs on bytes (`bytes`) where its input is an
+    /// int8 activation.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    /// x86-64 with AVX-512 VNNI and BW: the first layer on int16 pairs
+    /// (`wide`), every later one on byte quads of `x + 128` (`vnni`).
+    #[cfg(target_arch = "x86_64")]
+    Vnni,
+    /// aarch64 with the dot-product extension: the first layer on int16
+    /// pairs, every later one on byte quads (`sdot`).
+    #[cfg(target_arch = "aarch64")]
+    Sdot,
+}
+
+impl Route {
+    /// The fastest route this CPU can run, if any.
+    fn detect() -> Option<Self> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if vnni::has_vnni() {
+                Some(Route::Vnni)
+            } else {
+                std::is_x86_feature_detected!("avx2").then_some(Route::Avx2)
+            }
+        }
+        #[cfg(target_arch = "aarch64")]
+        {
+            sdot::has_sdot().then_some(Route::Sdot)
+        }
+    }
+
+    /// Whether the pooled layer reads its input as byte quads and every
+    /// layer after the first does too, with only the first layer's int16
+    /// weights copied.
+    fn on_quads(self) -> bool {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Route::Avx2 => false,
+            #[cfg(target_arch = "x86_64")]
+            Route::Vnni => true,
+            #[cfg(target_arch = "aarch64")]
+            Route::Sdot => true,
+        }
+    }
+
+    /// Whether layer `l` (0 the first) needs its rows' weight sums: the
+    /// byte kernels that hold each input as `x + 128` take `-128 * sum`
+    /// into the bias.
+    #[cfg_attr(target_arch = "aarch64", allow(unused_variables))]
+    fn needs_sums(self, l: usize, layers: usize) -> bool {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Route::Avx2 => l + 1 == layers && l > 0,
+            #[cfg(target_arch = "x86_64")]
+            Route::Vnni => l > 0,
+            #[cfg(target_arch = "aarch64")]
+            Route::Sdot => false,
+        }
+    }
+}
+
+/// A layer on bytes: its int8 weight rows as stored (`inputs` bytes each)
+/// and, where the route needs them ([`Route::needs_sums`]), each row's
+/// weight sum.
+pub(super) struct ByteLayer<'a> {
+    pub weights: &'a [u8],
+    pub inputs: usize,
+    /// (Read by the x86-64 routes only: the SDOT route is signed.)
+    #[cfg_attr(target_arch = "aarch64", allow(dead_code))]
+    pub sums: &'a [u32],
+}
+
+/// Where a layer's activations go on the quad routes.
+pub(super) enum Out<'a> {
+    /// The next layer's input as byte quads: word `j * BLOCK + p` holds
+    /// point `p`'s activations of outputs `4j..4j + 4` (each plus 128 on
+    /// the VNNI route; a missing output past the last reads as activation
+    /// 0).
+    Quads(&'a mut [u32]),
+    /// The max-pool before its output step: each output's largest
+    /// accumulator so far (an i32 in each word), to which [`pool_maxima`]
+    /// applies the steps once the last block is in ([`raise`]).
+    Maxima(&'a mut [u32]),
+}
 
 /// A block encoder over a caller's scratch: the int16 weights, the row
-/// sums of every layer after the first, the pooled layer's quad list when
-/// it runs on bytes, and two activation buffers.
+/// sums where the route needs them, the pooled layer's quad list when it
+/// runs on bytes with AVX2, and two activation buffers.
 pub(crate) struct BlockEncoder<'w> {
     weights: &'w [u32],
-    /// Each row's weight sum, for every layer after the first in order
-    /// (their byte kernels take `-128 * sum` into the bias).
+    /// Each row's weight sum, for every layer after the first in order,
+    /// filled where [`Route::needs_sums`] says.
     sums: &'w [u32],
+    #[cfg(target_arch = "x86_64")]
     pooled: Option<OnBytes<'w>>,
     /// The pooled layer's largest accumulators over the blocks so far
     /// ([`raise`]), and whether any block has been encoded.
     maxima: &'w mut [u32],
     blocks: bool,
     acts: (&'w mut [u32], &'w mut [u32]),
-    /// The CPU has AVX-512 VNNI and BW: the first layer through
-    /// [`layer_wide`], every later one through [`layer_bytes`] on byte
-    /// quads, and only the first layer's weights are copied.
-    vnni: bool,
+    route: Route,
 }
 
 /// The pooled layer's scratch when it runs on bytes with AVX2.
+#[cfg(target_arch = "x86_64")]
 struct OnBytes<'w> {
     /// Room for the list of quads that take the high-bit pass.
     quads: &'w mut [u32],
@@ -88,55 +186,54 @@ struct OnBytes<'w> {
 impl<'w> BlockEncoder<'w> {
     /// Copies the encoder weights into `area` (at least
     /// [`Arch::host_block_len`] bytes) and returns the encoder; `None`,
-    /// having done nothing that matters, without AVX2 or room.
+    /// having done nothing that matters, on a CPU without a route
+    /// ([`Route::detect`]) or without room.
     pub(crate) fn new(arch: &Arch, layers: &[Int8Layer<'_>], area: &'w mut [i8]) -> Option<Self> {
-        Self::with_route(arch, layers, area, vnni::has_vnni())
+        Self::with_route(arch, layers, area, Route::detect()?)
     }
 
-    /// [`Self::new`] on the VNNI kernels or not, as `vnni` says (it must
-    /// not say so on a CPU without them).
+    /// [`Self::new`] on `route` (which the CPU must be able to run).
     fn with_route(
         arch: &Arch,
         layers: &[Int8Layer<'_>],
         area: &'w mut [i8],
-        vnni: bool,
+        route: Route,
     ) -> Option<Self> {
-        if !std::is_x86_feature_detected!("avx2") || area.len() < arch.host_block_len() {
+        if area.len() < arch.host_block_len() {
             return None;
         }
         let words = as_words(area);
         let sizes = arch.host_block_words();
         let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
         let (sums, rest) = rest.split_at_mut_checked(sizes.sums)?;
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
         let (quads, rest) = rest.split_at_mut_checked(sizes.quads)?;
         let (maxima, rest) = rest.split_at_mut_checked(sizes.maxima)?;
         maxima.fill(i32::MIN as u32);
         let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
         let b = rest.get_mut(..sizes.buffer)?;
-        // The AVX2 route reads only the pooled layer's sums (the last).
-        let later = arch.encoder.len().saturating_sub(1);
+        let count = arch.encoder.len();
         let mut free = &mut *sums;
         for (l, (shape, layer)) in arch.encoder_layers().zip(layers).enumerate().skip(1) {
             let (out, tail) = free.split_at_mut_checked(shape.outputs)?;
-            if vnni || l == later {
-                for (sum, row) in out.iter_mut().zip(super::rows(layer.weights, shape.inputs)) {
+            if route.needs_sums(l, count) {
+                for (sum, row) in out.iter_mut().zip(rows(layer.weights, shape.inputs)) {
                     *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
                 }
             }
             free = tail;
         }
-        // A pooled layer on bytes: its int16 weights last, copied later if
-        // at all. With VNNI only the first layer's are ever used.
+        // A pooled layer on bytes with AVX2: its int16 weights last, copied
+        // later if at all. The quad routes use only the first layer's.
         let last = arch.encoder_layers().last();
-        let on_bytes = last.filter(|_| sizes.quads > 0);
+        let on_bytes = last.filter(|_| sizes.quads > 0 && !route.on_quads());
         let later = on_bytes.map_or(0, |shape| shape.pair_words());
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
         let (weights, wide) = weights.split_at_mut_checked(sizes.weights.checked_sub(later)?)?;
-        let widened = if vnni {
+        let widened = if route.on_quads() {
             1
         } else {
-            arch.encoder
-                .len()
-                .saturating_sub(usize::from(on_bytes.is_some()))
+            count.saturating_sub(usize::from(on_bytes.is_some()))
         };
         let mut free = &mut *weights;
         for (shape, layer) in arch.encoder_layers().zip(layers).take(widened) {
@@ -147,6 +244,7 @@ impl<'w> BlockEncoder<'w> {
         Some(BlockEncoder {
             weights,
             sums,
+            #[cfg(target_arch = "x86_64")]
             pooled: on_bytes.map(|_| OnBytes {
                 quads,
                 wide,
@@ -155,15 +253,15 @@ impl<'w> BlockEncoder<'w> {
             maxima,
             blocks: false,
             acts: (a, b),
-            vnni,
+            route,
         })
     }
 
     /// Encodes a block of quantized points and max-pools the last layer's
     /// accumulators into the running maxima, which [`Self::pool`] then
-    /// takes into a feature. `layers` holds each encoder layer's input and output
-    /// widths, int8 weights and requantization, first to last, as in
-    /// [`Self::new`].
+    /// takes into a feature. `layers` holds each encoder layer's input and
+    /// output widths, int8 weights and requantization, first to last, as
+    /// in [`Self::new`].
     pub(crate) fn encode<'q>(
         &mut self,
         points: &[[i16; INPUT_DIM]; BLOCK],
@@ -176,59 +274,32 @@ impl<'w> BlockEncoder<'w> {
             *xy = pair(x, y);
             *z = pair(zc, 0);
         }
-        let (mut input, mut output) = (a, b);
-        if self.vnni {
-            // SAFETY: `BlockEncoder::new` found AVX-512 VNNI and BW (which
-            // imply F), all `encode_vnni` requires.
-            #[allow(unsafe_code)]
-            unsafe {
-                encode_vnni(self.weights, self.sums, input, output, layers, self.maxima)
-            };
-            return;
-        }
-        let mut weights = self.weights;
-        let mut layers = layers.peekable();
-        while let Some((inputs, outputs, bytes, q)) = layers.next() {
-            let pairs = inputs.div_ceil(2);
-            let last = layers.peek().is_none();
-            if let (true, Some(on)) = (last, self.pooled.as_mut()) {
-                let pooled = ByteLayer {
-                    weights: bytes,
-                    inputs,
-                    // The pooled layer's sums are the last.
-                    sums: self
-                        .sums
-                        .get(self.sums.len().saturating_sub(outputs)..)
-                        .unwrap_or(&[]),
-                };
-                let maxima = &mut *self.maxima;
-                // SAFETY: `BlockEncoder::new` found AVX2, all `pool_bytes`
-                // and `layer` require.
-                #[allow(unsafe_code)]
-                unsafe {
-                    if !pool_bytes(&pooled, q, input, output, on.quads, maxima) {
-                        if !on.widened {
-                            widen(bytes, inputs, on.wide);
-                            on.widened = true;
-                        }
-                        layer(on.wide, pairs, q, input, Dest::Maxima(maxima));
-                    }
-                };
-                return;
-            }
-            let (w, rest) = weights.split_at(weights.len().min(outputs * pairs));
-            weights = rest;
-            let dest = if last {
-                Dest::Maxima(&mut *self.maxima)
-            } else {
-                Dest::Pairs(&mut *output)
-            };
-            // SAFETY: `BlockEncoder::new` found AVX2, all `layer` requires.
-            #[allow(unsafe_code)]
-            unsafe {
-                layer(w, pairs, q, input, dest)
-            };
-            core::mem::swap(&mut input, &mut output);
+        let (input, output) = (a, b);
+        let (weights, sums, maxima) = (self.weights, self.sums, &mut *self.maxima);
+        // SAFETY (every arm): `Route::detect` found what the route's
+        // kernels require.
+        #[allow(unsafe_code)]
+        match self.route {
+            #[cfg(target_arch = "x86_64")]
+            Route::Vnni => unsafe {
+                encode_quads::<vnni::Kernels>(weights, sums, input, output, layers, maxima)
+            },
+            #[cfg(target_arch = "aarch64")]
+            Route::Sdot => unsafe {
+                encode_quads::<sdot::Kernels>(weights, sums, input, output, layers, maxima)
+            },
+            #[cfg(target_arch = "x86_64")]
+            Route::Avx2 => unsafe {
+                encode_avx2(
+                    weights,
+                    sums,
+                    self.pooled.as_mut(),
+                    maxima,
+                    input,
+                    output,
+                    layers,
+                )
+            },
         }
     }
 }
@@ -244,13 +315,34 @@ impl BlockEncoder<'_> {
     }
 }
 
-/// [`BlockEncoder::encode`] with AVX-512 VNNI, from the coordinate pairs
-/// in `input`: the first layer on them ([`layer_wide`], its int16
-/// `weights`), every later one on the previous one's byte quads
-/// ([`layer_bytes`], their row `sums` in order), `output` and `input`
-/// taking turns; the pooled layer's largest accumulators into `maxima`.
-#[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
-fn encode_vnni<'a, 'q>(
+/// The two kernels of a route on byte quads.
+#[allow(unsafe_code)]
+trait QuadKernels {
+    /// The first layer, on the coordinates as int16 pairs by point:
+    /// `weights` holds its rows of `pairs` int16-pair words.
+    ///
+    /// # Safety
+    /// The CPU must have what the route needs.
+    unsafe fn first(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], out: Out<'_>);
+
+    /// A later layer, on the previous one's byte quads; `false`, having
+    /// written nothing, when `input` is short.
+    ///
+    /// # Safety
+    /// As for [`Self::first`].
+    unsafe fn later(layer: &ByteLayer<'_>, q: Requant<'_>, input: &[u32], out: Out<'_>) -> bool;
+}
+
+/// [`BlockEncoder::encode`] on a quad route, from the coordinate pairs in
+/// `input`: the first layer on them (its int16 `weights`), every later one
+/// on the previous one's byte quads (their row `sums` in order, where the
+/// route takes them), `output` and `input` taking turns; the pooled
+/// layer's largest accumulators into `maxima`.
+///
+/// # Safety
+/// The CPU must have what `K` needs.
+#[allow(unsafe_code)]
+unsafe fn encode_quads<'a, 'q, K: QuadKernels>(
     weights: &[u32],
     mut sums: &[u32],
     mut input: &'a mut [u32],
@@ -268,7 +360,8 @@ fn encode_vnni<'a, 'q>(
         };
         if core::mem::take(&mut first) {
             let w = weights.get(..outputs * inputs.div_ceil(2)).unwrap_or(&[]);
-            layer_wide(w, inputs.div_ceil(2), q, input, out);
+            // SAFETY: the caller's.
+            unsafe { K::first(w, inputs.div_ceil(2), q, input, out) };
         } else {
             let (s, rest) = sums.split_at(sums.len().min(outputs));
             sums = rest;
@@ -277,12 +370,97 @@ fn encode_vnni<'a, 'q>(
                 inputs,
                 sums: s,
             };
-            if !layer_bytes(&layer, q, input, out) {
+            // SAFETY: the caller's.
+            if !unsafe { K::later(&layer, q, input, out) } {
                 return;
             }
         }
         core::mem::swap(&mut input, &mut output);
     }
+}
+
+/// [`BlockEncoder::encode`] on the AVX2 route, from the coordinate pairs
+/// in `input`: every layer on int16 pairs ([`layer`], their `weights` in
+/// order) but a pooled layer on bytes (`pooled`, its row sums the last of
+/// `sums`), `output` and `input` taking turns.
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+unsafe fn encode_avx2<'a, 'q>(
+    mut weights: &[u32],
+    sums: &[u32],
+    mut pooled: Option<&mut OnBytes<'_>>,
+    maxima: &mut [u32],
+    mut input: &'a mut [u32],
+    mut output: &'a mut [u32],
+    layers: impl Iterator<Item = (usize, usize, &'q [u8], Requant<'q>)>,
+) {
+    let mut layers = layers.peekable();
+    while let Some((inputs, outputs, bytes, q)) = layers.next() {
+        let pairs = inputs.div_ceil(2);
+        let last = layers.peek().is_none();
+        if let (true, Some(on)) = (last, pooled.as_mut()) {
+            let layer_on_bytes = ByteLayer {
+                weights: bytes,
+                inputs,
+                // The pooled layer's sums are the last.
+                sums: sums
+                    .get(sums.len().saturating_sub(outputs)..)
+                    .unwrap_or(&[]),
+            };
+            // SAFETY: the caller's (AVX2, all `pool_bytes` and `layer`
+            // require).
+            unsafe {
+                if !pool_bytes(&layer_on_bytes, q, input, output, on.quads, maxima) {
+                    if !on.widened {
+                        widen(bytes, inputs, on.wide);
+                        on.widened = true;
+                    }
+                    layer(on.wide, pairs, q, input, Dest::Maxima(maxima));
+                }
+            };
+            return;
+        }
+        let (w, rest) = weights.split_at(weights.len().min(outputs * pairs));
+        weights = rest;
+        let dest = if last {
+            Dest::Maxima(&mut *maxima)
+        } else {
+            Dest::Pairs(&mut *output)
+        };
+        // SAFETY: the caller's.
+        unsafe { layer(w, pairs, q, input, dest) };
+        core::mem::swap(&mut input, &mut output);
+    }
+}
+
+/// Sign-extends a layer's int8 weight rows of `inputs` values into int16
+/// pair words, each row padded with a zero to an even length.
+fn widen(weights: &[u8], inputs: usize, out: &mut [u32]) {
+    let pairs = inputs.div_ceil(2);
+    for (row, out) in rows(weights, inputs).zip(rows_mut(out, pairs)) {
+        for (j, word) in out.iter_mut().enumerate() {
+            let w = |k: usize| row.get(k).map_or(0, |&b| b as i8 as i16);
+            *word = pair(w(2 * j), w(2 * j + 1));
+        }
+    }
+}
+
+/// Two int16 values as one word, `lo` in the low half.
+fn pair(lo: i16, hi: i16) -> u32 {
+    (lo as u16 as u32) | ((hi as u16 as u32) << 16)
+}
+
+/// Weights `4j..4j + 4` of a row as one word, zeros past its end.
+#[inline]
+fn quad(row: &[u8], j: usize) -> i32 {
+    let mut word = [0u8; 4];
+    for (w, &v) in word.iter_mut().zip(row.iter().skip(4 * j)) {
+        *w = v;
+    }
+    i32::from_le_bytes(word)
 }
 
 /// Raises output `o`'s running maximum (an i32 in each word of `maxima`,
@@ -319,21 +497,39 @@ mod tests {
     use crate::testing::SplitMix64;
     use std::vec::Vec;
 
-    /// The whole block encoder, on the VNNI kernels (where the CPU has
-    /// them) and on AVX2 alone, gives the pooled feature of the portable
-    /// kernels over two blocks: encoders of one layer, of odd widths and of
-    /// the embedded widths, both requantization paths.
+    /// Every route this CPU can run (the tests say which they cannot).
+    fn routes() -> Vec<Route> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut routes = Vec::new();
+            if std::is_x86_feature_detected!("avx2") {
+                routes.push(Route::Avx2);
+            }
+            if vnni::has_vnni() {
+                routes.push(Route::Vnni);
+            } else {
+                std::eprintln!("no AVX-512 VNNI on this CPU: its route not tested");
+            }
+            routes
+        }
+        #[cfg(target_arch = "aarch64")]
+        {
+            if sdot::has_sdot() {
+                std::vec![Route::Sdot]
+            } else {
+                std::eprintln!("no dot-product extension on this CPU: the SDOT route not tested");
+                Vec::new()
+            }
+        }
+    }
+
+    /// The whole block encoder, on every route the CPU can run, gives the
+    /// pooled feature of the portable kernels over two blocks: encoders of
+    /// one layer, of odd widths and of the embedded widths, both
+    /// requantization paths.
     #[test]
     fn block_encoder_matches_portable_on_every_route() {
-        if !std::is_x86_feature_detected!("avx2") {
-            return;
-        }
-        let routes: &[bool] = if vnni::has_vnni() {
-            &[false, true]
-        } else {
-            std::eprintln!("no AVX-512 VNNI on this CPU: its route not tested");
-            &[false]
-        };
+        let routes = routes();
         let mut rng = SplitMix64(40);
         let encoders: [&[u16]; 4] = [&[8], &[7, 33, 65], &[32, 64, 128, 256], &[16, 16]];
         for widths in encoders {
@@ -391,10 +587,10 @@ mod tests {
                         }
                     }
                 }
-                for &vnni in routes {
+                for &route in &routes {
                     let mut area = std::vec![0i8; arch.host_block_len()];
                     let mut encoder =
-                        BlockEncoder::with_route(&arch, &layers, &mut area, vnni).unwrap();
+                        BlockEncoder::with_route(&arch, &layers, &mut area, route).unwrap();
                     let mut got = std::vec![i8::MIN; want.len()];
                     for points in &blocks {
                         let steps = shapes
@@ -404,7 +600,7 @@ mod tests {
                         encoder.encode(points, steps);
                     }
                     encoder.pool(random.last().unwrap().requant(), &mut got);
-                    assert_eq!(got, want, "{widths:?}, {shifts:?}, VNNI {vnni}");
+                    assert_eq!(got, want, "{widths:?}, {shifts:?}, {route:?}");
                 }
             }
         }

@@ -147,7 +147,7 @@ mod dsp;
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
 mod x86;
 
-#[cfg(all(target_arch = "x86_64", feature = "std"))]
+#[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
 pub(crate) mod block;
 
 #[cfg(all(target_arch = "aarch64", feature = "std"))]
@@ -238,7 +238,7 @@ pub(crate) fn row_groups<'a>(
 }
 
 /// [`rows`] for a mutable slice.
-#[cfg(all(target_arch = "x86_64", feature = "std"))]
+#[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
 #[inline(always)]
 pub(crate) fn rows_mut<T>(values: &mut [T], len: usize) -> core::slice::ChunksExactMut<'_, T> {
     match core::num::NonZeroUsize::new(len) {

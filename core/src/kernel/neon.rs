@@ -1,5 +1,7 @@
-//! The aarch64 encoder and head kernels (`std` feature), chosen at run
-//! time: `SDOT` where the CPU has the dot-product extension (Armv8.2
+//! The aarch64 tile and head kernels (`std` feature), chosen at run
+//! time (with the host scratch and `dotprod`, whole blocks of points take
+//! the block kernel instead, [`super::block`]): `SDOT` where the CPU has
+//! the dot-product extension (Armv8.2
 //! `dotprod`: Cortex-A55/A76 and later, Apple M, Graviton 2+), plain NEON
 //! (`SMULL` + `SADALP`) on every other aarch64 CPU (Cortex-A53/A72, the
 //! Raspberry Pi 3 and 4).
@@ -80,8 +82,44 @@ impl Dot for Smull {
     }
 }
 
+/// `acc + ` the products of `w` and `x`, four per i32 lane (`SDOT`).
+///
+/// # Safety
+/// The CPU must have `dotprod`.
+#[inline(always)]
+pub(super) unsafe fn sdot(acc: int32x4_t, w: int8x16_t, x: int8x16_t) -> int32x4_t {
+    // SAFETY: the caller's.
+    unsafe { Sdot::dot(acc, w, x) }
+}
+
+/// `SDOT` by element: each i32 lane of `acc` plus the four products of
+/// its quad of `x` with quad `K` (0..=3) of `w`.
+///
+/// # Safety
+/// The CPU must have `dotprod`.
+#[inline(always)]
+pub(super) unsafe fn sdot_lane<const K: i32>(
+    mut acc: int32x4_t,
+    x: int8x16_t,
+    w: int8x16_t,
+) -> int32x4_t {
+    // SAFETY: the caller runs on a CPU with `dotprod`; the instruction
+    // only reads and writes these registers.
+    unsafe {
+        core::arch::asm!(
+            "sdot {acc:v}.4s, {x:v}.16b, {w:v}.4b[{k}]",
+            acc = inout(vreg) acc,
+            x = in(vreg) x,
+            w = in(vreg) w,
+            k = const K,
+            options(pure, nomem, nostack, preserves_flags),
+        );
+    }
+    acc
+}
+
 /// Whether the CPU has `SDOT`.
-fn has_sdot() -> bool {
+pub(super) fn has_sdot() -> bool {
     std::arch::is_aarch64_feature_detected!("dotprod")
 }
 

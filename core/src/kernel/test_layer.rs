@@ -5,6 +5,7 @@ use crate::testing::SplitMix64;
 use std::vec::Vec;
 
 /// Random weights, biases and output steps of one layer.
+#[derive(Clone)]
 pub(crate) struct TestLayer {
     pub weights: Vec<u8>,
     pub bias: Vec<u8>,
@@ -101,4 +102,108 @@ pub(crate) fn vector_cases(seed: u64) -> Vec<VectorCase> {
         }
     })
     .collect()
+}
+
+/// A case of the block kernels' layers on bytes: a random layer of
+/// `inputs -> outputs` and a block's inputs, [`HOST_BLOCK`] rows of
+/// `inputs` in `x`.
+///
+/// [`HOST_BLOCK`]: crate::arch::HOST_BLOCK
+pub(crate) struct BlockCase {
+    pub layer: TestLayer,
+    pub inputs: usize,
+    pub outputs: usize,
+    pub x: Vec<i8>,
+    pub what: &'static str,
+}
+
+/// The byte kernels' cases: widths that are and are not multiples of four
+/// and of sixteen, output counts that are and are not multiples of the
+/// four rows taken together, both requantization paths; inputs over the
+/// whole int8 range, in its
+/// lower or upper half only, and at either end. Then the largest
+/// products: every weight -128 or 127, every input -128, -1 or 127, the
+/// bias bringing the true accumulator to 400 and the output step dividing
+/// by 8, so the activation is 50, far from either clamp (checked here on
+/// the portable kernel): an accumulator off by more than 4 would show.
+pub(crate) fn block_cases(seed: u64) -> Vec<BlockCase> {
+    use crate::arch::HOST_BLOCK;
+    let mut rng = SplitMix64(seed);
+    let mut cases = Vec::new();
+    let shapes = [
+        (1, 1),
+        (5, 3),
+        (8, 8),
+        (33, 17),
+        (40, 9),
+        (64, 64),
+        (128, 256),
+        (130, 5),
+        (7, 10),
+    ];
+    for &(inputs, outputs) in &shapes {
+        for shifts in [(-22, -2), (-31, 31)] {
+            let n = HOST_BLOCK * inputs;
+            let patterns: [(&str, Vec<i8>); 5] = [
+                ("whole range", (0..n).map(|_| byte(&mut rng)).collect()),
+                (
+                    "lower half",
+                    (0..n).map(|_| rng.int(-128, -1) as i8).collect(),
+                ),
+                (
+                    "upper half",
+                    (0..n).map(|_| rng.int(0, 127) as i8).collect(),
+                ),
+                ("all -128", std::vec![-128; n]),
+                ("all 127", std::vec![127; n]),
+            ];
+            let layer = TestLayer::new(&mut rng, inputs, outputs, shifts);
+            for (what, x) in patterns {
+                cases.push(BlockCase {
+                    layer: layer.clone(),
+                    inputs,
+                    outputs,
+                    x,
+                    what,
+                });
+            }
+        }
+    }
+    let (inputs, outputs) = (128, 6);
+    for weight in [-128i8, 127] {
+        for x in [-128i8, -1, 127] {
+            let mut layer = TestLayer::new(&mut rng, inputs, outputs, (-2, -2));
+            layer.weights.fill(weight as u8);
+            let dot = weight as i32 * x as i32 * inputs as i32;
+            layer.bias = (0..outputs)
+                .flat_map(|_| (400 - dot).to_le_bytes())
+                .collect();
+            layer.multiplier = (0..outputs)
+                .flat_map(|_| (1i32 << 30).to_le_bytes())
+                .collect();
+            layer.zero_point = 0;
+            let x = std::vec![x; HOST_BLOCK * inputs];
+            let mut want = std::vec![i8::MIN; outputs];
+            super::dense_tile(
+                &layer.weights,
+                inputs,
+                layer.requant(),
+                &x,
+                &mut Sink::Pool(&mut want),
+            );
+            assert_eq!(
+                want,
+                std::vec![50; outputs],
+                "the portable kernel's activation"
+            );
+            cases.push(BlockCase {
+                layer,
+                inputs,
+                outputs,
+                x,
+                what: "extremes",
+            });
+        }
+    }
+    cases
 }

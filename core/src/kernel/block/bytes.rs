@@ -10,17 +10,8 @@ use core::arch::x86_64::{
 
 use super::super::{Requant, rows, rows_mut};
 use super::pairs::{HALF, Half, VECTORS, half_of, largest};
-use super::{BLOCK, raise};
+use super::{BLOCK, ByteLayer, quad, raise};
 use crate::format::le_i32s;
-
-/// A layer on bytes (the pooled one here, every one after the first with
-/// VNNI): its int8 weight rows as stored (`inputs` bytes each) and each
-/// row's weight sum.
-pub(super) struct ByteLayer<'a> {
-    pub weights: &'a [u8],
-    pub inputs: usize,
-    pub sums: &'a [u32],
-}
 
 /// The pooled (last) layer, its input an int8 activation. `VPMADDUBSW`
 /// multiplies 32 unsigned bytes by 32 signed ones (`VPMADDWD`: 16 int16
@@ -123,16 +114,6 @@ pub(super) fn pool_bytes(
         o += 2;
     }
     true
-}
-
-/// Weights `4j..4j + 4` of a row as one word, zeros past its end.
-#[inline]
-pub(super) fn quad(row: &[u8], j: usize) -> i32 {
-    let mut word = [0u8; 4];
-    for (w, &v) in word.iter_mut().zip(row.iter().skip(4 * j)) {
-        *w = v;
-    }
-    i32::from_le_bytes(word)
 }
 
 /// Adds to two rows' accumulators over half a block the products of their

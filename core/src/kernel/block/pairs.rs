@@ -7,38 +7,16 @@ use core::arch::x86_64::{
     _mm256_max_epi32, _mm256_or_si256, _mm256_set1_epi32, _mm256_slli_epi32, _mm256_storeu_si256,
 };
 
-use super::super::x86::{activations, as_i16, max};
+use super::super::x86::{activations, max};
 use super::super::{Requant, rows, rows_mut};
 use super::{BLOCK, raise};
+#[cfg(test)]
+use super::{pair, widen};
 use crate::fixed::OutputStep;
 use crate::format::le_i32s;
 
 /// Vectors of eight points in a block.
 pub(super) const VECTORS: usize = BLOCK / 8;
-
-/// Sign-extends a layer's int8 weight rows of `inputs` values into int16
-/// pair words, each row padded with a zero to an even length.
-pub(super) fn widen(weights: &[u8], inputs: usize, out: &mut [u32]) {
-    let pairs = inputs.div_ceil(2);
-    if inputs.is_multiple_of(2) {
-        // Row-major int16 is already the pair layout.
-        for (h, &w) in as_i16(out).iter_mut().zip(weights) {
-            *h = w as i8 as i16;
-        }
-        return;
-    }
-    for (row, out) in rows(weights, inputs).zip(rows_mut(out, pairs)) {
-        for (j, word) in out.iter_mut().enumerate() {
-            let w = |k: usize| row.get(k).map_or(0, |&b| b as i8 as i16);
-            *word = pair(w(2 * j), w(2 * j + 1));
-        }
-    }
-}
-
-/// Two int16 values as one word, `lo` in the low half.
-pub(super) fn pair(lo: i16, hi: i16) -> u32 {
-    (lo as u16 as u32) | ((hi as u16 as u32) << 16)
-}
 
 /// Where a layer's results go.
 pub(super) enum Dest<'a> {

@@ -14,8 +14,8 @@ use core::arch::x86_64::{
 
 pub(super) use super::super::x86::has_vnni;
 use super::super::{Requant, rows};
-use super::bytes::{ByteLayer, quad};
-use super::{BLOCK, raise};
+
+use super::{BLOCK, ByteLayer, Out, quad, raise};
 use crate::fixed::OutputStep;
 
 /// Rows that share each load of the block's inputs (here and in
@@ -25,20 +25,21 @@ pub(super) const ROWS: usize = 4;
 /// Vectors of sixteen points in a block.
 pub(super) const WIDE: usize = BLOCK / 16;
 
-/// Where a layer's activations go on the VNNI path.
-pub(super) enum Out<'a> {
-    /// The next layer's input as byte quads: word `j * BLOCK + p` holds
-    /// point `p`'s activations of outputs `4j..4j + 4`, each plus 128 (a
-    /// missing output past the last reads 128, activation 0).
-    Quads(&'a mut [u32]),
-    /// The max-pool before its output step: each output's largest
-    /// accumulator so far (an i32 in each word), to which
-    /// [`pool_maxima`](super::pool_maxima)
-    /// applies the steps once the last block is in. The output step is
-    /// non-decreasing (see [`Sink::Pool`](super::super::Sink::Pool)), so
-    /// the step of the largest accumulator is the largest activation, and
-    /// one step per output replaces one per output and block.
-    Maxima(&'a mut [u32]),
+/// The VNNI route's kernels: the first layer through
+/// [`super::wide::layer_wide`], every later one through [`layer_bytes`].
+pub(super) struct Kernels;
+
+#[allow(unsafe_code)]
+impl super::QuadKernels for Kernels {
+    unsafe fn first(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], out: Out<'_>) {
+        // SAFETY: the caller's (AVX-512 VNNI and BW, which imply F).
+        unsafe { super::wide::layer_wide(weights, pairs, q, input, out) }
+    }
+
+    unsafe fn later(layer: &ByteLayer<'_>, q: Requant<'_>, input: &[u32], out: Out<'_>) -> bool {
+        // SAFETY: as above.
+        unsafe { layer_bytes(layer, q, input, out) }
+    }
 }
 
 /// A layer whose input is an int8 activation, on a CPU with AVX-512 VNNI.
@@ -296,11 +297,10 @@ fn stepped(acc: __m512i, step: &OutputStep) -> __m512i {
 
 #[cfg(test)]
 pub(super) mod tests {
-    use super::super::super::test_layer::{TestLayer, byte};
+    use super::super::super::test_layer::{TestLayer, block_cases};
     use super::super::super::{Sink, dense_tile};
     use super::super::pool_maxima;
     use super::*;
-    use crate::testing::SplitMix64;
     use std::vec::Vec;
 
     /// Whether this CPU can run the kernels (the tests say when it cannot).
@@ -383,89 +383,15 @@ pub(super) mod tests {
         assert_eq!(got, want, "{what}, pooled, {inputs} -> {outputs}");
     }
 
-    /// Random layers of widths that are and are not multiples of four,
-    /// output counts that are and are not multiples of the four rows taken
-    /// together, both requantization paths; inputs over the whole int8
-    /// range, in its lower or upper half only, and at either end.
+    /// The byte kernel gives the portable kernel's activations, stored and
+    /// pooled, on every case of [`block_cases`].
     #[test]
     fn byte_layer_matches_portable() {
         if !vnni() {
             return;
         }
-        let mut rng = SplitMix64(36);
-        let shapes = [
-            (1, 1),
-            (5, 3),
-            (8, 8),
-            (33, 17),
-            (64, 64),
-            (128, 256),
-            (130, 5),
-            (7, 10),
-        ];
-        for &(inputs, outputs) in &shapes {
-            for shifts in [(-22, -2), (-31, 31)] {
-                let layer = TestLayer::new(&mut rng, inputs, outputs, shifts);
-                let n = BLOCK * inputs;
-                let patterns: [(&str, Vec<i8>); 5] = [
-                    ("whole range", (0..n).map(|_| byte(&mut rng)).collect()),
-                    (
-                        "lower half",
-                        (0..n).map(|_| rng.int(-128, -1) as i8).collect(),
-                    ),
-                    (
-                        "upper half",
-                        (0..n).map(|_| rng.int(0, 127) as i8).collect(),
-                    ),
-                    ("all -128", std::vec![-128; n]),
-                    ("all 127", std::vec![127; n]),
-                ];
-                for (what, x) in &patterns {
-                    check(&layer, inputs, outputs, x, what);
-                }
-            }
-        }
-    }
-
-    /// The largest products `VPDPBUSD` meets: every weight -128 or 127,
-    /// every input -128, -1 or 127. The bias brings the true accumulator to
-    /// 400 and the output step divides by 8, so the activation is 50, far
-    /// from either clamp: an accumulator off by more than 4 would show.
-    #[test]
-    fn byte_layer_extremes() {
-        if !vnni() {
-            return;
-        }
-        let mut rng = SplitMix64(37);
-        let (inputs, outputs) = (128, 6);
-        for weight in [-128i8, 127] {
-            for x in [-128i8, -1, 127] {
-                let mut layer = TestLayer::new(&mut rng, inputs, outputs, (-2, -2));
-                layer.weights.fill(weight as u8);
-                let dot = weight as i32 * x as i32 * inputs as i32;
-                layer.bias = (0..outputs)
-                    .flat_map(|_| (400 - dot).to_le_bytes())
-                    .collect();
-                layer.multiplier = (0..outputs)
-                    .flat_map(|_| (1i32 << 30).to_le_bytes())
-                    .collect();
-                layer.zero_point = 0;
-                let x = std::vec![x; BLOCK * inputs];
-                let mut want = std::vec![i8::MIN; outputs];
-                dense_tile(
-                    &layer.weights,
-                    inputs,
-                    layer.requant(),
-                    &x,
-                    &mut Sink::Pool(&mut want),
-                );
-                assert_eq!(
-                    want,
-                    std::vec![50; outputs],
-                    "the portable kernel's activation"
-                );
-                check(&layer, inputs, outputs, &x, "extreme");
-            }
+        for c in block_cases(36) {
+            check(&c.layer, c.inputs, c.outputs, &c.x, c.what);
         }
     }
 }

@@ -1,0 +1,472 @@
+//! The block kernel's layers on aarch64 with the dot-product extension
+//! (Armv8.2 `dotprod`: Cortex-A55/A76 and later, Apple M, Graviton 2+):
+//! the first layer on the coordinates' int16 pairs, every later one on
+//! byte quads, each writing its activations straight into the next one's
+//! quads.
+//!
+//! As in the x86-64 block kernels, the vector lanes run along the points
+//! (four to a vector), so no lane is ever summed across: a group of four
+//! rows takes a quarter of the block at a time (sixteen points, four
+//! vectors), sixteen accumulators in all.
+//!
+//! - A layer on bytes holds its input as signed byte quads by point (word
+//!   `j * BLOCK + p` holds point `p`'s inputs `4j..4j + 4`; past the
+//!   inputs the weights are zero, so what is there adds nothing). Each row
+//!   is read sixteen weights (four quads) at a time, and `SDOT` by element
+//!   adds into each point's lane the four products of its quad with quad
+//!   `k` of the row (`sdot v.4s, x.16b, w.4b[k]`): one load of weights per
+//!   sixteen `SDOT`s of the group. A row's last quads (past a multiple of
+//!   sixteen inputs) are broadcast whole.
+//! - The first layer holds the coordinates as int16 pairs by point, `(x,
+//!   y)` then `(z, 0)`: `SMULL`/`SMULL2` of four points' pairs with a
+//!   broadcast weight pair, then `ADDP` sums each point's two products.
+//! - The output step runs on four points at once: the high word of the
+//!   64-bit product as `SQDMULH` (the doubled product's high word) shifted
+//!   right by one, exact for every multiplier model loading accepts (none
+//!   is negative), the folded offset and the shift; then two
+//!   saturating narrows (`SQXTN`, the clamp at 127 and -128), one byte
+//!   table lookup from row order to point order and `SMAX` with the ReLU
+//!   floor. The pooled layer keeps each output's largest accumulator
+//!   ([`raise`]).
+//!
+//! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`,
+//! four byte products at most `4 * 128 * 128`), and model loading bounds
+//! every partial sum (see [`super::super::dot`]), so the result is the
+//! portable kernel's, bit for bit. `cargo xtask aarch64-test` runs the
+//! tests under `qemu-aarch64` on a CPU with `dotprod`; without it the
+//! encoder keeps to the tile kernel ([`super::super::neon`]).
+
+use core::arch::aarch64::{
+    int8x16_t, int32x4_t, vaddq_s32, vdupq_n_s32, vdupq_n_u32, vget_low_s16, vld1q_s8, vld1q_s32,
+    vld1q_u8, vmaxq_s8, vmaxq_s32, vmaxvq_s32, vmull_high_s16, vmull_s16, vpaddq_s32, vqdmulhq_s32,
+    vqmovn_high_s16, vqmovn_high_s32, vqmovn_s16, vqmovn_s32, vqtbl1q_s8, vreinterpretq_s8_s32,
+    vreinterpretq_s8_u32, vreinterpretq_s16_s8, vreinterpretq_s16_u32, vshlq_s32, vshrq_n_s32,
+    vst1q_s8, vst1q_s32,
+};
+
+pub(super) use super::super::neon::has_sdot;
+use super::super::neon::{sdot, sdot_lane};
+use super::super::{Requant, rows};
+use super::{BLOCK, ByteLayer, Out, quad, raise};
+use crate::fixed::OutputStep;
+
+/// Rows taken together.
+const ROWS: usize = 4;
+
+/// Vectors of four points in a pass.
+const PASS: usize = 4;
+
+/// Points in a pass (a quarter of the block).
+const PASS_POINTS: usize = 4 * PASS;
+
+/// Passes over a block.
+const PASSES: usize = BLOCK / PASS_POINTS;
+
+/// A group's accumulators over a pass: rows by vectors of four points.
+type Acc = [[int32x4_t; PASS]; ROWS];
+
+/// The SDOT route's kernels: the first layer through [`layer_pairs`],
+/// every later one through [`layer_bytes`].
+pub(super) struct Kernels;
+
+impl super::QuadKernels for Kernels {
+    unsafe fn first(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32], out: Out<'_>) {
+        // SAFETY: NEON is part of every aarch64 CPU.
+        unsafe { layer_pairs(weights, pairs, q, input, out) }
+    }
+
+    unsafe fn later(layer: &ByteLayer<'_>, q: Requant<'_>, input: &[u32], out: Out<'_>) -> bool {
+        // SAFETY: the caller's (the CPU has `dotprod`).
+        unsafe { layer_bytes(layer, q, input, out) }
+    }
+}
+
+/// Rows `o..o + ROWS` of a layer with `outputs` rows of `len` values in
+/// `weights`: each row, its bias and its output step. Missing rows (past
+/// the last) repeat the last with a zero bias and no step; their results
+/// are never taken.
+fn group<'a, T>(
+    weights: &'a [T],
+    len: usize,
+    q: Requant<'_>,
+    o: usize,
+    outputs: usize,
+) -> ([&'a [T]; ROWS], [i32; ROWS], [Option<OutputStep>; ROWS]) {
+    let n = outputs.saturating_sub(o).clamp(1, ROWS);
+    let (bias, mult) = (q.bias.as_chunks::<4>().0, q.multiplier.as_chunks::<4>().0);
+    let (mut rs, mut biases, mut steps) = ([&[][..]; ROWS], [0; ROWS], [None; ROWS]);
+    for (r, ((row, b), step)) in rs.iter_mut().zip(&mut biases).zip(&mut steps).enumerate() {
+        let ch = o + r.min(n - 1);
+        *row = weights.get(ch * len..(ch + 1) * len).unwrap_or(&[]);
+        if let (true, Some(&bias), Some(&m), Some(&s)) =
+            (r < n, bias.get(ch), mult.get(ch), q.shift.get(ch))
+        {
+            *b = i32::from_le_bytes(bias);
+            *step = Some(OutputStep::new(
+                i32::from_le_bytes(m),
+                s as i8,
+                q.zero_point,
+                q.act_min,
+            ));
+        }
+    }
+    (rs, biases, steps)
+}
+
+/// Accumulators starting from the rows' biases.
+#[inline]
+#[target_feature(enable = "neon")]
+fn start(biases: [i32; ROWS]) -> Acc {
+    let mut acc = [[vdupq_n_s32(0); PASS]; ROWS];
+    for (acc, b) in acc.iter_mut().zip(biases) {
+        *acc = [vdupq_n_s32(b); PASS];
+    }
+    acc
+}
+
+/// Pass `pass` of one input row of a block (`BLOCK` words, one per point)
+/// as four vectors of four points' words; `None` when `row` is short.
+#[inline(always)]
+fn pass_vectors(row: &[u32], pass: usize) -> Option<[int8x16_t; PASS]> {
+    let x = row
+        .get(pass * PASS_POINTS..)?
+        .first_chunk::<PASS_POINTS>()?;
+    let [a, b, c, d]: &[[u32; 4]; PASS] = x.as_chunks::<4>().0.try_into().ok()?;
+    // SAFETY: each of `a..d` is four words (16 bytes); NEON loads need no
+    // alignment.
+    Some([a, b, c, d].map(|v| unsafe { vld1q_s8(v.as_ptr().cast()) }))
+}
+
+/// The first layer (the coordinates, int16 pairs by point, `pairs x
+/// BLOCK` words in `input`): `weights` holds its rows of `pairs` pair
+/// words; the activations go to `out`.
+#[target_feature(enable = "neon")]
+pub(super) fn layer_pairs(
+    weights: &[u32],
+    pairs: usize,
+    q: Requant<'_>,
+    input: &[u32],
+    mut out: Out<'_>,
+) {
+    let Some(input) = input.get(..pairs * BLOCK) else {
+        return;
+    };
+    let outputs = q.shift.len();
+    for o in (0..outputs).step_by(ROWS) {
+        let (rs, biases, steps) = group(weights, pairs, q, o, outputs);
+        for pass in 0..PASSES {
+            let mut acc = start(biases);
+            for (j, x) in rows(input, BLOCK).enumerate() {
+                let Some(x) = pass_vectors(x, pass) else {
+                    continue;
+                };
+                for (acc, r) in acc.iter_mut().zip(&rs) {
+                    let w = vreinterpretq_s16_u32(vdupq_n_u32(r.get(j).copied().unwrap_or(0)));
+                    for (a, &x) in acc.iter_mut().zip(&x) {
+                        let x = vreinterpretq_s16_s8(x);
+                        // Each point's two products side by side, then
+                        // summed pairwise: lanes are points again.
+                        let low = vmull_s16(vget_low_s16(x), vget_low_s16(w));
+                        let high = vmull_high_s16(x, w);
+                        *a = vaddq_s32(*a, vpaddq_s32(low, high));
+                    }
+                }
+            }
+            finish(&acc, &steps, o, pass, &mut out);
+        }
+    }
+}
+
+/// A layer whose input is an int8 activation, as signed byte quads by
+/// point (`inputs.div_ceil(4) x BLOCK` words in `quads`); the activations
+/// go to `out`. Returns `false`, having written nothing, when `quads` is
+/// short.
+#[target_feature(enable = "dotprod")]
+pub(super) fn layer_bytes(
+    layer: &ByteLayer<'_>,
+    q: Requant<'_>,
+    quads: &[u32],
+    mut out: Out<'_>,
+) -> bool {
+    let (inputs, count) = (layer.inputs, layer.inputs.div_ceil(4));
+    let Some(quads) = quads.get(..count * BLOCK) else {
+        return false;
+    };
+    let (outputs, chunks) = (q.shift.len(), inputs / 16);
+    for o in (0..outputs).step_by(ROWS) {
+        let (rs, biases, steps) = group(layer.weights, inputs, q, o, outputs);
+        for pass in 0..PASSES {
+            let mut acc = start(biases);
+            let mut x = rows(quads, BLOCK).map(|row| pass_vectors(row, pass));
+            for c in 0..chunks {
+                let w = [
+                    sixteen(rs[0], 16 * c),
+                    sixteen(rs[1], 16 * c),
+                    sixteen(rs[2], 16 * c),
+                    sixteen(rs[3], 16 * c),
+                ];
+                // (Plain calls: a loop over `k` cannot give `SDOT` its
+                // lane as a constant.)
+                if let Some(Some(x)) = x.next() {
+                    lane_step::<0>(&mut acc, &w, &x);
+                }
+                if let Some(Some(x)) = x.next() {
+                    lane_step::<1>(&mut acc, &w, &x);
+                }
+                if let Some(Some(x)) = x.next() {
+                    lane_step::<2>(&mut acc, &w, &x);
+                }
+                if let Some(Some(x)) = x.next() {
+                    lane_step::<3>(&mut acc, &w, &x);
+                }
+            }
+            for j in 4 * chunks..count {
+                let w = [
+                    broadcast(quad(rs[0], j)),
+                    broadcast(quad(rs[1], j)),
+                    broadcast(quad(rs[2], j)),
+                    broadcast(quad(rs[3], j)),
+                ];
+                if let Some(Some(x)) = x.next() {
+                    for (acc, &w) in acc.iter_mut().zip(&w) {
+                        for (a, &x) in acc.iter_mut().zip(&x) {
+                            // SAFETY: this function requires `dotprod`.
+                            *a = unsafe { sdot(*a, w, x) };
+                        }
+                    }
+                }
+            }
+            finish(&acc, &steps, o, pass, &mut out);
+        }
+    }
+    true
+}
+
+/// Bytes `at..at + 16` of a weight row (zeros if the row is short).
+#[inline]
+#[target_feature(enable = "neon")]
+fn sixteen(row: &[u8], at: usize) -> int8x16_t {
+    match row.get(at..).and_then(|r| r.first_chunk::<16>()) {
+        // SAFETY: 16 bytes; NEON loads need no alignment.
+        Some(w) => unsafe { vld1q_s8(w.as_ptr().cast()) },
+        None => vreinterpretq_s8_s32(vdupq_n_s32(0)),
+    }
+}
+
+/// A weight quad in every lane.
+#[inline]
+#[target_feature(enable = "neon")]
+fn broadcast(quad: i32) -> int8x16_t {
+    vreinterpretq_s8_s32(vdupq_n_s32(quad))
+}
+
+/// Adds to the group's accumulators the products of quad `K` of each row's
+/// sixteen weights `w` with the pass's points' quads `x`.
+#[inline]
+#[target_feature(enable = "dotprod")]
+fn lane_step<const K: i32>(acc: &mut Acc, w: &[int8x16_t; ROWS], x: &[int8x16_t; PASS]) {
+    for (acc, &w) in acc.iter_mut().zip(w) {
+        for (a, &x) in acc.iter_mut().zip(x) {
+            // SAFETY: this function requires `dotprod`.
+            *a = unsafe { sdot_lane::<K>(*a, x, w) };
+        }
+    }
+}
+
+/// The end of a pass of a group of rows `o..o + ROWS`: each row with a
+/// step takes its accumulators to `out`, the largest to the running
+/// maxima or all through the step into the next layer's quads (word `o /
+/// 4` of each point of the pass). Not inlined: it is most of the code and
+/// runs once per group and pass.
+#[inline(never)]
+#[target_feature(enable = "neon")]
+fn finish(acc: &Acc, steps: &[Option<OutputStep>; ROWS], o: usize, pass: usize, out: &mut Out<'_>) {
+    match out {
+        Out::Maxima(maxima) => {
+            for (r, (acc, step)) in acc.iter().zip(steps).enumerate() {
+                if step.is_some() {
+                    let [first, rest @ ..] = *acc;
+                    let mut m = first;
+                    for v in rest {
+                        m = vmaxq_s32(m, v);
+                    }
+                    raise(maxima, o + r, vmaxvq_s32(m));
+                }
+            }
+        }
+        Out::Quads(quads) => {
+            let Some(words) = quads
+                .get_mut(o / ROWS * BLOCK + pass * PASS_POINTS..)
+                .and_then(|q| q.first_chunk_mut::<PASS_POINTS>())
+            else {
+                return;
+            };
+            // The ReLU floor in each row's byte of a word; a missing row's
+            // byte stays 0 under -128.
+            let floor = steps.map(|s| s.map_or(i8::MIN, |s| s.act_min()) as u8);
+            let floor = vreinterpretq_s8_u32(vdupq_n_u32(u32::from_le_bytes(floor)));
+            // Byte `4p + r` of a word set comes from byte `4r + p`.
+            let order: [u8; 16] = [0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15];
+            // SAFETY: 16 bytes; NEON loads need no alignment.
+            let order = unsafe { vld1q_u8(order.as_ptr()) };
+            for (v, words) in words.as_chunks_mut::<4>().0.iter_mut().enumerate() {
+                let mut stepped_rows = [vdupq_n_s32(0); ROWS];
+                for ((y, acc), step) in stepped_rows.iter_mut().zip(acc).zip(steps) {
+                    if let (Some(step), Some(&a)) = (step, acc.get(v)) {
+                        *y = stepped(a, step);
+                    }
+                }
+                let [r0, r1, r2, r3] = stepped_rows;
+                // Saturating narrows (the clamp to int8), rows in order.
+                let low = vqmovn_high_s32(vqmovn_s32(r0), r1);
+                let high = vqmovn_high_s32(vqmovn_s32(r2), r3);
+                let by_row = vqmovn_high_s16(vqmovn_s16(low), high);
+                let word = vmaxq_s8(vqtbl1q_s8(by_row, order), floor);
+                // SAFETY: `words` is four words (16 bytes); NEON stores
+                // need no alignment.
+                unsafe { vst1q_s8(words.as_mut_ptr().cast(), word) };
+            }
+        }
+    }
+}
+
+/// `OutputStep::apply` on four accumulators but for the clamp (the
+/// caller's): on the fast path `hi(acc * m)` as `SQDMULH` (the high word
+/// of `2 acc m`, which saturates only when both are `i32::MIN`, and model
+/// loading rejects negative multipliers) shifted right by one, then the
+/// folded offset and the arithmetic shift, the same integers as the
+/// scalar step; lane by lane (clamped, which changes nothing after) on the
+/// general path.
+#[inline]
+#[target_feature(enable = "neon")]
+fn stepped(acc: int32x4_t, step: &OutputStep) -> int32x4_t {
+    match step.fast_parts() {
+        Some((m, offset, high_shift, _)) => {
+            let hi = vshrq_n_s32::<1>(vqdmulhq_s32(acc, vdupq_n_s32(m)));
+            vshlq_s32(
+                vaddq_s32(hi, vdupq_n_s32(offset)),
+                vdupq_n_s32(-(high_shift as i32)),
+            )
+        }
+        _ => {
+            let mut lanes = [0i32; 4];
+            // SAFETY: `lanes` is four i32 (16 bytes); NEON loads and
+            // stores need no alignment.
+            unsafe {
+                vst1q_s32(lanes.as_mut_ptr(), acc);
+                let lanes = lanes.map(|a| step.apply(a) as i32);
+                vld1q_s32(lanes.as_ptr())
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::super::test_layer::{BlockCase, block_cases};
+    use super::super::super::{Sink, dense_tile};
+    use super::super::{pair, pool_maxima, widen};
+    use super::*;
+    use std::vec::Vec;
+
+    /// A block's inputs (`BLOCK` rows of `inputs`) as signed byte quads by
+    /// point, `pad` in the bytes past `inputs`.
+    fn quads_by_point(x: &[i8], inputs: usize, pad: u8) -> Vec<u32> {
+        let count = inputs.div_ceil(4);
+        let mut quads = std::vec![0u32; count * BLOCK];
+        for (p, row) in x.chunks(inputs).enumerate() {
+            for j in 0..count {
+                let byte = |k: usize| row.get(k).map_or(pad, |&v| v as u8);
+                quads[j * BLOCK + p] = u32::from_le_bytes([0, 1, 2, 3].map(|k| byte(4 * j + k)));
+            }
+        }
+        quads
+    }
+
+    /// A block's inputs as int16 pairs by point.
+    fn pairs_by_point(x: &[i8], inputs: usize) -> Vec<u32> {
+        let count = inputs.div_ceil(2);
+        let mut words = std::vec![0u32; count * BLOCK];
+        for (p, row) in x.chunks(inputs).enumerate() {
+            for j in 0..count {
+                let v = |k: usize| row.get(k).map_or(0, |&v| v as i16);
+                words[j * BLOCK + p] = pair(v(2 * j), v(2 * j + 1));
+            }
+        }
+        words
+    }
+
+    /// The activations a block's [`Out::Quads`] holds, `BLOCK` rows of
+    /// `outputs`; checks that the bytes past the last output read 0.
+    fn from_quads(quads: &[u32], outputs: usize) -> Vec<i8> {
+        let byte = |o: usize, p: usize| (quads[o / 4 * BLOCK + p] >> (8 * (o % 4))) as u8 as i8;
+        for o in outputs..outputs.next_multiple_of(4) {
+            for p in 0..BLOCK {
+                assert_eq!(byte(o, p), 0, "a missing output's byte");
+            }
+        }
+        (0..BLOCK * outputs)
+            .map(|i| byte(i % outputs, i / outputs))
+            .collect()
+    }
+
+    /// A kernel's activations, stored as quads and max-pooled, against the
+    /// portable kernel's.
+    fn check(c: &BlockCase, kernel: &str, run: &dyn Fn(Out<'_>)) {
+        let (q, outputs) = (c.layer.requant(), c.outputs);
+        let what = std::format!("{kernel}, {}, {} -> {outputs}", c.what, c.inputs);
+        let mut want = std::vec![0i8; BLOCK * outputs];
+        let sink = &mut Sink::Store {
+            out: &mut want,
+            outputs,
+        };
+        dense_tile(&c.layer.weights, c.inputs, q, &c.x, sink);
+        let mut got = std::vec![0x5A5A_5A5Au32; outputs.div_ceil(4) * BLOCK];
+        run(Out::Quads(&mut got));
+        assert_eq!(from_quads(&got, outputs), want, "{what}, stored");
+        let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+        dense_tile(
+            &c.layer.weights,
+            c.inputs,
+            q,
+            &c.x,
+            &mut Sink::Pool(&mut want),
+        );
+        let mut maxima = std::vec![i32::MIN as u32; outputs];
+        run(Out::Maxima(&mut maxima));
+        pool_maxima(&maxima, q, &mut got);
+        assert_eq!(got, want, "{what}, pooled");
+    }
+
+    /// Both layers of the SDOT route (the byte quads one, and the int16
+    /// pairs one on the same values) give the portable kernel's
+    /// activations, stored and pooled, on every case of [`block_cases`];
+    /// what lies past a layer's inputs in its quads must not matter.
+    #[test]
+    fn sdot_layers_match_portable() {
+        if !has_sdot() {
+            std::eprintln!("no dot-product extension on this CPU: the SDOT kernels not tested");
+            return;
+        }
+        for c in block_cases(38) {
+            let (q, inputs) = (c.layer.requant(), c.inputs);
+            let quads = quads_by_point(&c.x, inputs, 0x5A);
+            let layer = ByteLayer {
+                weights: &c.layer.weights,
+                inputs,
+                sums: &[],
+            };
+            // SAFETY: the CPU has `dotprod` (checked above).
+            check(&c, "bytes", &|out| {
+                assert!(unsafe { layer_bytes(&layer, q, &quads, out) }, "buffers")
+            });
+            let pairs = pairs_by_point(&c.x, inputs);
+            let mut wide = std::vec![0u32; c.outputs * inputs.div_ceil(2)];
+            widen(&c.layer.weights, inputs, &mut wide);
+            // SAFETY: NEON is part of every aarch64 CPU.
+            check(&c, "pairs", &|out| unsafe {
+                layer_pairs(&wide, inputs.div_ceil(2), q, &pairs, out)
+            });
+        }
+    }
+}
