@@ -44,9 +44,9 @@ use core::arch::aarch64::{
     vst1q_s8, vst1q_s32,
 };
 
+use super::super::Requant;
 pub(super) use super::super::neon::has_sdot;
 use super::super::neon::{sdot, sdot_lane};
-use super::super::{Requant, rows};
 use super::{BLOCK, ByteLayer, Out, quad, raise};
 use crate::fixed::OutputStep;
 
@@ -124,22 +124,29 @@ fn start(biases: [i32; ROWS]) -> Acc {
     acc
 }
 
-/// Pass `pass` of one input row of a block (`BLOCK` words, one per point)
-/// as four vectors of four points' words; `None` when `row` is short.
-#[inline(always)]
-fn pass_vectors(row: &[u32], pass: usize) -> Option<[int8x16_t; PASS]> {
-    let x = row
-        .get(pass * PASS_POINTS..)?
-        .first_chunk::<PASS_POINTS>()?;
-    let [a, b, c, d]: &[[u32; 4]; PASS] = x.as_chunks::<4>().0.try_into().ok()?;
-    // SAFETY: each of `a..d` is four words (16 bytes); NEON loads need no
-    // alignment.
-    Some([a, b, c, d].map(|v| unsafe { vld1q_s8(v.as_ptr().cast()) }))
+/// Four vectors of four points' words from `x` on (a pass of one input
+/// row of a block).
+///
+/// # Safety
+/// `x` must point at sixteen readable words.
+#[inline]
+#[target_feature(enable = "neon")]
+unsafe fn load_pass(x: *const u32) -> [int8x16_t; PASS] {
+    // SAFETY: the caller's; NEON loads need no alignment.
+    unsafe {
+        [
+            vld1q_s8(x.cast()),
+            vld1q_s8(x.add(4).cast()),
+            vld1q_s8(x.add(8).cast()),
+            vld1q_s8(x.add(12).cast()),
+        ]
+    }
 }
 
 /// The first layer (the coordinates, int16 pairs by point, `pairs x
 /// BLOCK` words in `input`): `weights` holds its rows of `pairs` pair
-/// words; the activations go to `out`.
+/// words; the activations go to `out`. Does nothing when `input` or
+/// `weights` is short.
 #[target_feature(enable = "neon")]
 pub(super) fn layer_pairs(
     weights: &[u32],
@@ -154,14 +161,22 @@ pub(super) fn layer_pairs(
     let outputs = q.shift.len();
     for o in (0..outputs).step_by(ROWS) {
         let (rs, biases, steps) = group(weights, pairs, q, o, outputs);
+        if rs.iter().any(|r| r.len() < pairs) {
+            return;
+        }
         for pass in 0..PASSES {
             let mut acc = start(biases);
-            for (j, x) in rows(input, BLOCK).enumerate() {
-                let Some(x) = pass_vectors(x, pass) else {
-                    continue;
+            for j in 0..pairs {
+                // SAFETY: `input` holds `pairs x BLOCK` words and `pass *
+                // 16 + 16 <= BLOCK`; every row holds `pairs` words.
+                let (x, w) = unsafe {
+                    (
+                        load_pass(input.as_ptr().add(j * BLOCK + pass * PASS_POINTS)),
+                        rs.map(|r| *r.as_ptr().add(j)),
+                    )
                 };
-                for (acc, r) in acc.iter_mut().zip(&rs) {
-                    let w = vreinterpretq_s16_u32(vdupq_n_u32(r.get(j).copied().unwrap_or(0)));
+                for (acc, w) in acc.iter_mut().zip(w) {
+                    let w = vreinterpretq_s16_u32(vdupq_n_u32(w));
                     for (a, &x) in acc.iter_mut().zip(&x) {
                         let x = vreinterpretq_s16_s8(x);
                         // Each point's two products side by side, then
@@ -180,7 +195,7 @@ pub(super) fn layer_pairs(
 /// A layer whose input is an int8 activation, as signed byte quads by
 /// point (`inputs.div_ceil(4) x BLOCK` words in `quads`); the activations
 /// go to `out`. Returns `false`, having written nothing, when `quads` is
-/// short.
+/// short (and stops when a weight row is).
 #[target_feature(enable = "dotprod")]
 pub(super) fn layer_bytes(
     layer: &ByteLayer<'_>,
@@ -195,44 +210,43 @@ pub(super) fn layer_bytes(
     let (outputs, chunks) = (q.shift.len(), inputs / 16);
     for o in (0..outputs).step_by(ROWS) {
         let (rs, biases, steps) = group(layer.weights, inputs, q, o, outputs);
+        if rs.iter().any(|r| r.len() < inputs) {
+            return true;
+        }
         for pass in 0..PASSES {
             let mut acc = start(biases);
-            let mut x = rows(quads, BLOCK).map(|row| pass_vectors(row, pass));
+            // Plain pointers in the loops: a check per load (its `None`
+            // path) made the compiler store every accumulator after every
+            // step.
+            let Some(x) = quads.get(pass * PASS_POINTS..) else {
+                return false;
+            };
+            let x = x.as_ptr();
             for c in 0..chunks {
-                let w = [
-                    sixteen(rs[0], 16 * c),
-                    sixteen(rs[1], 16 * c),
-                    sixteen(rs[2], 16 * c),
-                    sixteen(rs[3], 16 * c),
-                ];
-                // (Plain calls: a loop over `k` cannot give `SDOT` its
-                // lane as a constant.)
-                if let Some(Some(x)) = x.next() {
-                    lane_step::<0>(&mut acc, &w, &x);
-                }
-                if let Some(Some(x)) = x.next() {
-                    lane_step::<1>(&mut acc, &w, &x);
-                }
-                if let Some(Some(x)) = x.next() {
-                    lane_step::<2>(&mut acc, &w, &x);
-                }
-                if let Some(Some(x)) = x.next() {
-                    lane_step::<3>(&mut acc, &w, &x);
+                // SAFETY: every row holds `inputs >= 16 c + 16` weights;
+                // quad `4c + k < count` of the pass starts `(4c + k) BLOCK`
+                // words on, and `quads` holds `count x BLOCK` words from
+                // `x - pass * 16`, `pass * 16 + 16 <= BLOCK`.
+                unsafe {
+                    let w = rs.map(|r| vld1q_s8(r.as_ptr().add(16 * c).cast()));
+                    let x = x.add(4 * c * BLOCK);
+                    // (Plain calls: a loop over `k` cannot give `SDOT` its
+                    // lane as a constant.)
+                    lane_step::<0>(&mut acc, &w, &load_pass(x));
+                    lane_step::<1>(&mut acc, &w, &load_pass(x.add(BLOCK)));
+                    lane_step::<2>(&mut acc, &w, &load_pass(x.add(2 * BLOCK)));
+                    lane_step::<3>(&mut acc, &w, &load_pass(x.add(3 * BLOCK)));
                 }
             }
             for j in 4 * chunks..count {
-                let w = [
-                    broadcast(quad(rs[0], j)),
-                    broadcast(quad(rs[1], j)),
-                    broadcast(quad(rs[2], j)),
-                    broadcast(quad(rs[3], j)),
-                ];
-                if let Some(Some(x)) = x.next() {
-                    for (acc, &w) in acc.iter_mut().zip(&w) {
-                        for (a, &x) in acc.iter_mut().zip(&x) {
-                            // SAFETY: this function requires `dotprod`.
-                            *a = unsafe { sdot(*a, w, x) };
-                        }
+                let w = rs.map(|r| quad(r, j));
+                // SAFETY: as above, `j < count`.
+                let x = unsafe { load_pass(x.add(j * BLOCK)) };
+                for (acc, w) in acc.iter_mut().zip(w) {
+                    let w = broadcast(w);
+                    for (a, &x) in acc.iter_mut().zip(&x) {
+                        // SAFETY: this function requires `dotprod`.
+                        *a = unsafe { sdot(*a, w, x) };
                     }
                 }
             }
@@ -240,17 +254,6 @@ pub(super) fn layer_bytes(
         }
     }
     true
-}
-
-/// Bytes `at..at + 16` of a weight row (zeros if the row is short).
-#[inline]
-#[target_feature(enable = "neon")]
-fn sixteen(row: &[u8], at: usize) -> int8x16_t {
-    match row.get(at..).and_then(|r| r.first_chunk::<16>()) {
-        // SAFETY: 16 bytes; NEON loads need no alignment.
-        Some(w) => unsafe { vld1q_s8(w.as_ptr().cast()) },
-        None => vreinterpretq_s8_s32(vdupq_n_s32(0)),
-    }
 }
 
 /// A weight quad in every lane.
