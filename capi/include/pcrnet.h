@@ -314,10 +314,10 @@ size_t pcrnet_model_scratch_len(const PcrnetModel *model, size_t tile);
 
 /*
  Bytes of scratch with which a host build of this library on an x86-64
- CPU with AVX2 encodes many points per weight pass (the block kernel,
- picked at run time; results identical bit for bit): the
- `PCRNET_MAX_TILE` scratch plus the kernel's int16 weights and
- activations. Firmware builds never use the extra bytes: give them
+ CPU with AVX2, or an aarch64 one with the dot-product extension,
+ encodes many points per weight pass (the block kernel, picked at run
+ time; results identical bit for bit): the `PCRNET_MAX_TILE` scratch
+ plus the kernel's int16 weights and activations. Firmware builds never use the extra bytes: give them
  `pcrnet_model_scratch_len`. 0 for a handle that is not loaded.
 
  # Safety

@@ -28,8 +28,9 @@
 //!   not overlap the blob, the points or the outputs. A bigger scratch
 //!   (up to `pcrnet_model_scratch_len` with tile `PCRNET_MAX_TILE`)
 //!   runs faster; the results are identical for every size. On an x86-64
-//!   host, `pcrnet_model_host_scratch_len` bytes also let the encoder run
-//!   its AVX2 block kernel (several times faster, same results).
+//!   host (AVX2) or an aarch64 one (the dot-product extension),
+//!   `pcrnet_model_host_scratch_len` bytes also let the encoder run its
+//!   block kernel (several times faster, same results).
 //!
 //! # Errors
 //! Every function that can fail returns a status (`PcrnetStatus`);
@@ -197,10 +198,10 @@ pub unsafe extern "C" fn pcrnet_model_scratch_len(model: *const PcrnetModel, til
 }
 
 /// Bytes of scratch with which a host build of this library on an x86-64
-/// CPU with AVX2 encodes many points per weight pass (the block kernel,
-/// picked at run time; results identical bit for bit): the
-/// `PCRNET_MAX_TILE` scratch plus the kernel's int16 weights and
-/// activations. Firmware builds never use the extra bytes: give them
+/// CPU with AVX2, or an aarch64 one with the dot-product extension,
+/// encodes many points per weight pass (the block kernel, picked at run
+/// time; results identical bit for bit): the `PCRNET_MAX_TILE` scratch
+/// plus the kernel's int16 weights and activations. Firmware builds never use the extra bytes: give them
 /// `pcrnet_model_scratch_len`. 0 for a handle that is not loaded.
 ///
 /// # Safety

@@ -4,6 +4,7 @@
 //! target through rustup, QEMU through apt-get), so a fresh machine needs
 //! only a Rust toolchain.
 
+mod aarch64;
 mod fuzz;
 mod no_panic;
 mod ort_bench;
@@ -38,10 +39,16 @@ cargo xtask <command>
                 up to 1,024 points, no paper-size model; M0 microbit: the
                 small random models), each bit-exact with the host
   aarch64-test  pcrnet-core's tests (with `std`: the NEON and SDOT host
-                kernels, each against the portable one) built for
+                kernels, tile, head and block, each against the portable
+                one) built for
                 aarch64-unknown-linux-gnu and run under qemu-aarch64 on a
                 CPU with the dot-product extension (max) and one without
                 (Cortex-A53)
+  aarch64-count instructions per encoder call on aarch64, tile kernel
+                against block kernel (core's encode_count example under
+                qemu-aarch64 on a CPU with the dot-product extension,
+                counted from QEMU's translation log): 1,024 points,
+                random models of the embedded and the paper's widths
   firmware-run  build firmware-example and run it under QEMU
   profile       run firmware-example under QEMU with instruction tracing
                 and print the instructions per function and hottest blocks
@@ -92,7 +99,8 @@ fn main() -> ExitCode {
         Some("cores") => cores(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
         Some("firmware-run") => firmware_run(),
-        Some("aarch64-test") => aarch64_test(),
+        Some("aarch64-test") => aarch64::test(),
+        Some("aarch64-count") => aarch64::count(),
         Some("profile") => ensure_target()
             .and_then(|()| ensure_qemu())
             .and_then(|()| profile::run(&root())),
@@ -239,56 +247,6 @@ fn layers() -> Result<(), String> {
     harness(&["layers", "--board", "mps2-an500"])
 }
 
-/// The 64-bit Arm Linux target of `aarch64-test`.
-const AARCH64: &str = "aarch64-unknown-linux-gnu";
-
-/// Clippy on pcrnet-core's aarch64 code, then its tests with `std` for
-/// aarch64 Linux under qemu-aarch64 (user mode), once on QEMU's `max` CPU
-/// (with `dotprod`: the `SDOT` kernels) and once on a Cortex-A53 (without:
-/// the `SMULL` kernels).
-fn aarch64_test() -> Result<(), String> {
-    ensure_targets(&[AARCH64])?;
-    ensure_apt("qemu-aarch64", &["qemu-user"])?;
-    ensure_apt(
-        "aarch64-linux-gnu-gcc",
-        &["gcc-aarch64-linux-gnu", "libc6-dev-arm64-cross"],
-    )?;
-    let core = [
-        "-p",
-        "pcrnet-core",
-        "--features",
-        "std",
-        "--target",
-        AARCH64,
-    ];
-    cargo(
-        &[
-            &["clippy"][..],
-            &core,
-            &["--all-targets", "--", "-D", "warnings"],
-        ]
-        .concat(),
-    )?;
-    for cpu in ["max", "cortex-a53"] {
-        run_with_env(
-            env!("CARGO"),
-            &[&["test", "--release"][..], &core].concat(),
-            &[
-                (
-                    "CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER",
-                    "aarch64-linux-gnu-gcc",
-                ),
-                (
-                    "CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER",
-                    "qemu-aarch64 -L /usr/aarch64-linux-gnu",
-                ),
-                ("QEMU_CPU", cpu),
-            ],
-        )?;
-    }
-    Ok(())
-}
-
 fn firmware_run() -> Result<(), String> {
     ensure_target()?;
     ensure_qemu()?;
@@ -364,7 +322,7 @@ fn ci() -> Result<(), String> {
     steps.time("QEMU harness, Cortex-M4F (qemu-test)", qemu_test)?;
     steps.time("QEMU harness, other cores (cores)", cores)?;
     steps.time("C example under QEMU", c_example)?;
-    steps.time("aarch64 kernels under qemu-aarch64", aarch64_test)?;
+    steps.time("aarch64 kernels under qemu-aarch64", aarch64::test)?;
     steps.time("fuzzing", || {
         run_in(
             &root().join("fuzz"),
