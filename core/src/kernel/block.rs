@@ -490,12 +490,85 @@ fn pool_maxima(maxima: &[u32], q: Requant<'_>, feature: &mut [i8]) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::super::Sink;
-    use super::super::test_layer::TestLayer;
+pub(super) mod tests {
+    use super::super::test_layer::{BlockCase, TestLayer};
+    use super::super::{Sink, dense_tile};
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
+
+    /// A block's inputs (`BLOCK` rows of `inputs`) as int16 pairs by point.
+    pub(super) fn pairs_by_point(x: &[i8], inputs: usize) -> Vec<u32> {
+        let count = inputs.div_ceil(2);
+        let mut words = std::vec![0u32; count * BLOCK];
+        for (p, row) in x.chunks(inputs).enumerate() {
+            for j in 0..count {
+                let v = |k: usize| row.get(k).map_or(0, |&v| v as i16);
+                words[j * BLOCK + p] = pair(v(2 * j), v(2 * j + 1));
+            }
+        }
+        words
+    }
+
+    /// A block's inputs as byte quads by point, each byte XOR `flip`
+    /// (0x80: `x + 128`, as the VNNI route holds them; 0: signed, as the
+    /// SDOT route does), `pad` in the bytes past `inputs`.
+    pub(super) fn quads_by_point(x: &[i8], inputs: usize, pad: u8, flip: u8) -> Vec<u32> {
+        let count = inputs.div_ceil(4);
+        let mut quads = std::vec![0u32; count * BLOCK];
+        for (p, row) in x.chunks(inputs).enumerate() {
+            for j in 0..count {
+                let byte = |k: usize| row.get(k).map_or(pad, |&v| v as u8 ^ flip);
+                quads[j * BLOCK + p] = u32::from_le_bytes([0, 1, 2, 3].map(|k| byte(4 * j + k)));
+            }
+        }
+        quads
+    }
+
+    /// The activations a block's [`Out::Quads`] holds (bytes XOR `flip`),
+    /// `BLOCK` rows of `outputs`; checks that the bytes past the last
+    /// output read activation 0.
+    fn from_quads(quads: &[u32], outputs: usize, flip: u8) -> Vec<i8> {
+        let byte =
+            |o: usize, p: usize| ((quads[o / 4 * BLOCK + p] >> (8 * (o % 4))) as u8 ^ flip) as i8;
+        for o in outputs..outputs.next_multiple_of(4) {
+            for p in 0..BLOCK {
+                assert_eq!(byte(o, p), 0, "a missing output's byte");
+            }
+        }
+        (0..BLOCK * outputs)
+            .map(|i| byte(i % outputs, i / outputs))
+            .collect()
+    }
+
+    /// A quad route's layer kernel (`run`, into the [`Out`] it is given),
+    /// its activations stored as quads (bytes XOR `flip`) and max-pooled,
+    /// against the portable kernel's on case `c`.
+    pub(super) fn check_layer(c: &BlockCase, kernel: &str, flip: u8, run: &dyn Fn(Out<'_>)) {
+        let (q, outputs) = (c.layer.requant(), c.outputs);
+        let what = std::format!("{kernel}, {}, {} -> {outputs}", c.what, c.inputs);
+        let mut want = std::vec![0i8; BLOCK * outputs];
+        let sink = &mut Sink::Store {
+            out: &mut want,
+            outputs,
+        };
+        dense_tile(&c.layer.weights, c.inputs, q, &c.x, sink);
+        let mut got = std::vec![0x5A5A_5A5Au32; outputs.div_ceil(4) * BLOCK];
+        run(Out::Quads(&mut got));
+        assert_eq!(from_quads(&got, outputs, flip), want, "{what}, stored");
+        let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
+        dense_tile(
+            &c.layer.weights,
+            c.inputs,
+            q,
+            &c.x,
+            &mut Sink::Pool(&mut want),
+        );
+        let mut maxima = std::vec![i32::MIN as u32; outputs];
+        run(Out::Maxima(&mut maxima));
+        pool_maxima(&maxima, q, &mut got);
+        assert_eq!(got, want, "{what}, pooled");
+    }
 
     /// Every route this CPU can run (the tests say which they cannot).
     fn routes() -> Vec<Route> {
@@ -577,7 +650,7 @@ mod tests {
                             out: &mut out,
                             outputs: shape.outputs,
                         };
-                        super::super::dense_tile(&l.weights, shape.inputs, l.requant(), &x, sink);
+                        dense_tile(&l.weights, shape.inputs, l.requant(), &x, sink);
                         x = out;
                     }
                     let last = shapes.last().unwrap().outputs;

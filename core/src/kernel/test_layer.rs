@@ -132,6 +132,7 @@ pub(crate) fn block_cases(seed: u64) -> Vec<BlockCase> {
     let mut cases = Vec::new();
     let shapes = [
         (1, 1),
+        (3, 64),
         (5, 3),
         (8, 8),
         (33, 17),

@@ -235,8 +235,8 @@ fn split_bytes(
 mod tests {
     use super::super::super::Sink;
     use super::super::super::test_layer::{TestLayer, byte};
-    use super::super::pairs::tests::by_point;
     use super::super::pool_maxima;
+    use super::super::tests::pairs_by_point;
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
@@ -269,7 +269,7 @@ mod tests {
             pool_bytes(
                 &pooled,
                 q,
-                &by_point(x, inputs),
+                &pairs_by_point(x, inputs),
                 &mut bytes,
                 &mut lists,
                 &mut maxima,

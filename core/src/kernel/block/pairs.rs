@@ -9,9 +9,9 @@ use core::arch::x86_64::{
 
 use super::super::x86::{activations, max};
 use super::super::{Requant, rows, rows_mut};
-use super::{BLOCK, raise};
 #[cfg(test)]
-use super::{pair, widen};
+use super::widen;
+use super::{BLOCK, raise};
 use crate::fixed::OutputStep;
 use crate::format::le_i32s;
 
@@ -125,26 +125,14 @@ pub(super) fn largest<const N: usize>(acc: [__m256i; N]) -> i32 {
 }
 
 #[cfg(test)]
-pub(super) mod tests {
+mod tests {
     use super::super::super::test_layer::{TestLayer, byte};
     use super::super::super::{Sink, dense_tile};
     use super::super::pool_maxima;
+    use super::super::tests::pairs_by_point;
     use super::*;
     use crate::testing::SplitMix64;
     use std::vec::Vec;
-
-    /// A block's inputs (`BLOCK` rows of `inputs`) as int16 pairs by point.
-    pub(in super::super) fn by_point(x: &[i8], inputs: usize) -> Vec<u32> {
-        let pairs = inputs.div_ceil(2);
-        let mut input = std::vec![0u32; pairs * BLOCK];
-        for (p, row) in x.chunks(inputs).enumerate() {
-            for j in 0..pairs {
-                let v = |k: usize| row.get(k).map_or(0, |&v| v as i16);
-                input[j * BLOCK + p] = pair(v(2 * j), v(2 * j + 1));
-            }
-        }
-        input
-    }
 
     /// One layer of the block kernel gives the portable kernel's
     /// activations, stored and max-pooled, on even and odd widths, on the
@@ -163,7 +151,7 @@ pub(super) mod tests {
                 let pairs = inputs.div_ceil(2);
                 let mut wide = std::vec![0u32; outputs * pairs];
                 widen(weights, inputs, &mut wide);
-                let input = by_point(&x, inputs);
+                let input = pairs_by_point(&x, inputs);
                 let mut want = std::vec![0i8; BLOCK * outputs];
                 let sink = &mut Sink::Store {
                     out: &mut want,

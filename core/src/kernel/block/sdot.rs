@@ -366,80 +366,10 @@ fn stepped(acc: int32x4_t, step: &OutputStep) -> int32x4_t {
 
 #[cfg(test)]
 mod tests {
-    use super::super::super::test_layer::{BlockCase, block_cases};
-    use super::super::super::{Sink, dense_tile};
-    use super::super::{pair, pool_maxima, widen};
+    use super::super::super::test_layer::block_cases;
+    use super::super::tests::{check_layer, pairs_by_point, quads_by_point};
+    use super::super::widen;
     use super::*;
-    use std::vec::Vec;
-
-    /// A block's inputs (`BLOCK` rows of `inputs`) as signed byte quads by
-    /// point, `pad` in the bytes past `inputs`.
-    fn quads_by_point(x: &[i8], inputs: usize, pad: u8) -> Vec<u32> {
-        let count = inputs.div_ceil(4);
-        let mut quads = std::vec![0u32; count * BLOCK];
-        for (p, row) in x.chunks(inputs).enumerate() {
-            for j in 0..count {
-                let byte = |k: usize| row.get(k).map_or(pad, |&v| v as u8);
-                quads[j * BLOCK + p] = u32::from_le_bytes([0, 1, 2, 3].map(|k| byte(4 * j + k)));
-            }
-        }
-        quads
-    }
-
-    /// A block's inputs as int16 pairs by point.
-    fn pairs_by_point(x: &[i8], inputs: usize) -> Vec<u32> {
-        let count = inputs.div_ceil(2);
-        let mut words = std::vec![0u32; count * BLOCK];
-        for (p, row) in x.chunks(inputs).enumerate() {
-            for j in 0..count {
-                let v = |k: usize| row.get(k).map_or(0, |&v| v as i16);
-                words[j * BLOCK + p] = pair(v(2 * j), v(2 * j + 1));
-            }
-        }
-        words
-    }
-
-    /// The activations a block's [`Out::Quads`] holds, `BLOCK` rows of
-    /// `outputs`; checks that the bytes past the last output read 0.
-    fn from_quads(quads: &[u32], outputs: usize) -> Vec<i8> {
-        let byte = |o: usize, p: usize| (quads[o / 4 * BLOCK + p] >> (8 * (o % 4))) as u8 as i8;
-        for o in outputs..outputs.next_multiple_of(4) {
-            for p in 0..BLOCK {
-                assert_eq!(byte(o, p), 0, "a missing output's byte");
-            }
-        }
-        (0..BLOCK * outputs)
-            .map(|i| byte(i % outputs, i / outputs))
-            .collect()
-    }
-
-    /// A kernel's activations, stored as quads and max-pooled, against the
-    /// portable kernel's.
-    fn check(c: &BlockCase, kernel: &str, run: &dyn Fn(Out<'_>)) {
-        let (q, outputs) = (c.layer.requant(), c.outputs);
-        let what = std::format!("{kernel}, {}, {} -> {outputs}", c.what, c.inputs);
-        let mut want = std::vec![0i8; BLOCK * outputs];
-        let sink = &mut Sink::Store {
-            out: &mut want,
-            outputs,
-        };
-        dense_tile(&c.layer.weights, c.inputs, q, &c.x, sink);
-        let mut got = std::vec![0x5A5A_5A5Au32; outputs.div_ceil(4) * BLOCK];
-        run(Out::Quads(&mut got));
-        assert_eq!(from_quads(&got, outputs), want, "{what}, stored");
-        let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
-        dense_tile(
-            &c.layer.weights,
-            c.inputs,
-            q,
-            &c.x,
-            &mut Sink::Pool(&mut want),
-        );
-        let mut maxima = std::vec![i32::MIN as u32; outputs];
-        run(Out::Maxima(&mut maxima));
-        pool_maxima(&maxima, q, &mut got);
-        assert_eq!(got, want, "{what}, pooled");
-    }
 
     /// Both layers of the SDOT route (the byte quads one, and the int16
     /// pairs one on the same values) give the portable kernel's
@@ -453,21 +383,21 @@ mod tests {
         }
         for c in block_cases(38) {
             let (q, inputs) = (c.layer.requant(), c.inputs);
-            let quads = quads_by_point(&c.x, inputs, 0x5A);
+            let quads = quads_by_point(&c.x, inputs, 0x5A, 0);
             let layer = ByteLayer {
                 weights: &c.layer.weights,
                 inputs,
                 sums: &[],
             };
             // SAFETY: the CPU has `dotprod` (checked above).
-            check(&c, "bytes", &|out| {
+            check_layer(&c, "bytes", 0, &|out| {
                 assert!(unsafe { layer_bytes(&layer, q, &quads, out) }, "buffers")
             });
             let pairs = pairs_by_point(&c.x, inputs);
             let mut wide = std::vec![0u32; c.outputs * inputs.div_ceil(2)];
             widen(&c.layer.weights, inputs, &mut wide);
             // SAFETY: NEON is part of every aarch64 CPU.
-            check(&c, "pairs", &|out| unsafe {
+            check_layer(&c, "pairs", 0, &|out| unsafe {
                 layer_pairs(&wide, inputs.div_ceil(2), q, &pairs, out)
             });
         }

@@ -297,9 +297,8 @@ fn stepped(acc: __m512i, step: &OutputStep) -> __m512i {
 
 #[cfg(test)]
 pub(super) mod tests {
-    use super::super::super::test_layer::{TestLayer, block_cases};
-    use super::super::super::{Sink, dense_tile};
-    use super::super::pool_maxima;
+    use super::super::super::test_layer::block_cases;
+    use super::super::tests::{check_layer, quads_by_point};
     use super::*;
     use std::vec::Vec;
 
@@ -312,86 +311,30 @@ pub(super) mod tests {
         found
     }
 
-    /// The activations a block's [`Out::Quads`] holds, `BLOCK` rows of
-    /// `outputs`; checks that the bytes past the last output read 128.
-    pub(in super::super) fn from_quads(quads: &[u32], outputs: usize) -> Vec<i8> {
-        for o in outputs..outputs.next_multiple_of(4) {
-            for p in 0..BLOCK {
-                assert_eq!(quads[o / 4 * BLOCK + p] >> (8 * (o % 4)) & 0xFF, 128);
-            }
-        }
-        (0..BLOCK * outputs)
-            .map(|i| {
-                let (p, o) = (i / outputs, i % outputs);
-                ((quads[o / 4 * BLOCK + p] >> (8 * (o % 4))) as u8 ^ 0x80) as i8
-            })
-            .collect()
-    }
-
-    /// A block's inputs (`BLOCK` rows of `inputs`) as byte quads of `x +
-    /// 128` by point, `pad` in the bytes past `inputs`.
-    fn quads_by_point(x: &[i8], inputs: usize, pad: u8) -> Vec<u32> {
-        let count = inputs.div_ceil(4);
-        let mut quads = std::vec![0u32; count * BLOCK];
-        for (p, row) in x.chunks(inputs).enumerate() {
-            for j in 0..count {
-                let byte = |k: usize| row.get(k).map_or(pad, |&v| v as u8 ^ 0x80);
-                quads[j * BLOCK + p] = u32::from_le_bytes([0, 1, 2, 3].map(|k| byte(4 * j + k)));
-            }
-        }
-        quads
-    }
-
-    /// `layer_bytes`' activations, stored as quads and max-pooled, against
-    /// the portable kernel's.
-    fn check(layer: &TestLayer, inputs: usize, outputs: usize, x: &[i8], what: &str) {
-        let q = layer.requant();
-        let sums: Vec<u32> = rows(&layer.weights, inputs)
-            .map(|r| r.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32)
-            .collect();
-        let bytes = ByteLayer {
-            weights: &layer.weights,
-            inputs,
-            sums: &sums,
-        };
-        // What lies past the inputs must not matter.
-        let quads = quads_by_point(x, inputs, 0x5A);
-        let mut want = std::vec![0i8; BLOCK * outputs];
-        let sink = &mut Sink::Store {
-            out: &mut want,
-            outputs,
-        };
-        dense_tile(&layer.weights, inputs, q, x, sink);
-        let mut got = std::vec![0u32; outputs.div_ceil(4) * BLOCK];
-        // SAFETY: the caller checked for AVX-512 VNNI and BW.
-        #[allow(unsafe_code)]
-        let done = unsafe { layer_bytes(&bytes, q, &quads, Out::Quads(&mut got)) };
-        assert!(done, "{what}: buffers");
-        assert_eq!(
-            from_quads(&got, outputs),
-            want,
-            "{what}, stored, {inputs} -> {outputs}"
-        );
-        let (mut want, mut got) = (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
-        let mut maxima = std::vec![i32::MIN as u32; outputs];
-        dense_tile(&layer.weights, inputs, q, x, &mut Sink::Pool(&mut want));
-        // SAFETY: as above.
-        #[allow(unsafe_code)]
-        let done = unsafe { layer_bytes(&bytes, q, &quads, Out::Maxima(&mut maxima)) };
-        assert!(done, "{what}: buffers");
-        pool_maxima(&maxima, q, &mut got);
-        assert_eq!(got, want, "{what}, pooled, {inputs} -> {outputs}");
-    }
-
     /// The byte kernel gives the portable kernel's activations, stored and
-    /// pooled, on every case of [`block_cases`].
+    /// pooled, on every case of [`block_cases`]; what lies past a layer's
+    /// inputs in its quads must not matter.
     #[test]
     fn byte_layer_matches_portable() {
         if !vnni() {
             return;
         }
         for c in block_cases(36) {
-            check(&c.layer, c.inputs, c.outputs, &c.x, c.what);
+            let (q, inputs) = (c.layer.requant(), c.inputs);
+            let sums: Vec<u32> = rows(&c.layer.weights, inputs)
+                .map(|r| r.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32)
+                .collect();
+            let layer = ByteLayer {
+                weights: &c.layer.weights,
+                inputs,
+                sums: &sums,
+            };
+            let quads = quads_by_point(&c.x, inputs, 0x5A, 0x80);
+            // SAFETY: the CPU has AVX-512 VNNI and BW (checked above).
+            #[allow(unsafe_code)]
+            check_layer(&c, "bytes", 0x80, &|out| {
+                assert!(unsafe { layer_bytes(&layer, q, &quads, out) }, "buffers")
+            });
         }
     }
 }

@@ -79,73 +79,30 @@ fn pair_step(acc: &mut [[__m512i; WIDE]; ROWS], w: [u32; ROWS], x: &[u32]) {
 
 #[cfg(test)]
 mod tests {
-    use super::super::super::test_layer::{TestLayer, byte};
-    use super::super::super::{Sink, dense_tile};
-    use super::super::pairs::tests::by_point;
-    use super::super::pool_maxima;
-    use super::super::vnni::tests::{from_quads, vnni};
+    use super::super::super::test_layer::block_cases;
+    use super::super::tests::{check_layer, pairs_by_point};
+    use super::super::vnni::tests::vnni;
     use super::super::widen;
     use super::*;
-    use crate::testing::SplitMix64;
-    use std::vec::Vec;
 
     /// `layer_wide` gives the portable kernel's activations, stored as
-    /// byte quads and max-pooled, on even and odd widths (output counts
-    /// that are and are not multiples of the four rows taken together), on
-    /// both requantization paths.
+    /// byte quads and max-pooled, on every case of [`block_cases`] (their
+    /// int8 inputs as int16 pairs).
     #[test]
     fn wide_layer_matches_portable() {
         if !vnni() {
             return;
         }
-        let mut rng = SplitMix64(38);
-        for &(inputs, outputs) in &[
-            (4, 3),
-            (3, 64),
-            (16, 8),
-            (33, 64),
-            (64, 7),
-            (128, 256),
-            (7, 1),
-            (9, 6),
-        ] {
-            for shifts in [(-22, -2), (-31, 31)] {
-                let random = TestLayer::new(&mut rng, inputs, outputs, shifts);
-                let (weights, q) = (&random.weights, random.requant());
-                let x: Vec<i8> = (0..BLOCK * inputs).map(|_| byte(&mut rng)).collect();
-                let pairs = inputs.div_ceil(2);
-                let mut wide = std::vec![0u32; outputs * pairs];
-                widen(weights, inputs, &mut wide);
-                let input = by_point(&x, inputs);
-                let mut want = std::vec![0i8; BLOCK * outputs];
-                let sink = &mut Sink::Store {
-                    out: &mut want,
-                    outputs,
-                };
-                dense_tile(weights, inputs, q, &x, sink);
-                let mut got = std::vec![0u32; outputs.div_ceil(4) * BLOCK];
-                // SAFETY: the CPU has AVX-512 VNNI and BW (checked above).
-                #[allow(unsafe_code)]
-                unsafe {
-                    layer_wide(&wide, pairs, q, &input, Out::Quads(&mut got))
-                };
-                assert_eq!(
-                    from_quads(&got, outputs),
-                    want,
-                    "stored, {inputs} -> {outputs}"
-                );
-                let (mut want, mut got) =
-                    (std::vec![i8::MIN; outputs], std::vec![i8::MIN; outputs]);
-                dense_tile(weights, inputs, q, &x, &mut Sink::Pool(&mut want));
-                let mut maxima = std::vec![i32::MIN as u32; outputs];
-                // SAFETY: as above.
-                #[allow(unsafe_code)]
-                unsafe {
-                    layer_wide(&wide, pairs, q, &input, Out::Maxima(&mut maxima))
-                };
-                pool_maxima(&maxima, q, &mut got);
-                assert_eq!(got, want, "pooled, {inputs} -> {outputs}");
-            }
+        for c in block_cases(39) {
+            let (q, pairs) = (c.layer.requant(), c.inputs.div_ceil(2));
+            let mut wide = std::vec![0u32; c.outputs * pairs];
+            widen(&c.layer.weights, c.inputs, &mut wide);
+            let input = pairs_by_point(&c.x, c.inputs);
+            // SAFETY: the CPU has AVX-512 VNNI and BW (checked above).
+            #[allow(unsafe_code)]
+            check_layer(&c, "wide", 0x80, &|out| unsafe {
+                layer_wide(&wide, pairs, q, &input, out)
+            });
         }
     }
 }
