@@ -1,8 +1,9 @@
-//! The host block encoder (`std` feature; x86-64 with AVX2 or AVX-512
-//! VNNI, aarch64 with the dot-product extension, see [`Route`]):
+//! The host block encoder (`std` feature; x86-64 with AVX2, AVX-VNNI or
+//! AVX-512 VNNI, aarch64 with the dot-product extension, see [`Route`]):
 //! [`HOST_BLOCK`](crate::arch::HOST_BLOCK) points through every encoder
-//! layer, each layer a small matrix product. The aarch64 route
-//! (`sdot`) is described there; what follows is the x86-64 routes.
+//! layer, each layer a small matrix product. The aarch64 route (`sdot`)
+//! and the AVX-VNNI one (`avxvnni`) are described there; what follows is
+//! the AVX2 and AVX-512 VNNI routes.
 //!
 //! The tile kernel (`super::x86`) multiplies one weight row with eight
 //! points' activations along the input axis and must add each point's
@@ -48,6 +49,8 @@ use crate::fixed::OutputStep;
 use crate::format::{Int8Layer, le_i32s};
 
 #[cfg(target_arch = "x86_64")]
+mod avxvnni;
+#[cfg(target_arch = "x86_64")]
 mod bytes;
 #[cfg(target_arch = "x86_64")]
 mod pairs;
@@ -76,6 +79,10 @@ enum Route {
     /// (`wide`), every later one on byte quads of `x + 128` (`vnni`).
     #[cfg(target_arch = "x86_64")]
     Vnni,
+    /// x86-64 with AVX-VNNI but no AVX-512: the same layers on 256-bit
+    /// vectors (`avxvnni`).
+    #[cfg(target_arch = "x86_64")]
+    AvxVnni,
     /// aarch64 with the dot-product extension: the first layer on int16
     /// pairs, every later one on byte quads (`sdot`).
     #[cfg(target_arch = "aarch64")]
@@ -89,6 +96,8 @@ impl Route {
         {
             if vnni::has_vnni() {
                 Some(Route::Vnni)
+            } else if avxvnni::has_avxvnni() {
+                Some(Route::AvxVnni)
             } else {
                 std::is_x86_feature_detected!("avx2").then_some(Route::Avx2)
             }
@@ -107,7 +116,7 @@ impl Route {
             #[cfg(target_arch = "x86_64")]
             Route::Avx2 => false,
             #[cfg(target_arch = "x86_64")]
-            Route::Vnni => true,
+            Route::Vnni | Route::AvxVnni => true,
             #[cfg(target_arch = "aarch64")]
             Route::Sdot => true,
         }
@@ -122,7 +131,7 @@ impl Route {
             #[cfg(target_arch = "x86_64")]
             Route::Avx2 => l + 1 == layers && l > 0,
             #[cfg(target_arch = "x86_64")]
-            Route::Vnni => l > 0,
+            Route::Vnni | Route::AvxVnni => l > 0,
             #[cfg(target_arch = "aarch64")]
             Route::Sdot => false,
         }
@@ -283,6 +292,10 @@ impl<'w> BlockEncoder<'w> {
             #[cfg(target_arch = "x86_64")]
             Route::Vnni => unsafe {
                 encode_quads::<vnni::Kernels>(weights, sums, input, output, layers, maxima)
+            },
+            #[cfg(target_arch = "x86_64")]
+            Route::AvxVnni => unsafe {
+                encode_quads::<avxvnni::Kernels>(weights, sums, input, output, layers, maxima)
             },
             #[cfg(target_arch = "aarch64")]
             Route::Sdot => unsafe {
@@ -453,6 +466,47 @@ fn pair(lo: i16, hi: i16) -> u32 {
     (lo as u16 as u32) | ((hi as u16 as u32) << 16)
 }
 
+/// Rows a group of the quad routes' kernels takes together, sharing each
+/// load of the block's inputs (four outputs fill a quad of the next
+/// layer's input).
+const ROWS: usize = 4;
+
+/// Rows `o..o + ROWS` of a layer with `outputs` rows of `len` values in
+/// `weights`: each row, its bias (less `128` times the row's weight sum
+/// where `sums` has them, for inputs held as `x + 128`) and its output
+/// step. Missing rows (past the last) repeat the last with a zero bias and
+/// no step; their results are never taken.
+#[allow(clippy::type_complexity)]
+fn group<'a, T>(
+    weights: &'a [T],
+    len: usize,
+    q: Requant<'_>,
+    o: usize,
+    outputs: usize,
+    sums: &[u32],
+) -> ([&'a [T]; ROWS], [i32; ROWS], [Option<OutputStep>; ROWS]) {
+    let n = outputs.saturating_sub(o).clamp(1, ROWS);
+    let (bias, mult) = (q.bias.as_chunks::<4>().0, q.multiplier.as_chunks::<4>().0);
+    let (mut rs, mut biases, mut steps) = ([&[][..]; ROWS], [0; ROWS], [None; ROWS]);
+    for (r, ((row, b), step)) in rs.iter_mut().zip(&mut biases).zip(&mut steps).enumerate() {
+        let ch = o + r.min(n - 1);
+        *row = weights.get(ch * len..(ch + 1) * len).unwrap_or(&[]);
+        if let (true, Some(&bias), Some(&m), Some(&s)) =
+            (r < n, bias.get(ch), mult.get(ch), q.shift.get(ch))
+        {
+            let sum = sums.get(ch).map_or(0, |&s| s as i32);
+            *b = i32::from_le_bytes(bias).wrapping_sub(sum.wrapping_mul(128));
+            *step = Some(OutputStep::new(
+                i32::from_le_bytes(m),
+                s as i8,
+                q.zero_point,
+                q.act_min,
+            ));
+        }
+    }
+    (rs, biases, steps)
+}
+
 /// Weights `4j..4j + 4` of a row as one word, zeros past its end.
 #[inline]
 fn quad(row: &[u8], j: usize) -> i32 {
@@ -582,6 +636,11 @@ pub(super) mod tests {
                 routes.push(Route::Vnni);
             } else {
                 std::eprintln!("no AVX-512 VNNI on this CPU: its route not tested");
+            }
+            if avxvnni::has_avxvnni() {
+                routes.push(Route::AvxVnni);
+            } else {
+                std::eprintln!("no AVX-VNNI on this CPU: its route not tested");
             }
             routes
         }

@@ -47,11 +47,8 @@ use core::arch::aarch64::{
 use super::super::Requant;
 pub(super) use super::super::neon::has_sdot;
 use super::super::neon::{sdot, sdot_lane};
-use super::{BLOCK, ByteLayer, Out, quad, raise};
+use super::{BLOCK, ByteLayer, Out, ROWS, group, quad, raise};
 use crate::fixed::OutputStep;
-
-/// Rows taken together.
-const ROWS: usize = 4;
 
 /// Vectors of four points in a pass.
 const PASS: usize = 4;
@@ -79,38 +76,6 @@ impl super::QuadKernels for Kernels {
         // SAFETY: the caller's (the CPU has `dotprod`).
         unsafe { layer_bytes(layer, q, input, out) }
     }
-}
-
-/// Rows `o..o + ROWS` of a layer with `outputs` rows of `len` values in
-/// `weights`: each row, its bias and its output step. Missing rows (past
-/// the last) repeat the last with a zero bias and no step; their results
-/// are never taken.
-fn group<'a, T>(
-    weights: &'a [T],
-    len: usize,
-    q: Requant<'_>,
-    o: usize,
-    outputs: usize,
-) -> ([&'a [T]; ROWS], [i32; ROWS], [Option<OutputStep>; ROWS]) {
-    let n = outputs.saturating_sub(o).clamp(1, ROWS);
-    let (bias, mult) = (q.bias.as_chunks::<4>().0, q.multiplier.as_chunks::<4>().0);
-    let (mut rs, mut biases, mut steps) = ([&[][..]; ROWS], [0; ROWS], [None; ROWS]);
-    for (r, ((row, b), step)) in rs.iter_mut().zip(&mut biases).zip(&mut steps).enumerate() {
-        let ch = o + r.min(n - 1);
-        *row = weights.get(ch * len..(ch + 1) * len).unwrap_or(&[]);
-        if let (true, Some(&bias), Some(&m), Some(&s)) =
-            (r < n, bias.get(ch), mult.get(ch), q.shift.get(ch))
-        {
-            *b = i32::from_le_bytes(bias);
-            *step = Some(OutputStep::new(
-                i32::from_le_bytes(m),
-                s as i8,
-                q.zero_point,
-                q.act_min,
-            ));
-        }
-    }
-    (rs, biases, steps)
 }
 
 /// Accumulators starting from the rows' biases.
@@ -160,7 +125,7 @@ pub(super) fn layer_pairs(
     };
     let outputs = q.shift.len();
     for o in (0..outputs).step_by(ROWS) {
-        let (rs, biases, steps) = group(weights, pairs, q, o, outputs);
+        let (rs, biases, steps) = group(weights, pairs, q, o, outputs, &[]);
         if rs.iter().any(|r| r.len() < pairs) {
             return;
         }
@@ -209,7 +174,7 @@ pub(super) fn layer_bytes(
     };
     let (outputs, chunks) = (q.shift.len(), inputs / 16);
     for o in (0..outputs).step_by(ROWS) {
-        let (rs, biases, steps) = group(layer.weights, inputs, q, o, outputs);
+        let (rs, biases, steps) = group(layer.weights, inputs, q, o, outputs, &[]);
         if rs.iter().any(|r| r.len() < inputs) {
             return true;
         }

@@ -15,12 +15,8 @@ use core::arch::x86_64::{
 pub(super) use super::super::x86::has_vnni;
 use super::super::{Requant, rows};
 
-use super::{BLOCK, ByteLayer, Out, quad, raise};
+use super::{BLOCK, ByteLayer, Out, ROWS, quad, raise};
 use crate::fixed::OutputStep;
-
-/// Rows that share each load of the block's inputs (here and in
-/// [`super::wide`]).
-pub(super) const ROWS: usize = 4;
 
 /// Vectors of sixteen points in a block.
 pub(super) const WIDE: usize = BLOCK / 16;

@@ -6,8 +6,8 @@ use core::arch::x86_64::{__m512i, _mm512_dpwssd_epi32, _mm512_set1_epi32, _mm512
 
 use super::super::{Requant, rows};
 use super::BLOCK;
-use super::Out;
-use super::vnni::{ROWS, WIDE, block_vectors, finish};
+use super::vnni::{WIDE, block_vectors, finish};
+use super::{Out, ROWS};
 use crate::fixed::OutputStep;
 
 /// A layer on int16 pairs with AVX-512 VNNI: `weights` holds `outputs`
