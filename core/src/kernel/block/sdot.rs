@@ -159,8 +159,8 @@ pub(super) fn layer_pairs(
 
 /// A layer whose input is an int8 activation, as signed byte quads by
 /// point (`inputs.div_ceil(4) x BLOCK` words in `quads`); the activations
-/// go to `out`. Returns `false`, having written nothing, when `quads` is
-/// short (and stops when a weight row is).
+/// go to `out`. Returns `false` when `quads` or a weight row is short,
+/// having written nothing in the first case.
 #[target_feature(enable = "dotprod")]
 pub(super) fn layer_bytes(
     layer: &ByteLayer<'_>,
@@ -176,7 +176,8 @@ pub(super) fn layer_bytes(
     for o in (0..outputs).step_by(ROWS) {
         let (rs, biases, steps) = group(layer.weights, inputs, q, o, outputs, &[]);
         if rs.iter().any(|r| r.len() < inputs) {
-            return true;
+            // (Never for a loaded model: its rows are checked at load.)
+            return false;
         }
         for pass in 0..PASSES {
             let mut acc = start(biases);
