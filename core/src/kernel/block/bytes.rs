@@ -28,8 +28,9 @@ use crate::format::le_i32s;
 /// - the high bits are 1 only where the activation is in the upper half of
 ///   its range, which after a ReLU is rare (in 3.4% of the quads of a
 ///   block at the pooled layer's input, on the ModelNet10 benchmark
-///   clouds, measured with blocks of 48 points). Only the quads where some point of the block has
-///   one take a second pass, `VPMADDUBSW` on `h`, then `VPMADDWD` with 128.
+///   clouds, measured with blocks of 48 points). Only the quads where
+///   some point of the block has one take a second pass, `VPMADDUBSW` on
+///   `h`, then `VPMADDWD` with 128.
 ///
 /// Per 32 products that is still two multiply instructions, as in
 /// [`super::layer`], but one `VPADDD` instead of two, half the loads of
