@@ -69,13 +69,16 @@ cargo xtask <command>
                 write capi/include/pcrnet.h from the C API crate (cbindgen);
                 --check fails if the committed header differs
   bench         host benchmarks (criterion): encoder throughput, training step
-  ort-bench [DATA]
+  ort-bench [DATA] [--avx2 | --avx-vnni]
                 our f32 and int8 network beside ONNX Runtime on the same
                 weights and clouds (the shipped embedded default and a
                 paper-width model; 50 ModelNet10 test clouds from DATA,
                 default ../shared/data/ModelNet10, else generated shapes),
                 one thread, printing the time ratios; installs onnxruntime,
-                onnx and numpy with pip into target/ort-venv
+                onnx and numpy with pip into target/ort-venv; with --avx2
+                both sides as on a CPU without AVX-512 and AVX-VNNI, with
+                --avx-vnni as on one with AVX-VNNI but no AVX-512
+                (tools/cpuid/mask.c, needs CPUID faulting)
   results [DATA] run the paper's six experiments and `trust` on DATA (default
                 ../shared/data; trains the models they need into
                 target/experiments) and regenerate RESULTS.md
@@ -94,7 +97,9 @@ fn main() -> ExitCode {
         Some("ci") => ci(),
         Some("demo") => demo(&args[1..]),
         Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "-p", "pcrnet-train"]),
-        Some("ort-bench") => ort_bench::run(&root(), args.get(1).map(String::as_str)),
+        Some("ort-bench") => {
+            ort_bench_args(&args[1..]).and_then(|(data, cpu)| ort_bench::run(&root(), data, cpu))
+        }
         Some("qemu-test") => qemu_test(),
         Some("cores") => cores(),
         Some("results") => results(args.get(1).map_or("../shared/data", String::as_str)),
@@ -128,6 +133,22 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `ort-bench`'s arguments: an optional data folder and CPU flag.
+fn ort_bench_args(args: &[String]) -> Result<(Option<&str>, Option<ort_bench::Cpu>), String> {
+    let (mut data, mut cpu) = (None, None);
+    for a in args {
+        match a.as_str() {
+            "--avx2" => cpu = Some(ort_bench::Cpu::Avx2),
+            "--avx-vnni" => cpu = Some(ort_bench::Cpu::AvxVnni),
+            flag if flag.starts_with("--") => {
+                return Err(format!("ort-bench: unknown flag `{flag}`\n\n{HELP}"));
+            }
+            path => data = Some(path),
+        }
+    }
+    Ok((data, cpu))
 }
 
 fn root() -> PathBuf {

@@ -14,6 +14,13 @@
 //! environment when its wheel installs here, and `tools/icp_bench.py`
 //! runs its point-to-point ICP on the pairs our side registered (see the
 //! example's docs). Without Open3D that comparison is skipped, saying so.
+//!
+//! With `--avx2`, both sides run as on a CPU with AVX2 but no AVX-512 or
+//! AVX-VNNI, and with `--avx-vnni` as on one with AVX-VNNI but no
+//! AVX-512: `tools/cpuid/mask.c`, built with gcc into `target/` and
+//! preloaded into the script (and so into our side, which it starts),
+//! hides those features from every feature test through Linux's CPUID
+//! faulting. The ICP comparison is left out then.
 
 use std::path::Path;
 
@@ -23,7 +30,30 @@ const PACKAGES: [&str; 3] = ["onnxruntime==1.32.0", "onnx==1.23.2", "numpy==2.4.
 /// Open3D, for the ICP comparison (its CPU-only wheel).
 const OPEN3D: &str = "open3d-cpu==0.19.0";
 
-pub fn run(root: &Path, data: Option<&str>) -> Result<(), String> {
+/// A CPU class the benchmark can pretend to run on.
+#[derive(Clone, Copy)]
+pub enum Cpu {
+    /// AVX2, no AVX-512 or AVX-VNNI (AMD Zen 1-3, Intel Haswell to
+    /// Comet Lake).
+    Avx2,
+    /// AVX-VNNI, no AVX-512 (Intel client cores from Alder Lake on).
+    AvxVnni,
+}
+
+impl Cpu {
+    /// The preloaded library's name, gcc's extra flags and what the run
+    /// says.
+    fn parts(self) -> (&'static str, &'static [&'static str], &'static str) {
+        match self {
+            Cpu::Avx2 => ("avx2_only", &[], "AVX-512 and AVX-VNNI hidden"),
+            Cpu::AvxVnni => ("avx_vnni", &["-DKEEP_AVX_VNNI"], "AVX-512 hidden"),
+        }
+    }
+}
+
+/// The benchmark on `data` (ModelNet10 by default), on the CPU's own
+/// features or as on `cpu`.
+pub fn run(root: &Path, data: Option<&str>, cpu: Option<Cpu>) -> Result<(), String> {
     let venv = root.join("target/ort-venv");
     let python = venv.join("bin/python");
     let python = python.to_str().ok_or("the workspace path is not UTF-8")?;
@@ -63,6 +93,22 @@ pub fn run(root: &Path, data: Option<&str>) -> Result<(), String> {
     crate::cargo(&args)?;
     let ours = root.join("target/release/examples/ort_bench");
     let ours = ours.to_str().ok_or("the workspace path is not UTF-8")?;
+    if let Some(cpu) = cpu {
+        let (name, flags, hidden) = cpu.parts();
+        let shim = format!("target/{name}.so");
+        let source = "tools/cpuid/mask.c";
+        let mut args = vec!["-O2", "-shared", "-fPIC", "-o", shim.as_str(), source];
+        args.extend(flags);
+        crate::run("gcc", &args)?;
+        let preload = root.join(&shim);
+        let preload = preload.to_str().ok_or("the workspace path is not UTF-8")?;
+        println!("{hidden} ({shim}, from {source})");
+        return crate::run_with_env(
+            python,
+            &["tools/ort_bench.py", out, ours],
+            &[("LD_PRELOAD", preload)],
+        );
+    }
     crate::run(python, &["tools/ort_bench.py", out, ours])?;
     let has_open3d = |python: &str| {
         std::process::Command::new(python)
