@@ -227,7 +227,7 @@ impl<'w> BlockEncoder<'w> {
             let (out, tail) = free.split_at_mut_checked(shape.outputs)?;
             if route.needs_sums(l, count) {
                 for (sum, row) in out.iter_mut().zip(rows(layer.weights, shape.inputs)) {
-                    *sum = row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32;
+                    *sum = row_sum(row);
                 }
             }
             free = tail;
@@ -477,6 +477,7 @@ const ROWS: usize = 4;
 /// step. Missing rows (past the last) repeat the last with a zero bias and
 /// no step; their results are never taken.
 #[allow(clippy::type_complexity)]
+#[inline(always)]
 fn group<'a, T>(
     weights: &'a [T],
     len: usize,
@@ -505,6 +506,12 @@ fn group<'a, T>(
         }
     }
     (rs, biases, steps)
+}
+
+/// The sum of an int8 weight row (as a word), which the byte kernels that
+/// hold each input as `x + 128` take `-128` times into the bias.
+fn row_sum(row: &[u8]) -> u32 {
+    row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32
 }
 
 /// Weights `4j..4j + 4` of a row as one word, zeros past its end.

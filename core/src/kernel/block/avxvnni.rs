@@ -261,7 +261,7 @@ mod tests {
         for c in block_cases(41) {
             let (q, inputs) = (c.layer.requant(), c.inputs);
             let sums: Vec<u32> = super::super::super::rows(&c.layer.weights, inputs)
-                .map(|r| r.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32)
+                .map(super::super::row_sum)
                 .collect();
             let layer = ByteLayer {
                 weights: &c.layer.weights,

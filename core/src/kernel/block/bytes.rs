@@ -248,7 +248,7 @@ mod tests {
     fn check(layer: &TestLayer, inputs: usize, outputs: usize, x: &[i8], what: &str) -> bool {
         let q = layer.requant();
         let sums: Vec<u32> = rows(&layer.weights, inputs)
-            .map(|r| r.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32)
+            .map(super::super::row_sum)
             .collect();
         let pooled = ByteLayer {
             weights: &layer.weights,

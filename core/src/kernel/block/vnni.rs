@@ -15,7 +15,7 @@ use core::arch::x86_64::{
 pub(super) use super::super::x86::has_vnni;
 use super::super::{Requant, rows};
 
-use super::{BLOCK, ByteLayer, Out, ROWS, quad, raise};
+use super::{BLOCK, ByteLayer, Out, ROWS, group, quad, raise};
 use crate::fixed::OutputStep;
 
 /// Vectors of sixteen points in a block.
@@ -71,34 +71,11 @@ pub(super) fn layer_bytes(
         return false;
     };
     let outputs = layer.sums.len();
-    // Channels by index, not by a chain of iterators: per group of rows
-    // that chain cost as much as a sixth of the layer's time.
-    let (bias, mult) = (q.bias.as_chunks::<4>().0, q.multiplier.as_chunks::<4>().0);
     for o in (0..outputs).step_by(ROWS) {
-        let n = (outputs - o).min(ROWS);
-        // Missing rows repeat the last with a zero bias and no step; never
-        // taken.
-        let mut rs = [&[][..]; ROWS];
+        let (rs, biases, steps) = group(layer.weights, inputs, q, o, outputs, layer.sums);
         let mut acc = [[_mm512_setzero_si512(); WIDE]; ROWS];
-        let mut steps = [None; ROWS];
-        for (r, ((row, acc), step)) in rs.iter_mut().zip(&mut acc).zip(&mut steps).enumerate() {
-            let ch = o + r.min(n - 1);
-            *row = layer
-                .weights
-                .get(ch * inputs..(ch + 1) * inputs)
-                .unwrap_or(&[]);
-            if let (true, Some(&b), Some(&sum), Some(&m), Some(&s)) = (
-                r < n,
-                bias.get(ch),
-                layer.sums.get(ch),
-                mult.get(ch),
-                q.shift.get(ch),
-            ) {
-                let b = i32::from_le_bytes(b).wrapping_sub((sum as i32).wrapping_mul(128));
-                *acc = [_mm512_set1_epi32(b); WIDE];
-                let m = i32::from_le_bytes(m);
-                *step = Some(OutputStep::new(m, s as i8, q.zero_point, q.act_min));
-            }
+        for (acc, b) in acc.iter_mut().zip(biases) {
+            *acc = [_mm512_set1_epi32(b); WIDE];
         }
         let [r0, r1, r2, r3] = rs;
         // (Plain loops: a closure would not inherit the target features,
@@ -318,7 +295,7 @@ pub(super) mod tests {
         for c in block_cases(36) {
             let (q, inputs) = (c.layer.requant(), c.inputs);
             let sums: Vec<u32> = rows(&c.layer.weights, inputs)
-                .map(|r| r.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32)
+                .map(super::super::row_sum)
                 .collect();
             let layer = ByteLayer {
                 weights: &c.layer.weights,

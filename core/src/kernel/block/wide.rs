@@ -7,8 +7,7 @@ use core::arch::x86_64::{__m512i, _mm512_dpwssd_epi32, _mm512_set1_epi32, _mm512
 use super::super::{Requant, rows};
 use super::BLOCK;
 use super::vnni::{WIDE, block_vectors, finish};
-use super::{Out, ROWS};
-use crate::fixed::OutputStep;
+use super::{Out, ROWS, group};
 
 /// A layer on int16 pairs with AVX-512 VNNI: `weights` holds `outputs`
 /// rows of `pairs` int16-pair words, `input` the block's input pairs by
@@ -31,24 +30,11 @@ pub(super) fn layer_wide(
         return;
     };
     let outputs = q.bias.len() / 4;
-    let (bias, mult) = (q.bias.as_chunks::<4>().0, q.multiplier.as_chunks::<4>().0);
-    // Channels by index (see `layer_bytes`).
     for o in (0..outputs).step_by(ROWS) {
-        let n = (outputs - o).min(ROWS);
-        // Missing rows repeat the last with a zero bias; never taken.
-        let mut rs = [&[][..]; ROWS];
+        let (rs, biases, steps) = group(weights, pairs, q, o, outputs, &[]);
         let mut acc = [[_mm512_setzero_si512(); WIDE]; ROWS];
-        let mut steps = [None; ROWS];
-        for (r, ((row, acc), step)) in rs.iter_mut().zip(&mut acc).zip(&mut steps).enumerate() {
-            let ch = o + r.min(n - 1);
-            *row = weights.get(ch * pairs..(ch + 1) * pairs).unwrap_or(&[]);
-            if let (true, Some(&b), Some(&m), Some(&s)) =
-                (r < n, bias.get(ch), mult.get(ch), q.shift.get(ch))
-            {
-                *acc = [_mm512_set1_epi32(i32::from_le_bytes(b)); WIDE];
-                let m = i32::from_le_bytes(m);
-                *step = Some(OutputStep::new(m, s as i8, q.zero_point, q.act_min));
-            }
+        for (acc, b) in acc.iter_mut().zip(biases) {
+            *acc = [_mm512_set1_epi32(b); WIDE];
         }
         // (Plain loops: a closure would not inherit the target features,
         // and its intrinsics would become calls.)
