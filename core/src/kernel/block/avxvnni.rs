@@ -8,38 +8,53 @@
 //! int16 pairs (`VPDPWSSD`), every later one on byte quads of `x + 128`
 //! (`VPDPBUSD`, the bias taking `-128` times the row's weight sum), each
 //! writing its activations straight into the next one's quads. A group of
-//! four rows takes a quarter of the block at a time (sixteen points, two
-//! vectors of eight), eight accumulators; each row's weight quad is
-//! broadcast from memory. The output step is the AVX2 kernel's
-//! ([`activations`]), then two saturating packs and one byte shuffle put
-//! the four rows' bytes in point order, as on the AVX-512 route.
+//! four rows takes 24 points at a time (three vectors of eight, twelve
+//! accumulators, so that each `VPDPBUSD` has others to run while its
+//! five-cycle latency passes; eight left the chains waiting) and the
+//! block's last sixteen in a short pass; each row's weight quad is
+//! broadcast from memory. The steps are `asm!` blocks (see
+//! [`step_long`]). The output step is the AVX2 kernel's without its clamp
+//! ([`high_step`]), then two saturating packs, one byte shuffle and the
+//! ReLU floor put the four rows' bytes in point order, as on the AVX-512
+//! route; the max-pool keeps a vector of running maxima per row over the
+//! passes and reduces the four rows' at once ([`raise_group`]).
 //!
 //! The sums are the portable kernel's exact integers (products and pair
 //! sums fit in i32, and model loading bounds every partial sum, see
 //! [`super::super::dot`]), so the results are its bits.
 
+use core::arch::asm;
 use core::arch::x86_64::{
-    __m256i, _mm256_dpbusd_avx_epi32, _mm256_dpwssd_avx_epi32, _mm256_loadu_si256,
-    _mm256_max_epi32, _mm256_packs_epi16, _mm256_packs_epi32, _mm256_set1_epi32, _mm256_setr_epi8,
-    _mm256_setzero_si256, _mm256_shuffle_epi8, _mm256_storeu_si256, _mm256_xor_si256,
+    __m256i, _mm_max_epi32, _mm_storeu_si128, _mm256_castsi256_si128, _mm256_extracti128_si256,
+    _mm256_max_epi8, _mm256_max_epi32, _mm256_packs_epi16, _mm256_packs_epi32, _mm256_set1_epi32,
+    _mm256_setr_epi8, _mm256_setzero_si256, _mm256_shuffle_epi8, _mm256_storeu_si256,
+    _mm256_unpackhi_epi32, _mm256_unpackhi_epi64, _mm256_unpacklo_epi32, _mm256_unpacklo_epi64,
+    _mm256_xor_si256,
 };
 
 use super::super::Requant;
-use super::super::x86::{activations, max};
+use super::super::x86::{high_step, load, store};
 use super::{BLOCK, ByteLayer, Out, ROWS, group, quad, raise};
 use crate::fixed::OutputStep;
 
-/// Vectors of eight points in a pass.
-const PASS: usize = 2;
+/// Vectors of eight points in a long pass: twelve accumulators, three
+/// input vectors and a broadcast weight fill the sixteen registers.
+const LONG: usize = 3;
 
-/// Points in a pass (a quarter of the block).
-const PASS_POINTS: usize = 8 * PASS;
+/// Long passes over a block; the rest of it takes one short pass of
+/// [`SHORT`] vectors.
+const LONGS: usize = BLOCK / (8 * LONG);
 
-/// Passes over a block.
-const PASSES: usize = BLOCK / PASS_POINTS;
+/// Vectors of eight points in the block's last, short pass.
+const SHORT: usize = BLOCK % (8 * LONG) / 8;
 
-/// A group's accumulators over a pass: rows by vectors of eight points.
-type Acc = [[__m256i; PASS]; ROWS];
+// The passes cover the block: a long pass's points do not divide it and
+// the rest is whole vectors.
+const _: () = assert!(SHORT > 0 && BLOCK.is_multiple_of(8));
+
+/// A group's accumulators over a pass of `P` vectors: rows by vectors of
+/// eight points.
+type Acc<const P: usize> = [[__m256i; P]; ROWS];
 
 /// Whether the CPU has AVX-VNNI (and AVX2, for the output step).
 pub(super) fn has_avxvnni() -> bool {
@@ -66,33 +81,25 @@ impl super::QuadKernels for Kernels {
 /// Accumulators starting from the rows' biases.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn start(biases: [i32; ROWS]) -> Acc {
-    let mut acc = [[_mm256_setzero_si256(); PASS]; ROWS];
+fn start<const P: usize>(biases: [i32; ROWS]) -> Acc<P> {
+    let mut acc = [[_mm256_setzero_si256(); P]; ROWS];
     for (acc, b) in acc.iter_mut().zip(biases) {
-        *acc = [_mm256_set1_epi32(b); PASS];
+        *acc = [_mm256_set1_epi32(b); P];
     }
     acc
 }
 
-/// Pass `pass` of one input row of a block (`BLOCK` words, one per point)
-/// as two vectors of eight points' words.
-#[inline]
-#[target_feature(enable = "avx2")]
-fn load_pass(row: &[u32; BLOCK], pass: usize) -> [__m256i; PASS] {
-    let x = row
-        .get(pass * PASS_POINTS..)
-        .and_then(|x| x.first_chunk::<PASS_POINTS>())
-        .unwrap_or(&[0; PASS_POINTS]);
-    let (a, b) = x.split_at(8);
-    // SAFETY: `a` and `b` are eight words (32 bytes) each; unaligned loads
-    // are allowed.
-    #[allow(unsafe_code)]
-    unsafe {
-        [
-            _mm256_loadu_si256(a.as_ptr().cast()),
-            _mm256_loadu_si256(b.as_ptr().cast()),
-        ]
-    }
+/// Runs `pass` on the block's points, [`LONGS`] long passes then a short
+/// one, each from its first point; `best` collects the max-pool's vectors.
+/// (A macro: the two pass widths are two instances of the same body, each
+/// inlined with the caller's target features.)
+macro_rules! passes {
+    ($pass:ident) => {{
+        for l in 0..LONGS {
+            $pass!(LONG, step_long, 8 * LONG * l);
+        }
+        $pass!(SHORT, step_short, 8 * LONG * LONGS);
+    }};
 }
 
 /// The first layer (the coordinates, int16 pairs by point, `pairs x
@@ -113,14 +120,21 @@ pub(super) fn layer_pairs(
     let outputs = q.shift.len();
     for o in (0..outputs).step_by(ROWS) {
         let (rs, biases, steps) = group(weights, pairs, q, o, outputs, &[]);
-        let [r0, r1, r2, r3] = rs;
-        for pass in 0..PASSES {
-            let mut acc = start(biases);
-            let columns = r0.iter().zip(r1).zip(r2).zip(r3);
-            for ((((&a, &b), &c), &d), x) in columns.zip(input.as_chunks::<BLOCK>().0) {
-                step(&mut acc, [a, b, c, d], &load_pass(x, pass), Product::Pairs);
-            }
-            finish(&acc, &steps, o, pass, &mut out);
+        let [r0, r1, r2, r3] = rs.map(word_bytes);
+        let mut best = [_mm256_set1_epi32(i32::MIN); ROWS];
+        macro_rules! pass {
+            ($p:expr, $step:ident, $at:expr) => {{
+                let mut acc = start::<{ $p }>(biases);
+                let columns = r0.iter().zip(r1).zip(r2).zip(r3);
+                for ((((a, b), c), d), x) in columns.zip(input.as_chunks::<BLOCK>().0) {
+                    $step(&mut acc, [a, b, c, d], x, $at, Product::Pairs);
+                }
+                finish(&acc, &steps, o, $at, &mut out, &mut best);
+            }};
+        }
+        passes!(pass);
+        if let Out::Maxima(maxima) = &mut out {
+            raise_group(maxima, o, &steps, best);
         }
     }
 }
@@ -144,19 +158,25 @@ pub(super) fn layer_bytes(
     for o in (0..outputs).step_by(ROWS) {
         let (rs, biases, steps) = group(layer.weights, inputs, q, o, outputs, layer.sums);
         let [r0, r1, r2, r3] = rs.map(|r| r.as_chunks::<4>().0);
-        for pass in 0..PASSES {
-            let mut acc = start(biases);
-            let words = r0.iter().zip(r1).zip(r2).zip(r3);
-            for ((((&a, &b), &c), &d), x) in words.zip(quads) {
-                let w = [a, b, c, d].map(i32::from_le_bytes).map(|w| w as u32);
-                step(&mut acc, w, &load_pass(x, pass), Product::Bytes);
-            }
-            // The rows' last, partial quad.
-            if let Some(x) = quads.get(full).filter(|_| full < count) {
-                let w = rs.map(|r| quad(r, full) as u32);
-                step(&mut acc, w, &load_pass(x, pass), Product::Bytes);
-            }
-            finish(&acc, &steps, o, pass, &mut out);
+        let mut best = [_mm256_set1_epi32(i32::MIN); ROWS];
+        macro_rules! pass {
+            ($p:expr, $step:ident, $at:expr) => {{
+                let mut acc = start::<{ $p }>(biases);
+                let words = r0.iter().zip(r1).zip(r2).zip(r3);
+                for ((((a, b), c), d), x) in words.zip(quads) {
+                    $step(&mut acc, [a, b, c, d], x, $at, Product::Bytes);
+                }
+                // The rows' last, partial quad.
+                if let Some(x) = quads.get(full).filter(|_| full < count) {
+                    let w = rs.map(|r| quad(r, full).to_le_bytes());
+                    $step(&mut acc, w.each_ref(), x, $at, Product::Bytes);
+                }
+                finish(&acc, &steps, o, $at, &mut out, &mut best);
+            }};
+        }
+        passes!(pass);
+        if let Out::Maxima(maxima) = &mut out {
+            raise_group(maxima, o, &steps, best);
         }
     }
     true
@@ -171,42 +191,180 @@ enum Product {
     Bytes,
 }
 
-/// Adds to the rows' accumulators over the pass the products of their
-/// weight words `w` (broadcast) with the pass's input words `x`.
+/// Adds to the rows' accumulators over a long pass from point `at` the
+/// products of their weight words `w` (broadcast) with the pass's input
+/// words in `x`, one row of the block. One `asm!` block: the twelve
+/// accumulators, three input vectors and the broadcast weight take all
+/// sixteen registers, and the compiler, given the same with intrinsics,
+/// spills an accumulator and copies others between registers on every
+/// step.
 #[inline]
 #[target_feature(enable = "avx2,avxvnni")]
-fn step(acc: &mut Acc, w: [u32; ROWS], x: &[__m256i; PASS], product: Product) {
-    for (acc, w) in acc.iter_mut().zip(w) {
-        let w = _mm256_set1_epi32(w as i32);
-        for (a, &x) in acc.iter_mut().zip(x) {
-            *a = match product {
-                Product::Pairs => _mm256_dpwssd_avx_epi32(*a, x, w),
-                Product::Bytes => _mm256_dpbusd_avx_epi32(*a, x, w),
-            };
+fn step_long(acc: &mut Acc<3>, w: [&[u8; 4]; ROWS], x: &[u32; BLOCK], at: usize, product: Product) {
+    let Some(x) = x.get(at..).and_then(|x| x.first_chunk::<24>()) else {
+        return;
+    };
+    let [
+        [a00, a01, a02],
+        [a10, a11, a12],
+        [a20, a21, a22],
+        [a30, a31, a32],
+    ] = acc;
+    macro_rules! run {
+        ($op:literal) => {
+            asm!(
+                "vmovdqu {x0}, ymmword ptr [{x}]",
+                "vmovdqu {x1}, ymmword ptr [{x} + 32]",
+                "vmovdqu {x2}, ymmword ptr [{x} + 64]",
+                "vpbroadcastd {w}, dword ptr [{w0}]",
+                concat!("{{vex}} ", $op, " {a00}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a01}, {x1}, {w}"),
+                concat!("{{vex}} ", $op, " {a02}, {x2}, {w}"),
+                "vpbroadcastd {w}, dword ptr [{w1}]",
+                concat!("{{vex}} ", $op, " {a10}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a11}, {x1}, {w}"),
+                concat!("{{vex}} ", $op, " {a12}, {x2}, {w}"),
+                "vpbroadcastd {w}, dword ptr [{w2}]",
+                concat!("{{vex}} ", $op, " {a20}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a21}, {x1}, {w}"),
+                concat!("{{vex}} ", $op, " {a22}, {x2}, {w}"),
+                "vpbroadcastd {w}, dword ptr [{w3}]",
+                concat!("{{vex}} ", $op, " {a30}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a31}, {x1}, {w}"),
+                concat!("{{vex}} ", $op, " {a32}, {x2}, {w}"),
+                x = in(reg) x.as_ptr(),
+                w0 = in(reg) w[0].as_ptr(),
+                w1 = in(reg) w[1].as_ptr(),
+                w2 = in(reg) w[2].as_ptr(),
+                w3 = in(reg) w[3].as_ptr(),
+                a00 = inout(ymm_reg) *a00,
+                a01 = inout(ymm_reg) *a01,
+                a02 = inout(ymm_reg) *a02,
+                a10 = inout(ymm_reg) *a10,
+                a11 = inout(ymm_reg) *a11,
+                a12 = inout(ymm_reg) *a12,
+                a20 = inout(ymm_reg) *a20,
+                a21 = inout(ymm_reg) *a21,
+                a22 = inout(ymm_reg) *a22,
+                a30 = inout(ymm_reg) *a30,
+                a31 = inout(ymm_reg) *a31,
+                a32 = inout(ymm_reg) *a32,
+                x0 = out(ymm_reg) _,
+                x1 = out(ymm_reg) _,
+                x2 = out(ymm_reg) _,
+                w = out(ymm_reg) _,
+                options(pure, readonly, nostack, preserves_flags),
+            )
+        };
+    }
+    // SAFETY: the CPU has AVX-VNNI and AVX2 (the caller's); the block
+    // reads the 96 bytes of `x` from `at` and the four bytes of each `w`,
+    // and writes only its register operands.
+    #[allow(unsafe_code)]
+    unsafe {
+        match product {
+            Product::Pairs => run!("vpdpwssd"),
+            Product::Bytes => run!("vpdpbusd"),
         }
     }
 }
 
-/// The end of a pass of a group of rows `o..o + ROWS`: each row with a
-/// step takes its accumulators to `out`, the largest to the running
-/// maxima or all through the step into the next layer's quads (word `o /
-/// 4` of each point of the pass, plus 128).
+/// [`step_long`] on the short pass (two vectors).
+#[inline]
+#[target_feature(enable = "avx2,avxvnni")]
+fn step_short(
+    acc: &mut Acc<2>,
+    w: [&[u8; 4]; ROWS],
+    x: &[u32; BLOCK],
+    at: usize,
+    product: Product,
+) {
+    let Some(x) = x.get(at..).and_then(|x| x.first_chunk::<16>()) else {
+        return;
+    };
+    let [[a00, a01], [a10, a11], [a20, a21], [a30, a31]] = acc;
+    macro_rules! run {
+        ($op:literal) => {
+            asm!(
+                "vmovdqu {x0}, ymmword ptr [{x}]",
+                "vmovdqu {x1}, ymmword ptr [{x} + 32]",
+                "vpbroadcastd {w}, dword ptr [{w0}]",
+                concat!("{{vex}} ", $op, " {a00}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a01}, {x1}, {w}"),
+                "vpbroadcastd {w}, dword ptr [{w1}]",
+                concat!("{{vex}} ", $op, " {a10}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a11}, {x1}, {w}"),
+                "vpbroadcastd {w}, dword ptr [{w2}]",
+                concat!("{{vex}} ", $op, " {a20}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a21}, {x1}, {w}"),
+                "vpbroadcastd {w}, dword ptr [{w3}]",
+                concat!("{{vex}} ", $op, " {a30}, {x0}, {w}"),
+                concat!("{{vex}} ", $op, " {a31}, {x1}, {w}"),
+                x = in(reg) x.as_ptr(),
+                w0 = in(reg) w[0].as_ptr(),
+                w1 = in(reg) w[1].as_ptr(),
+                w2 = in(reg) w[2].as_ptr(),
+                w3 = in(reg) w[3].as_ptr(),
+                a00 = inout(ymm_reg) *a00,
+                a01 = inout(ymm_reg) *a01,
+                a10 = inout(ymm_reg) *a10,
+                a11 = inout(ymm_reg) *a11,
+                a20 = inout(ymm_reg) *a20,
+                a21 = inout(ymm_reg) *a21,
+                a30 = inout(ymm_reg) *a30,
+                a31 = inout(ymm_reg) *a31,
+                x0 = out(ymm_reg) _,
+                x1 = out(ymm_reg) _,
+                w = out(ymm_reg) _,
+                options(pure, readonly, nostack, preserves_flags),
+            )
+        };
+    }
+    // SAFETY: as in `step_long`, on 64 bytes of `x`.
+    #[allow(unsafe_code)]
+    unsafe {
+        match product {
+            Product::Pairs => run!("vpdpwssd"),
+            Product::Bytes => run!("vpdpbusd"),
+        }
+    }
+}
+
+/// Words as their bytes.
+fn word_bytes(words: &[u32]) -> &[[u8; 4]] {
+    // SAFETY: `[u8; 4]` has the size of `u32`, alignment 1 and no invalid
+    // bit patterns, so the same memory holds `words.len()` of them.
+    #[allow(unsafe_code)]
+    unsafe {
+        core::slice::from_raw_parts(words.as_ptr().cast(), words.len())
+    }
+}
+
+/// The end of a pass of a group of rows `o..o + ROWS`: each row's
+/// accumulators raise its vector of running maxima in `best` when `out`
+/// is the max-pool ([`raise_group`] takes them into it after the last
+/// pass), or go through the row's step into the next layer's quads (word
+/// `o / 4` of each point of the pass, plus 128).
 #[inline(never)]
 #[target_feature(enable = "avx2")]
-fn finish(acc: &Acc, steps: &[Option<OutputStep>; ROWS], o: usize, pass: usize, out: &mut Out<'_>) {
+fn finish<const P: usize>(
+    acc: &Acc<P>,
+    steps: &[Option<OutputStep>; ROWS],
+    o: usize,
+    at: usize,
+    out: &mut Out<'_>,
+    best: &mut [__m256i; ROWS],
+) {
     match out {
-        Out::Maxima(maxima) => {
-            for (r, (&[a, b], step)) in acc.iter().zip(steps).enumerate() {
-                if step.is_some() {
-                    raise(maxima, o + r, max(_mm256_max_epi32(a, b)));
+        Out::Maxima(_) => {
+            for (b, acc) in best.iter_mut().zip(acc) {
+                for &a in acc {
+                    *b = _mm256_max_epi32(*b, a);
                 }
             }
         }
         Out::Quads(quads) => {
-            let Some(words) = quads
-                .get_mut(o / ROWS * BLOCK + pass * PASS_POINTS..)
-                .and_then(|q| q.first_chunk_mut::<PASS_POINTS>())
-            else {
+            let Some(words) = quads.get_mut(o / ROWS * BLOCK + at..) else {
                 return;
             };
             // In each 128-bit lane, byte `4p + r` from byte `4r + p`.
@@ -214,22 +372,27 @@ fn finish(acc: &Acc, steps: &[Option<OutputStep>; ROWS], o: usize, pass: usize, 
                 0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15, 0, 4, 8, 12, 1, 5, 9, 13, 2,
                 6, 10, 14, 3, 7, 11, 15,
             );
-            for (v, words) in words.as_chunks_mut::<8>().0.iter_mut().enumerate() {
-                // Each row's activations (0 for a missing row).
+            // The ReLU floor in each row's byte of a word; a missing row's
+            // byte stays 0 under -128.
+            let floor = steps.map(|s| s.map_or(i8::MIN, |s| s.act_min()) as u8);
+            let floor = _mm256_set1_epi32(i32::from_le_bytes(floor));
+            for (v, words) in words.as_chunks_mut::<8>().0.iter_mut().take(P).enumerate() {
+                // Each row's stepped accumulators (0 for a missing row).
                 let mut rows = [_mm256_setzero_si256(); ROWS];
                 for ((y, acc), step) in rows.iter_mut().zip(acc).zip(steps) {
                     if let (Some(step), Some(&a)) = (step, acc.get(v)) {
-                        *y = activations(a, step);
+                        *y = stepped(a, step);
                     }
                 }
+                // `VPACKSSDW` and `VPACKSSWB` saturate as the step's clamp
+                // to 127 does; flooring after the saturation is flooring
+                // before, as the floor is -128 or above.
                 let [r0, r1, r2, r3] = rows;
                 let by_row =
                     _mm256_packs_epi16(_mm256_packs_epi32(r0, r1), _mm256_packs_epi32(r2, r3));
+                let word = _mm256_max_epi8(_mm256_shuffle_epi8(by_row, by_point), floor);
                 // x + 128 is x with its top bit flipped.
-                let word = _mm256_xor_si256(
-                    _mm256_shuffle_epi8(by_row, by_point),
-                    _mm256_set1_epi32(0x8080_8080_u32 as i32),
-                );
+                let word = _mm256_xor_si256(word, _mm256_set1_epi32(0x8080_8080_u32 as i32));
                 // SAFETY: `words` is eight words (32 bytes); unaligned
                 // stores are allowed.
                 #[allow(unsafe_code)]
@@ -238,6 +401,49 @@ fn finish(acc: &Acc, steps: &[Option<OutputStep>; ROWS], o: usize, pass: usize, 
                 };
             }
         }
+    }
+}
+
+/// Raises the running maxima of rows `o..o + ROWS` (those with a step)
+/// to the largest lanes of their vectors in `best`: within each 128-bit
+/// half, pairs of lanes, then pairs of pairs, leave lane `r` holding row
+/// `r`'s largest; then across the halves.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn raise_group(
+    maxima: &mut [u32],
+    o: usize,
+    steps: &[Option<OutputStep>; ROWS],
+    best: [__m256i; ROWS],
+) {
+    let [m0, m1, m2, m3] = best;
+    let t0 = _mm256_max_epi32(_mm256_unpacklo_epi32(m0, m1), _mm256_unpackhi_epi32(m0, m1));
+    let t1 = _mm256_max_epi32(_mm256_unpacklo_epi32(m2, m3), _mm256_unpackhi_epi32(m2, m3));
+    let u = _mm256_max_epi32(_mm256_unpacklo_epi64(t0, t1), _mm256_unpackhi_epi64(t0, t1));
+    let w = _mm_max_epi32(_mm256_castsi256_si128(u), _mm256_extracti128_si256::<1>(u));
+    let mut largest = [0i32; ROWS];
+    // SAFETY: `largest` is four i32 (16 bytes); unaligned stores are
+    // allowed.
+    #[allow(unsafe_code)]
+    unsafe {
+        _mm_storeu_si128(largest.as_mut_ptr().cast(), w)
+    };
+    for (r, (&v, step)) in largest.iter().zip(steps).enumerate() {
+        if step.is_some() {
+            raise(maxima, o + r, v);
+        }
+    }
+}
+
+/// `OutputStep::apply` on eight accumulators but for the clamp (which the
+/// caller's packs and floor take): [`high_step`] on the fast path, lane by
+/// lane (clamped, which changes nothing after) on the general one.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn stepped(acc: __m256i, step: &OutputStep) -> __m256i {
+    match step.fast_parts() {
+        Some((m, offset, high_shift, _)) => high_step(acc, m, offset, high_shift),
+        None => load(store(acc).map(|a| step.apply(a) as i32)),
     }
 }
 
