@@ -28,7 +28,7 @@ use super::{OutputStep, Requant, Sink, row_groups, rows, scalar_dot};
 
 mod vnni;
 use crate::format::le_i32s;
-pub(super) use vnni::has_vnni;
+pub(super) use vnni::{has_avxvnni, has_vnni};
 
 /// Points per tile of this kernel (the int8 path's largest tile).
 const ROWS: usize = crate::arch::MAX_TILE;
@@ -161,7 +161,8 @@ fn points8(weights: &[u8], q: Requant<'_>, points: &[i16; 3 * ROWS], sink: &mut 
 
 /// [`super::dense_vector`]'s contract and results for a vector of at
 /// least 16 inputs (the concatenation of `parts`) on a CPU with AVX2: with
-/// AVX-512 VNNI [`vnni::vector`]; otherwise the vector is copied to int16
+/// AVX-512 VNNI [`vnni::vector`], with AVX-VNNI [`vnni::vector_avx`];
+/// otherwise the vector is copied to int16
 /// once, then each weight row is read 16 bytes at a time, sign-extended
 /// (`VPMOVSXBW`) and multiplied with the vector by `VPMADDWD`, four rows at
 /// once; lane sums, the scalar tail past the last multiple of 16, the bias
@@ -184,6 +185,15 @@ pub(super) fn dense_vector(
         #[allow(unsafe_code)]
         unsafe {
             vnni::vector(weights, parts, q, out)
+        };
+        return true;
+    }
+    if has_avxvnni() {
+        // SAFETY: the CPU has AVX-VNNI and AVX2, all `vnni::vector_avx`
+        // requires.
+        #[allow(unsafe_code)]
+        unsafe {
+            vnni::vector_avx(weights, parts, q, out)
         };
         return true;
     }
@@ -502,8 +512,8 @@ mod tests {
         }
     }
 
-    /// The head's vector kernels, AVX2 and (where the CPU has it) AVX-512
-    /// VNNI, give the portable kernel's activations
+    /// The head's vector kernels, AVX2 and (where the CPU has them)
+    /// AVX-512 VNNI and AVX-VNNI, give the portable kernel's activations
     /// ([`super::super::test_layer::vector_cases`]).
     #[test]
     fn vector_kernels_match_portable() {
@@ -513,6 +523,10 @@ mod tests {
         let vnni = has_vnni();
         if !vnni {
             std::eprintln!("no AVX-512 VNNI on this CPU: vnni::vector not tested");
+        }
+        let avxvnni = has_avxvnni();
+        if !avxvnni {
+            std::eprintln!("no AVX-VNNI on this CPU: vnni::vector_avx not tested");
         }
         for c in vector_cases(13) {
             let (inputs, outputs) = (c.x.len(), c.want.len());
@@ -538,6 +552,15 @@ mod tests {
                     vnni::vector(w, &[a, b], q, &mut got)
                 };
                 assert_eq!(got, c.want, "VNNI, {inputs} -> {outputs}");
+            }
+            if avxvnni {
+                got.fill(0);
+                // SAFETY: the CPU has AVX-VNNI and AVX2 (checked above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    vnni::vector_avx(w, &[a, b], q, &mut got)
+                };
+                assert_eq!(got, c.want, "AVX-VNNI, {inputs} -> {outputs}");
             }
         }
     }

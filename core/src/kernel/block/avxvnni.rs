@@ -56,10 +56,7 @@ const _: () = assert!(SHORT > 0 && BLOCK.is_multiple_of(8));
 /// eight points.
 type Acc<const P: usize> = [[__m256i; P]; ROWS];
 
-/// Whether the CPU has AVX-VNNI (and AVX2, for the output step).
-pub(super) fn has_avxvnni() -> bool {
-    std::is_x86_feature_detected!("avxvnni") && std::is_x86_feature_detected!("avx2")
-}
+pub(super) use super::super::x86::has_avxvnni;
 
 /// The AVX-VNNI route's kernels: the first layer through
 /// [`layer_pairs`], every later one through [`layer_bytes`].
