@@ -307,24 +307,29 @@ pub(super) fn activations(acc: __m256i, step: &OutputStep) -> __m256i {
 #[inline]
 #[target_feature(enable = "avx2")]
 fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8)) -> __m256i {
-    let v = high_step(acc, m, offset, high_shift);
+    let v = high_step(
+        acc,
+        _mm256_set1_epi32(m),
+        _mm256_set1_epi32(offset),
+        high_shift,
+    );
     let v = _mm256_min_epi32(v, _mm256_set1_epi32(i8::MAX as i32));
     _mm256_max_epi32(v, _mm256_set1_epi32(act_min as i32))
 }
 
-/// The fast output step on eight accumulators but for its clamp: the high
-/// words of the eight i64 products with `m` (`VPMULDQ` on the even lanes,
+/// The fast output step on eight accumulators but for its clamp (`m` and
+/// `offset` in every lane): the high words of the eight i64 products with
+/// `m` (`VPMULDQ` on the even lanes,
 /// then on the odd lanes moved down), the folded offset and the
 /// arithmetic shift, as in the scalar step.
 #[inline]
 #[target_feature(enable = "avx2")]
-pub(super) fn high_step(acc: __m256i, m: i32, offset: i32, high_shift: u32) -> __m256i {
-    let m = _mm256_set1_epi32(m);
+pub(super) fn high_step(acc: __m256i, m: __m256i, offset: __m256i, high_shift: u32) -> __m256i {
     let even = _mm256_mul_epi32(acc, m);
     let odd = _mm256_mul_epi32(_mm256_srli_epi64::<32>(acc), m);
     let hi = _mm256_blend_epi32::<0b1010_1010>(_mm256_srli_epi64::<32>(even), odd);
     _mm256_sra_epi32(
-        _mm256_add_epi32(hi, _mm256_set1_epi32(offset)),
+        _mm256_add_epi32(hi, offset),
         _mm_cvtsi32_si128(high_shift as i32),
     )
 }

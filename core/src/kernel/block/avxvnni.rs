@@ -364,41 +364,72 @@ fn finish<const P: usize>(
             let Some(words) = quads.get_mut(o / ROWS * BLOCK + at..) else {
                 return;
             };
-            // In each 128-bit lane, byte `4p + r` from byte `4r + p`.
-            let by_point = _mm256_setr_epi8(
-                0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15, 0, 4, 8, 12, 1, 5, 9, 13, 2,
-                6, 10, 14, 3, 7, 11, 15,
-            );
             // The ReLU floor in each row's byte of a word; a missing row's
             // byte stays 0 under -128.
             let floor = steps.map(|s| s.map_or(i8::MIN, |s| s.act_min()) as u8);
             let floor = _mm256_set1_epi32(i32::from_le_bytes(floor));
-            for (v, words) in words.as_chunks_mut::<8>().0.iter_mut().take(P).enumerate() {
-                // Each row's stepped accumulators (0 for a missing row).
-                let mut rows = [_mm256_setzero_si256(); ROWS];
-                for ((y, acc), step) in rows.iter_mut().zip(acc).zip(steps) {
-                    if let (Some(step), Some(&a)) = (step, acc.get(v)) {
-                        *y = stepped(a, step);
-                    }
+            let words = words.as_chunks_mut::<8>().0.iter_mut().take(P);
+            let fast = steps.map(|s| s.and_then(|s| s.fast_parts()));
+            if let [Some(f0), Some(f1), Some(f2), Some(f3)] = fast {
+                // Every row on the fast path (the usual case): its constants
+                // once for the pass, straight-line steps.
+                let parts = [f0, f1, f2, f3];
+                let mut m = [_mm256_setzero_si256(); ROWS];
+                let mut offset = [_mm256_setzero_si256(); ROWS];
+                for ((m, offset), &(mr, or, _, _)) in m.iter_mut().zip(&mut offset).zip(&parts) {
+                    *m = _mm256_set1_epi32(mr);
+                    *offset = _mm256_set1_epi32(or);
                 }
-                // `VPACKSSDW` and `VPACKSSWB` saturate as the step's clamp
-                // to 127 does; flooring after the saturation is flooring
-                // before, as the floor is -128 or above.
-                let [r0, r1, r2, r3] = rows;
-                let by_row =
-                    _mm256_packs_epi16(_mm256_packs_epi32(r0, r1), _mm256_packs_epi32(r2, r3));
-                let word = _mm256_max_epi8(_mm256_shuffle_epi8(by_row, by_point), floor);
-                // x + 128 is x with its top bit flipped.
-                let word = _mm256_xor_si256(word, _mm256_set1_epi32(0x8080_8080_u32 as i32));
-                // SAFETY: `words` is eight words (32 bytes); unaligned
-                // stores are allowed.
-                #[allow(unsafe_code)]
-                unsafe {
-                    _mm256_storeu_si256(words.as_mut_ptr().cast(), word)
-                };
+                for (v, words) in words.enumerate() {
+                    let mut rows = [_mm256_setzero_si256(); ROWS];
+                    for (r, y) in rows.iter_mut().enumerate() {
+                        if let (Some(&a), Some(&(_, _, shift, _))) = (acc[r].get(v), parts.get(r)) {
+                            *y = high_step(a, m[r], offset[r], shift);
+                        }
+                    }
+                    store_quads(words, rows, floor);
+                }
+            } else {
+                for (v, words) in words.enumerate() {
+                    // Each row's stepped accumulators (0 for a missing row).
+                    let mut rows = [_mm256_setzero_si256(); ROWS];
+                    for ((y, acc), step) in rows.iter_mut().zip(acc).zip(steps) {
+                        if let (Some(step), Some(&a)) = (step, acc.get(v)) {
+                            *y = stepped(a, step);
+                        }
+                    }
+                    store_quads(words, rows, floor);
+                }
             }
         }
     }
+}
+
+/// Four rows' stepped accumulators of eight points (any i32 lanes) as
+/// the next layer's eight quad words: `VPACKSSDW` and `VPACKSSWB`
+/// saturate as the step's clamp to 127 does, one byte shuffle puts the
+/// bytes in point order, `floor` (each row's ReLU floor in its byte)
+/// takes the clamp's other end (flooring after the saturation is flooring
+/// before, as the floor is -128 or above), and the top bits flip (`x +
+/// 128`).
+#[inline]
+#[target_feature(enable = "avx2")]
+fn store_quads(words: &mut [u32; 8], rows: [__m256i; ROWS], floor: __m256i) {
+    // In each 128-bit lane, byte `4p + r` from byte `4r + p`.
+    let by_point = _mm256_setr_epi8(
+        0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15, 0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10,
+        14, 3, 7, 11, 15,
+    );
+    let [r0, r1, r2, r3] = rows;
+    let by_row = _mm256_packs_epi16(_mm256_packs_epi32(r0, r1), _mm256_packs_epi32(r2, r3));
+    let word = _mm256_max_epi8(_mm256_shuffle_epi8(by_row, by_point), floor);
+    let word = _mm256_xor_si256(word, _mm256_set1_epi32(0x8080_8080_u32 as i32));
+    // SAFETY: `words` is eight words (32 bytes); unaligned stores are
+    // allowed.
+    #[allow(unsafe_code)]
+    unsafe {
+        _mm256_storeu_si256(words.as_mut_ptr().cast(), word)
+    };
 }
 
 /// Raises the running maxima of rows `o..o + ROWS` (those with a step)
@@ -439,7 +470,12 @@ fn raise_group(
 #[target_feature(enable = "avx2")]
 fn stepped(acc: __m256i, step: &OutputStep) -> __m256i {
     match step.fast_parts() {
-        Some((m, offset, high_shift, _)) => high_step(acc, m, offset, high_shift),
+        Some((m, offset, high_shift, _)) => high_step(
+            acc,
+            _mm256_set1_epi32(m),
+            _mm256_set1_epi32(offset),
+            high_shift,
+        ),
         None => load(store(acc).map(|a| step.apply(a) as i32)),
     }
 }
