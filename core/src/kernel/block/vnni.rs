@@ -194,27 +194,57 @@ pub(super) fn finish(
             // byte stays 0 under -128.
             let floor = steps.map(|s| s.map_or(i8::MIN, |s| s.act_min()) as u8);
             let floor = _mm512_set1_epi32(i32::from_le_bytes(floor));
-            for (v, words) in words.as_chunks_mut::<16>().0.iter_mut().enumerate() {
-                // Each row's stepped accumulators (0 for a missing row).
-                let mut rows = [_mm512_setzero_si512(); ROWS];
-                for ((y, acc), step) in rows.iter_mut().zip(&acc).zip(steps) {
-                    if let (Some(step), Some(&a)) = (step, acc.get(v)) {
-                        *y = stepped(a, step);
-                    }
+            let words = words.as_chunks_mut::<16>().0.iter_mut();
+            let fast = steps.map(|s| s.and_then(|s| s.fast_parts()));
+            if let [Some(f0), Some(f1), Some(f2), Some(f3)] = fast {
+                // Every row on the fast path (the usual case): its constants
+                // once for the group, straight-line steps.
+                let parts = [f0, f1, f2, f3];
+                let mut m = [_mm512_setzero_si512(); ROWS];
+                let mut offset = [_mm512_setzero_si512(); ROWS];
+                for ((m, offset), &(mr, or, _, _)) in m.iter_mut().zip(&mut offset).zip(&parts) {
+                    *m = _mm512_set1_epi32(mr);
+                    *offset = _mm512_set1_epi32(or);
                 }
-                let word = pack_quads(rows);
-                // The floor, then x + 128: x with its top bit flipped.
-                let word = _mm512_max_epi8(word, floor);
-                let word = _mm512_xor_si512(word, _mm512_set1_epi32(0x8080_8080_u32 as i32));
-                // SAFETY: `words` is sixteen words (64 bytes); unaligned
-                // stores are allowed.
-                #[allow(unsafe_code)]
-                unsafe {
-                    _mm512_storeu_si512(words.as_mut_ptr().cast(), word)
-                };
+                for (v, words) in words.enumerate() {
+                    let mut rows = [_mm512_setzero_si512(); ROWS];
+                    for (r, y) in rows.iter_mut().enumerate() {
+                        if let (Some(&a), Some(&(_, _, shift, _))) = (acc[r].get(v), parts.get(r)) {
+                            *y = high_step(a, m[r], offset[r], shift);
+                        }
+                    }
+                    store_quads(words, rows, floor);
+                }
+            } else {
+                for (v, words) in words.enumerate() {
+                    // Each row's stepped accumulators (0 for a missing row).
+                    let mut rows = [_mm512_setzero_si512(); ROWS];
+                    for ((y, acc), step) in rows.iter_mut().zip(&acc).zip(steps) {
+                        if let (Some(step), Some(&a)) = (step, acc.get(v)) {
+                            *y = stepped(a, step);
+                        }
+                    }
+                    store_quads(words, rows, floor);
+                }
             }
         }
     }
+}
+
+/// Four rows' stepped accumulators of sixteen points as the next layer's
+/// sixteen quad words ([`pack_quads`]), floored by `floor` (each row's
+/// ReLU floor in its byte) and with the top bits flipped (`x + 128`).
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw")]
+fn store_quads(words: &mut [u32; 16], rows: [__m512i; ROWS], floor: __m512i) {
+    let word = _mm512_max_epi8(pack_quads(rows), floor);
+    let word = _mm512_xor_si512(word, _mm512_set1_epi32(0x8080_8080_u32 as i32));
+    // SAFETY: `words` is sixteen words (64 bytes); unaligned stores are
+    // allowed.
+    #[allow(unsafe_code)]
+    unsafe {
+        _mm512_storeu_si512(words.as_mut_ptr().cast(), word)
+    };
 }
 
 /// Four rows' stepped accumulators of sixteen points (any i32 lanes) as
@@ -256,14 +286,25 @@ fn stepped(acc: __m512i, step: &OutputStep) -> __m512i {
             return _mm512_loadu_si512(lanes.as_ptr().cast());
         }
     };
-    let m = _mm512_set1_epi32(m);
+    high_step(
+        acc,
+        _mm512_set1_epi32(m),
+        _mm512_set1_epi32(offset),
+        high_shift,
+    )
+}
+
+/// The fast step of [`stepped`] (`m` and `offset` in every lane).
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn high_step(acc: __m512i, m: __m512i, offset: __m512i, high_shift: u32) -> __m512i {
     let even = _mm512_mul_epi32(acc, m);
     let odd = _mm512_mul_epi32(_mm512_srli_epi64::<32>(acc), m);
     // The even lanes take their product's high word (lane 2i + 1 of
     // `even`); the odd lanes already hold theirs.
     let hi = _mm512_mask_shuffle_epi32::<0xF5>(odd, 0x5555, even);
     _mm512_sra_epi32(
-        _mm512_add_epi32(hi, _mm512_set1_epi32(offset)),
+        _mm512_add_epi32(hi, offset),
         _mm_cvtsi32_si128(high_shift as i32),
     )
 }
