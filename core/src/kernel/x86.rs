@@ -290,31 +290,64 @@ fn outputs(
     }
 }
 
-/// `OutputStep::apply` on eight accumulators: [`requantize`] on the fast
-/// path, lane by lane on the general one.
+/// `OutputStep::apply` on eight accumulators (see [`VectorStep`]).
 #[inline]
 #[target_feature(enable = "avx2")]
 pub(super) fn activations(acc: __m256i, step: &OutputStep) -> __m256i {
-    match step.fast_parts() {
-        Some(parts) => requantize(acc, parts),
-        None => load(store(acc).map(|a| step.apply(a) as i32)),
-    }
+    VectorStep::new(step).apply(acc)
 }
 
-/// `OutputStep::apply` on eight accumulators, given its fast path's
-/// constants ([`OutputStep::fast_parts`]): [`high_step`], then the clamp.
-/// The same integer operations as the scalar step, so the same values.
-#[inline]
-#[target_feature(enable = "avx2")]
-fn requantize(acc: __m256i, (m, offset, high_shift, act_min): (i32, i32, u32, i8)) -> __m256i {
-    let v = high_step(
-        acc,
-        _mm256_set1_epi32(m),
-        _mm256_set1_epi32(offset),
-        high_shift,
-    );
-    let v = _mm256_min_epi32(v, _mm256_set1_epi32(i8::MAX as i32));
-    _mm256_max_epi32(v, _mm256_set1_epi32(act_min as i32))
+/// An output step made ready for many vectors of eight accumulators: on
+/// the fast path its constants ([`OutputStep::fast_parts`]) in every lane,
+/// so that a kernel broadcasts them once per output, not per vector.
+#[derive(Clone, Copy)]
+pub(super) enum VectorStep<'a> {
+    /// [`high_step`], then the clamp to `act_min..=127`: the same integer
+    /// operations as the scalar step, so the same values.
+    Fast {
+        m: __m256i,
+        offset: __m256i,
+        high_shift: u32,
+        act_min: __m256i,
+    },
+    /// The general path, lane by lane.
+    General(&'a OutputStep),
+}
+
+impl<'a> VectorStep<'a> {
+    /// `step` made ready.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn new(step: &'a OutputStep) -> Self {
+        match step.fast_parts() {
+            Some((m, offset, high_shift, act_min)) => VectorStep::Fast {
+                m: _mm256_set1_epi32(m),
+                offset: _mm256_set1_epi32(offset),
+                high_shift,
+                act_min: _mm256_set1_epi32(act_min as i32),
+            },
+            None => VectorStep::General(step),
+        }
+    }
+
+    /// The activations of eight accumulators.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn apply(&self, acc: __m256i) -> __m256i {
+        match *self {
+            VectorStep::Fast {
+                m,
+                offset,
+                high_shift,
+                act_min,
+            } => {
+                let v = high_step(acc, m, offset, high_shift);
+                let v = _mm256_min_epi32(v, _mm256_set1_epi32(i8::MAX as i32));
+                _mm256_max_epi32(v, act_min)
+            }
+            VectorStep::General(step) => load(store(acc).map(|a| step.apply(a) as i32)),
+        }
+    }
 }
 
 /// The fast output step on eight accumulators but for its clamp (`m` and

@@ -7,7 +7,7 @@ use core::arch::x86_64::{
     _mm256_max_epi32, _mm256_or_si256, _mm256_set1_epi32, _mm256_slli_epi32, _mm256_storeu_si256,
 };
 
-use super::super::x86::{activations, max};
+use super::super::x86::{VectorStep, max};
 use super::super::{Requant, rows, rows_mut};
 #[cfg(test)]
 use super::widen;
@@ -46,7 +46,9 @@ pub(super) fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32]
     while let (Some(r0), Some((b0, s0))) = (channels.next(), params.next()) {
         let second = channels.next().zip(params.next());
         let (r1, b1) = second.as_ref().map_or((r0, 0), |&(r, (b, _))| (r, b));
-        let s1 = second.as_ref().map(|(_, (_, s))| s);
+        // The rows' output steps, made ready once for the block's vectors.
+        let k0 = VectorStep::new(&s0);
+        let k1 = second.as_ref().map(|(_, (_, s))| VectorStep::new(s));
         let mut out = out.as_mut().and_then(|rows| rows.next());
         let (mut m0, mut m1) = (i32::MIN, i32::MIN);
         // Two rows share each load: half a block at a time keeps the
@@ -78,8 +80,11 @@ pub(super) fn layer(weights: &[u32], pairs: usize, q: Requant<'_>, input: &[u32]
                 continue;
             };
             for ((a0, a1), out) in acc0.into_iter().zip(acc1).zip(out.as_chunks_mut::<8>().0) {
-                let lo = activations(a0, &s0);
-                let hi = s1.map_or(_mm256_set1_epi32(0), |s| activations(a1, s));
+                let lo = k0.apply(a0);
+                let hi = match &k1 {
+                    Some(k) => k.apply(a1),
+                    None => _mm256_set1_epi32(0),
+                };
                 let words = _mm256_or_si256(
                     _mm256_and_si256(lo, _mm256_set1_epi32(0xFFFF)),
                     _mm256_slli_epi32::<16>(hi),
