@@ -26,8 +26,10 @@
 //!   is negative), the folded offset and the shift; then two
 //!   saturating narrows (`SQXTN`, the clamp at 127 and -128), one byte
 //!   table lookup from row order to point order and `SMAX` with the ReLU
-//!   floor. The pooled layer keeps each output's largest accumulator
-//!   ([`raise`]).
+//!   floor (the constants broadcast once a pass when all four rows take
+//!   the fast step). The pooled layer keeps a vector of running maxima
+//!   per row over the passes, reduced four rows at once into each
+//!   output's largest accumulator ([`raise_group`], [`raise`]).
 //!
 //! Every product and pair sum fits in i32 (`|w| <= 128`, `|x| <= 32767`,
 //! four byte products at most `4 * 128 * 128`), and model loading bounds
@@ -38,7 +40,7 @@
 
 use core::arch::aarch64::{
     int8x16_t, int32x4_t, vaddq_s32, vdupq_n_s32, vdupq_n_u32, vget_low_s16, vld1q_s8, vld1q_s32,
-    vld1q_u8, vmaxq_s8, vmaxq_s32, vmaxvq_s32, vmull_high_s16, vmull_s16, vpaddq_s32, vqdmulhq_s32,
+    vld1q_u8, vmaxq_s8, vmaxq_s32, vmull_high_s16, vmull_s16, vpaddq_s32, vpmaxq_s32, vqdmulhq_s32,
     vqmovn_high_s16, vqmovn_high_s32, vqmovn_s16, vqmovn_s32, vqtbl1q_s8, vreinterpretq_s8_s32,
     vreinterpretq_s8_u32, vreinterpretq_s16_s8, vreinterpretq_s16_u32, vshlq_s32, vshrq_n_s32,
     vst1q_s8, vst1q_s32,
@@ -129,6 +131,7 @@ pub(super) fn layer_pairs(
         if rs.iter().any(|r| r.len() < pairs) {
             return;
         }
+        let mut best = [vdupq_n_s32(i32::MIN); ROWS];
         for pass in 0..PASSES {
             let mut acc = start(biases);
             for j in 0..pairs {
@@ -152,7 +155,10 @@ pub(super) fn layer_pairs(
                     }
                 }
             }
-            finish(&acc, &steps, o, pass, &mut out);
+            finish(&acc, &steps, o, pass, &mut out, &mut best);
+        }
+        if let Out::Maxima(maxima) = &mut out {
+            raise_group(maxima, o, &steps, best);
         }
     }
 }
@@ -179,6 +185,7 @@ pub(super) fn layer_bytes(
             // (Never for a loaded model: its rows are checked at load.)
             return false;
         }
+        let mut best = [vdupq_n_s32(i32::MIN); ROWS];
         for pass in 0..PASSES {
             let mut acc = start(biases);
             // Plain pointers in the loops: a check per load (its `None`
@@ -216,7 +223,10 @@ pub(super) fn layer_bytes(
                     }
                 }
             }
-            finish(&acc, &steps, o, pass, &mut out);
+            finish(&acc, &steps, o, pass, &mut out, &mut best);
+        }
+        if let Out::Maxima(maxima) = &mut out {
+            raise_group(maxima, o, &steps, best);
         }
     }
     true
@@ -242,24 +252,27 @@ fn lane_step<const K: i32>(acc: &mut Acc, w: &[int8x16_t; ROWS], x: &[int8x16_t;
     }
 }
 
-/// The end of a pass of a group of rows `o..o + ROWS`: each row with a
-/// step takes its accumulators to `out`, the largest to the running
-/// maxima or all through the step into the next layer's quads (word `o /
-/// 4` of each point of the pass). Not inlined: it is most of the code and
-/// runs once per group and pass.
+/// The end of a pass of a group of rows `o..o + ROWS`: each row's
+/// accumulators raise its vector of running maxima in `best` when `out`
+/// is the max-pool ([`raise_group`] takes them into it after the last
+/// pass), or go through the row's step into the next layer's quads (word
+/// `o / 4` of each point of the pass). Not inlined: it is most of the code
+/// and runs once per group and pass.
 #[inline(never)]
 #[target_feature(enable = "neon")]
-fn finish(acc: &Acc, steps: &[Option<OutputStep>; ROWS], o: usize, pass: usize, out: &mut Out<'_>) {
+fn finish(
+    acc: &Acc,
+    steps: &[Option<OutputStep>; ROWS],
+    o: usize,
+    pass: usize,
+    out: &mut Out<'_>,
+    best: &mut [int32x4_t; ROWS],
+) {
     match out {
-        Out::Maxima(maxima) => {
-            for (r, (acc, step)) in acc.iter().zip(steps).enumerate() {
-                if step.is_some() {
-                    let [first, rest @ ..] = *acc;
-                    let mut m = first;
-                    for v in rest {
-                        m = vmaxq_s32(m, v);
-                    }
-                    raise(maxima, o + r, vmaxvq_s32(m));
+        Out::Maxima(_) => {
+            for (b, acc) in best.iter_mut().zip(acc) {
+                for &a in acc {
+                    *b = vmaxq_s32(*b, a);
                 }
             }
         }
@@ -274,29 +287,96 @@ fn finish(acc: &Acc, steps: &[Option<OutputStep>; ROWS], o: usize, pass: usize, 
             // byte stays 0 under -128.
             let floor = steps.map(|s| s.map_or(i8::MIN, |s| s.act_min()) as u8);
             let floor = vreinterpretq_s8_u32(vdupq_n_u32(u32::from_le_bytes(floor)));
-            // Byte `4p + r` of a word set comes from byte `4r + p`.
-            let order: [u8; 16] = [0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15];
-            // SAFETY: 16 bytes; NEON loads need no alignment.
-            let order = unsafe { vld1q_u8(order.as_ptr()) };
-            for (v, words) in words.as_chunks_mut::<4>().0.iter_mut().enumerate() {
-                let mut stepped_rows = [vdupq_n_s32(0); ROWS];
-                for ((y, acc), step) in stepped_rows.iter_mut().zip(acc).zip(steps) {
-                    if let (Some(step), Some(&a)) = (step, acc.get(v)) {
-                        *y = stepped(a, step);
-                    }
+            let words = words.as_chunks_mut::<4>().0.iter_mut();
+            let fast = steps.map(|s| s.and_then(|s| s.fast_parts()));
+            if let [Some(f0), Some(f1), Some(f2), Some(f3)] = fast {
+                // Every row on the fast path (the usual case): its constants
+                // once for the pass, straight-line steps.
+                let parts = [f0, f1, f2, f3];
+                let mut k = [[vdupq_n_s32(0); 3]; ROWS];
+                for (k, &(m, offset, high_shift, _)) in k.iter_mut().zip(&parts) {
+                    *k = [
+                        vdupq_n_s32(m),
+                        vdupq_n_s32(offset),
+                        vdupq_n_s32(-(high_shift as i32)),
+                    ];
                 }
-                let [r0, r1, r2, r3] = stepped_rows;
-                // Saturating narrows (the clamp to int8), rows in order.
-                let low = vqmovn_high_s32(vqmovn_s32(r0), r1);
-                let high = vqmovn_high_s32(vqmovn_s32(r2), r3);
-                let by_row = vqmovn_high_s16(vqmovn_s16(low), high);
-                let word = vmaxq_s8(vqtbl1q_s8(by_row, order), floor);
-                // SAFETY: `words` is four words (16 bytes); NEON stores
-                // need no alignment.
-                unsafe { vst1q_s8(words.as_mut_ptr().cast(), word) };
+                for (v, words) in words.enumerate() {
+                    let mut rows = [vdupq_n_s32(0); ROWS];
+                    for (r, y) in rows.iter_mut().enumerate() {
+                        if let (Some(&a), Some(&[m, offset, shift])) = (acc[r].get(v), k.get(r)) {
+                            *y = high_step(a, m, offset, shift);
+                        }
+                    }
+                    store_quads(words, rows, floor);
+                }
+            } else {
+                for (v, words) in words.enumerate() {
+                    let mut rows = [vdupq_n_s32(0); ROWS];
+                    for ((y, acc), step) in rows.iter_mut().zip(acc).zip(steps) {
+                        if let (Some(step), Some(&a)) = (step, acc.get(v)) {
+                            *y = stepped(a, step);
+                        }
+                    }
+                    store_quads(words, rows, floor);
+                }
             }
         }
     }
+}
+
+/// Four rows' stepped accumulators of four points as the next layer's
+/// four quad words: saturating narrows (the clamp to int8), one byte
+/// table lookup from row order to point order, and `SMAX` with `floor`
+/// (each row's ReLU floor in its byte).
+#[inline]
+#[target_feature(enable = "neon")]
+fn store_quads(words: &mut [u32; 4], rows: [int32x4_t; ROWS], floor: int8x16_t) {
+    // Byte `4p + r` of a word set comes from byte `4r + p`.
+    let order: [u8; 16] = [0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15];
+    // SAFETY: 16 bytes; NEON loads need no alignment.
+    let order = unsafe { vld1q_u8(order.as_ptr()) };
+    let [r0, r1, r2, r3] = rows;
+    let low = vqmovn_high_s32(vqmovn_s32(r0), r1);
+    let high = vqmovn_high_s32(vqmovn_s32(r2), r3);
+    let by_row = vqmovn_high_s16(vqmovn_s16(low), high);
+    let word = vmaxq_s8(vqtbl1q_s8(by_row, order), floor);
+    // SAFETY: `words` is four words (16 bytes); NEON stores need no
+    // alignment.
+    unsafe { vst1q_s8(words.as_mut_ptr().cast(), word) };
+}
+
+/// Raises the running maxima of rows `o..o + ROWS` (those with a step)
+/// to the largest lanes of their vectors in `best`: two rounds of
+/// pairwise maxima (`SMAXP`) leave lane `r` holding row `r`'s largest.
+#[inline]
+#[target_feature(enable = "neon")]
+fn raise_group(
+    maxima: &mut [u32],
+    o: usize,
+    steps: &[Option<OutputStep>; ROWS],
+    best: [int32x4_t; ROWS],
+) {
+    let [m0, m1, m2, m3] = best;
+    let m = vpmaxq_s32(vpmaxq_s32(m0, m1), vpmaxq_s32(m2, m3));
+    let mut largest = [0i32; ROWS];
+    // SAFETY: `largest` is four i32 (16 bytes); NEON stores need no
+    // alignment.
+    unsafe { vst1q_s32(largest.as_mut_ptr(), m) };
+    for (r, (&v, step)) in largest.iter().zip(steps).enumerate() {
+        if step.is_some() {
+            raise(maxima, o + r, v);
+        }
+    }
+}
+
+/// The fast step of [`stepped`]: `m`, `offset` and `-high_shift` in
+/// every lane.
+#[inline]
+#[target_feature(enable = "neon")]
+fn high_step(acc: int32x4_t, m: int32x4_t, offset: int32x4_t, shift: int32x4_t) -> int32x4_t {
+    let hi = vshrq_n_s32::<1>(vqdmulhq_s32(acc, m));
+    vshlq_s32(vaddq_s32(hi, offset), shift)
 }
 
 /// `OutputStep::apply` on four accumulators but for the clamp (the
@@ -310,13 +390,12 @@ fn finish(acc: &Acc, steps: &[Option<OutputStep>; ROWS], o: usize, pass: usize, 
 #[target_feature(enable = "neon")]
 fn stepped(acc: int32x4_t, step: &OutputStep) -> int32x4_t {
     match step.fast_parts() {
-        Some((m, offset, high_shift, _)) => {
-            let hi = vshrq_n_s32::<1>(vqdmulhq_s32(acc, vdupq_n_s32(m)));
-            vshlq_s32(
-                vaddq_s32(hi, vdupq_n_s32(offset)),
-                vdupq_n_s32(-(high_shift as i32)),
-            )
-        }
+        Some((m, offset, high_shift, _)) => high_step(
+            acc,
+            vdupq_n_s32(m),
+            vdupq_n_s32(offset),
+            vdupq_n_s32(-(high_shift as i32)),
+        ),
         _ => {
             let mut lanes = [0i32; 4];
             // SAFETY: `lanes` is four i32 (16 bytes); NEON loads and
