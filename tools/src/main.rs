@@ -112,13 +112,7 @@ fn main() -> ExitCode {
         Some("c-example") => c_example(),
         Some("c-header") => c_header(args.get(1).map(String::as_str) == Some("--check")),
         Some("no-panic") => no_panic::run(&root()),
-        Some("fuzz") => match args.get(1).map(|s| s.parse::<u64>()) {
-            None => fuzz::run(&root(), 60),
-            Some(Ok(seconds)) => fuzz::run(&root(), seconds),
-            Some(Err(_)) => Err(format!(
-                "fuzz takes a number of seconds per target\n\n{HELP}"
-            )),
-        },
+        Some("fuzz") => fuzz_seconds(&args[1..]).and_then(|s| fuzz::run(&root(), s)),
         Some("size") => ensure_target().and_then(|()| harness(&["size"])),
         Some("help") | None => {
             print!("{HELP}");
@@ -135,20 +129,49 @@ fn main() -> ExitCode {
     }
 }
 
-/// `ort-bench`'s arguments: an optional data folder and CPU flag.
+/// `ort-bench`'s arguments: an optional data folder and at most one CPU
+/// flag. An unknown flag, a second folder or a second CPU flag is an
+/// error (not a silent choice between them).
 fn ort_bench_args(args: &[String]) -> Result<(Option<&str>, Option<ort_bench::Cpu>), String> {
     let (mut data, mut cpu) = (None, None);
     for a in args {
-        match a.as_str() {
-            "--avx2" => cpu = Some(ort_bench::Cpu::Avx2),
-            "--avx-vnni" => cpu = Some(ort_bench::Cpu::AvxVnni),
-            flag if flag.starts_with("--") => {
+        let flag = match a.as_str() {
+            "--avx2" => Some(ort_bench::Cpu::Avx2),
+            "--avx-vnni" => Some(ort_bench::Cpu::AvxVnni),
+            flag if flag.starts_with('-') => {
                 return Err(format!("ort-bench: unknown flag `{flag}`\n\n{HELP}"));
             }
-            path => data = Some(path),
+            path => {
+                if let Some(first) = data.replace(path) {
+                    return Err(format!(
+                        "ort-bench takes one data folder, given `{first}` and `{path}`\n\n{HELP}"
+                    ));
+                }
+                None
+            }
+        };
+        if let Some(flag) = flag
+            && cpu.replace(flag).is_some()
+        {
+            return Err(format!(
+                "ort-bench takes one of --avx2 and --avx-vnni\n\n{HELP}"
+            ));
         }
     }
     Ok((data, cpu))
+}
+
+/// `fuzz`'s argument: seconds per target (60 without one).
+fn fuzz_seconds(args: &[String]) -> Result<u64, String> {
+    match args {
+        [] => Ok(60),
+        [seconds] => seconds.parse().map_err(|_| {
+            format!("fuzz takes a number of seconds per target, not `{seconds}`\n\n{HELP}")
+        }),
+        _ => Err(format!(
+            "fuzz takes one number of seconds per target\n\n{HELP}"
+        )),
+    }
 }
 
 fn root() -> PathBuf {
@@ -483,4 +506,51 @@ fn c_header(check: bool) -> Result<(), String> {
     std::fs::write(&path, &text).map_err(|e| format!("writing {}: {e}", path.display()))?;
     println!("wrote {}", path.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn strings(args: &[&str]) -> Vec<String> {
+        args.iter().map(|a| a.to_string()).collect()
+    }
+
+    /// A folder and a CPU flag in either order; an unknown flag, two
+    /// folders or two CPU flags are errors that name the problem.
+    #[test]
+    fn ort_bench_arguments() {
+        let ok = |args: &[&str]| {
+            let args = strings(args);
+            ort_bench_args(&args).map(|(d, c)| (d.map(str::to_owned), c))
+        };
+        assert_eq!(ok(&[]), Ok((None, None)));
+        assert_eq!(
+            ok(&["data", "--avx2"]),
+            Ok((Some("data".into()), Some(ort_bench::Cpu::Avx2)))
+        );
+        assert_eq!(
+            ok(&["--avx-vnni", "data"]),
+            Ok((Some("data".into()), Some(ort_bench::Cpu::AvxVnni)))
+        );
+        let err = |args: &[&str]| ort_bench_args(&strings(args)).unwrap_err();
+        assert!(err(&["--avx512"]).contains("unknown flag `--avx512`"));
+        assert!(err(&["-v"]).contains("unknown flag `-v`"));
+        assert!(err(&["a", "b"]).contains("given `a` and `b`"));
+        assert!(err(&["--avx2", "--avx-vnni"]).contains("one of --avx2 and --avx-vnni"));
+        assert!(err(&["--avx2", "--avx2"]).contains("one of"));
+    }
+
+    /// Seconds per fuzz target: 60 by default, a number, or an error.
+    #[test]
+    fn fuzz_arguments() {
+        assert_eq!(fuzz_seconds(&[]), Ok(60));
+        assert_eq!(fuzz_seconds(&strings(&["15"])), Ok(15));
+        assert!(
+            fuzz_seconds(&strings(&["soon"]))
+                .unwrap_err()
+                .contains("not `soon`")
+        );
+        assert!(fuzz_seconds(&strings(&["1", "2"])).is_err());
+    }
 }

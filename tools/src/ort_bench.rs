@@ -31,7 +31,7 @@ const PACKAGES: [&str; 3] = ["onnxruntime==1.32.0", "onnx==1.23.2", "numpy==2.4.
 const OPEN3D: &str = "open3d-cpu==0.19.0";
 
 /// A CPU class the benchmark can pretend to run on.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Cpu {
     /// AVX2, no AVX-512 or AVX-VNNI (AMD Zen 1-3, Intel Haswell to
     /// Comet Lake).
