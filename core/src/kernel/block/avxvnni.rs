@@ -188,85 +188,92 @@ enum Product {
     Bytes,
 }
 
-/// Adds to the rows' accumulators over a long pass from point `at` the
-/// products of their weight words `w` (broadcast) with the pass's input
-/// words in `x`, one row of the block. One `asm!` block: the twelve
+/// Defines a pass step over `$p` vectors for one instruction `$op`: adds
+/// to the rows' accumulators over the pass from point `at` the products
+/// of their weight words `w` (broadcast) with the pass's input words in
+/// `x`, one row of the block. One `asm!` block: in a long pass the twelve
 /// accumulators, three input vectors and the broadcast weight take all
 /// sixteen registers, and the compiler, given the same with intrinsics,
-/// spills an accumulator and copies others between registers on every
-/// step.
+/// spilled an accumulator and copied others between registers on every
+/// step. `x:` names the input vectors' registers with their byte offsets,
+/// `rows:` each row's weight pointer and its accumulators, each with the
+/// input vector it takes.
+macro_rules! pass_step {
+    ($name:ident, $op:literal, $p:literal,
+     x: [$($xv:ident $off:literal),+],
+     rows: [$($wr:ident [$($a:ident $xa:ident),+]),+]) => {
+        #[inline]
+        #[target_feature(enable = "avx2,avxvnni")]
+        fn $name(acc: &mut Acc<$p>, w: [&[u8; 4]; ROWS], x: &[u32; BLOCK], at: usize) {
+            let Some(x) = x.get(at..).and_then(|x| x.first_chunk::<{ 8 * $p }>()) else {
+                return;
+            };
+            let [$([$($a),+]),+] = acc;
+            let [$($wr),+] = w;
+            // SAFETY: the CPU has AVX-VNNI and AVX2 (the caller's); the
+            // block reads the `32 P` bytes of `x` from `at` and the four
+            // bytes of each `w`, and writes only its register operands.
+            #[allow(unsafe_code)]
+            unsafe {
+                asm!(
+                    $(concat!("vmovdqu {", stringify!($xv), "}, ymmword ptr [{x}", $off, "]"),)+
+                    $(
+                        concat!("vpbroadcastd {w}, dword ptr [{", stringify!($wr), "}]"),
+                        $(concat!(
+                            "{{vex}} ", $op, " {", stringify!($a), "}, {", stringify!($xa), "}, {w}"
+                        ),)+
+                    )+
+                    x = in(reg) x.as_ptr(),
+                    $($wr = in(reg) $wr.as_ptr(),)+
+                    $($($a = inout(ymm_reg) *$a,)+)+
+                    $($xv = out(ymm_reg) _,)+
+                    w = out(ymm_reg) _,
+                    options(pure, readonly, nostack, preserves_flags),
+                )
+            }
+        }
+    };
+}
+
+/// [`pass_step`] on a long pass (three vectors).
+macro_rules! long_step {
+    ($name:ident, $op:literal) => {
+        pass_step!($name, $op, 3,
+            x: [x0 "", x1 " + 32", x2 " + 64"],
+            rows: [
+                w0 [a00 x0, a01 x1, a02 x2],
+                w1 [a10 x0, a11 x1, a12 x2],
+                w2 [a20 x0, a21 x1, a22 x2],
+                w3 [a30 x0, a31 x1, a32 x2]
+            ]);
+    };
+}
+
+/// [`pass_step`] on the short pass (two vectors).
+macro_rules! short_step {
+    ($name:ident, $op:literal) => {
+        pass_step!($name, $op, 2,
+            x: [x0 "", x1 " + 32"],
+            rows: [w0 [a00 x0, a01 x1], w1 [a10 x0, a11 x1], w2 [a20 x0, a21 x1], w3 [a30 x0, a31 x1]]);
+    };
+}
+
+long_step!(long_pairs, "vpdpwssd");
+long_step!(long_bytes, "vpdpbusd");
+short_step!(short_pairs, "vpdpwssd");
+short_step!(short_bytes, "vpdpbusd");
+
+/// A long pass's step on `product` ([`pass_step`]).
 #[inline]
 #[target_feature(enable = "avx2,avxvnni")]
 fn step_long(acc: &mut Acc<3>, w: [&[u8; 4]; ROWS], x: &[u32; BLOCK], at: usize, product: Product) {
-    let Some(x) = x.get(at..).and_then(|x| x.first_chunk::<24>()) else {
-        return;
-    };
-    let [
-        [a00, a01, a02],
-        [a10, a11, a12],
-        [a20, a21, a22],
-        [a30, a31, a32],
-    ] = acc;
-    macro_rules! run {
-        ($op:literal) => {
-            asm!(
-                "vmovdqu {x0}, ymmword ptr [{x}]",
-                "vmovdqu {x1}, ymmword ptr [{x} + 32]",
-                "vmovdqu {x2}, ymmword ptr [{x} + 64]",
-                "vpbroadcastd {w}, dword ptr [{w0}]",
-                concat!("{{vex}} ", $op, " {a00}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a01}, {x1}, {w}"),
-                concat!("{{vex}} ", $op, " {a02}, {x2}, {w}"),
-                "vpbroadcastd {w}, dword ptr [{w1}]",
-                concat!("{{vex}} ", $op, " {a10}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a11}, {x1}, {w}"),
-                concat!("{{vex}} ", $op, " {a12}, {x2}, {w}"),
-                "vpbroadcastd {w}, dword ptr [{w2}]",
-                concat!("{{vex}} ", $op, " {a20}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a21}, {x1}, {w}"),
-                concat!("{{vex}} ", $op, " {a22}, {x2}, {w}"),
-                "vpbroadcastd {w}, dword ptr [{w3}]",
-                concat!("{{vex}} ", $op, " {a30}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a31}, {x1}, {w}"),
-                concat!("{{vex}} ", $op, " {a32}, {x2}, {w}"),
-                x = in(reg) x.as_ptr(),
-                w0 = in(reg) w[0].as_ptr(),
-                w1 = in(reg) w[1].as_ptr(),
-                w2 = in(reg) w[2].as_ptr(),
-                w3 = in(reg) w[3].as_ptr(),
-                a00 = inout(ymm_reg) *a00,
-                a01 = inout(ymm_reg) *a01,
-                a02 = inout(ymm_reg) *a02,
-                a10 = inout(ymm_reg) *a10,
-                a11 = inout(ymm_reg) *a11,
-                a12 = inout(ymm_reg) *a12,
-                a20 = inout(ymm_reg) *a20,
-                a21 = inout(ymm_reg) *a21,
-                a22 = inout(ymm_reg) *a22,
-                a30 = inout(ymm_reg) *a30,
-                a31 = inout(ymm_reg) *a31,
-                a32 = inout(ymm_reg) *a32,
-                x0 = out(ymm_reg) _,
-                x1 = out(ymm_reg) _,
-                x2 = out(ymm_reg) _,
-                w = out(ymm_reg) _,
-                options(pure, readonly, nostack, preserves_flags),
-            )
-        };
-    }
-    // SAFETY: the CPU has AVX-VNNI and AVX2 (the caller's); the block
-    // reads the 96 bytes of `x` from `at` and the four bytes of each `w`,
-    // and writes only its register operands.
-    #[allow(unsafe_code)]
-    unsafe {
-        match product {
-            Product::Pairs => run!("vpdpwssd"),
-            Product::Bytes => run!("vpdpbusd"),
-        }
+    match product {
+        Product::Pairs => long_pairs(acc, w, x, at),
+        Product::Bytes => long_bytes(acc, w, x, at),
     }
 }
 
-/// [`step_long`] on the short pass (two vectors).
+/// The short pass's step on `product` ([`pass_step`]).
 #[inline]
 #[target_feature(enable = "avx2,avxvnni")]
 fn step_short(
@@ -276,54 +283,9 @@ fn step_short(
     at: usize,
     product: Product,
 ) {
-    let Some(x) = x.get(at..).and_then(|x| x.first_chunk::<16>()) else {
-        return;
-    };
-    let [[a00, a01], [a10, a11], [a20, a21], [a30, a31]] = acc;
-    macro_rules! run {
-        ($op:literal) => {
-            asm!(
-                "vmovdqu {x0}, ymmword ptr [{x}]",
-                "vmovdqu {x1}, ymmword ptr [{x} + 32]",
-                "vpbroadcastd {w}, dword ptr [{w0}]",
-                concat!("{{vex}} ", $op, " {a00}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a01}, {x1}, {w}"),
-                "vpbroadcastd {w}, dword ptr [{w1}]",
-                concat!("{{vex}} ", $op, " {a10}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a11}, {x1}, {w}"),
-                "vpbroadcastd {w}, dword ptr [{w2}]",
-                concat!("{{vex}} ", $op, " {a20}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a21}, {x1}, {w}"),
-                "vpbroadcastd {w}, dword ptr [{w3}]",
-                concat!("{{vex}} ", $op, " {a30}, {x0}, {w}"),
-                concat!("{{vex}} ", $op, " {a31}, {x1}, {w}"),
-                x = in(reg) x.as_ptr(),
-                w0 = in(reg) w[0].as_ptr(),
-                w1 = in(reg) w[1].as_ptr(),
-                w2 = in(reg) w[2].as_ptr(),
-                w3 = in(reg) w[3].as_ptr(),
-                a00 = inout(ymm_reg) *a00,
-                a01 = inout(ymm_reg) *a01,
-                a10 = inout(ymm_reg) *a10,
-                a11 = inout(ymm_reg) *a11,
-                a20 = inout(ymm_reg) *a20,
-                a21 = inout(ymm_reg) *a21,
-                a30 = inout(ymm_reg) *a30,
-                a31 = inout(ymm_reg) *a31,
-                x0 = out(ymm_reg) _,
-                x1 = out(ymm_reg) _,
-                w = out(ymm_reg) _,
-                options(pure, readonly, nostack, preserves_flags),
-            )
-        };
-    }
-    // SAFETY: as in `step_long`, on 64 bytes of `x`.
-    #[allow(unsafe_code)]
-    unsafe {
-        match product {
-            Product::Pairs => run!("vpdpwssd"),
-            Product::Bytes => run!("vpdpbusd"),
-        }
+    match product {
+        Product::Pairs => short_pairs(acc, w, x, at),
+        Product::Bytes => short_bytes(acc, w, x, at),
     }
 }
 
