@@ -99,7 +99,7 @@ pub use arch::{Arch, F32_TILE, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch
 pub use error::{Error, Result};
 pub use float::F32Model;
 pub use format::Frame;
-pub use int8::{Int8Inference, Int8Model};
+pub use int8::{Int8Inference, Int8Model, Prepared};
 pub use pose::Pose;
 pub use refine::{Degeneracy, Metric};
 pub use registration::{Options, Registration};

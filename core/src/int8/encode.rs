@@ -2,7 +2,7 @@
 //! layers tile by tile (or block by block on an x86-64 host), and the
 //! max-pool into the global feature.
 
-use super::{Int8Model, requant};
+use super::{Int8Model, Ready, requant};
 use crate::arch::{INPUT_DIM, MAX_TILE, ping_pong, prefix};
 use crate::error::{Error, Result};
 use crate::fixed::quantize_coordinate;
@@ -50,7 +50,11 @@ impl Int8Model<'_> {
     /// [`crate::arch::Arch::host_block_len`] bytes and the CPU has a block
     /// kernel (x86-64 with AVX2, aarch64 with the dot-product extension),
     /// every block of [`crate::arch::HOST_BLOCK`] points goes through it
-    /// instead (`kernel::block`; same values, bit for bit).
+    /// instead (`kernel::block`; same values, bit for bit). With
+    /// `ready.block`, `extra` holds the weight copies
+    /// [`Self::prepare`](super::Int8Model::prepare) made and the block
+    /// kernel takes them as they stand.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn encode_into(
         &self,
         source: &[[f32; 3]],
@@ -59,6 +63,7 @@ impl Int8Model<'_> {
         feature: &mut [i8],
         work: &mut [i8],
         extra: &mut [i8],
+        ready: Ready,
     ) -> Result<u32> {
         if source.is_empty() {
             return Err(Error::EmptyCloud);
@@ -69,12 +74,18 @@ impl Int8Model<'_> {
         let (pairs, spare) = work.split_at_mut((2 * half).min(work.len()));
         let mut pairs = ping_pong(pairs, half)?;
         let expanded = as_words(spare);
-        // The block kernel copies the weights first: not worth it when no
-        // block can fill.
+        // The block kernel copies the weights first, unless prepared: not
+        // worth it when no block can fill.
         #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
-        let mut block = (source.len() >= HOST_BLOCK)
-            .then(|| BlockEncoder::new(&self.p.arch, &self.p.encoder, extra))
-            .flatten();
+        let mut block = if ready.block {
+            BlockEncoder::prepared(&self.p.arch, extra)
+        } else if source.len() >= HOST_BLOCK {
+            BlockEncoder::new(&self.p.arch, &self.p.encoder, extra)
+        } else {
+            None
+        };
+        #[cfg(not(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std")))]
+        let _ = ready;
         #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
         let batch = if block.is_some() { HOST_BLOCK } else { tile };
         #[cfg(not(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std")))]

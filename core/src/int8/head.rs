@@ -16,15 +16,19 @@ impl Int8Model<'_> {
     /// Runs the head on a source feature: returns the output layer's raw
     /// i32 accumulators. `work` needs `2 x` the widest hidden head layer.
     pub fn head(&self, source_feature: &[i8], work: &mut [i8]) -> Result<[i32; POSE_DIM]> {
-        Ok(self.head_counted(source_feature, work)?.0)
+        Ok(self.head_counted(source_feature, work, None)?.0)
     }
 
     /// [`Self::head`], also counting the feature entries and hidden head
-    /// activations at `i8::MAX` (saturated).
+    /// activations at `i8::MAX` (saturated). With `folded` (the first
+    /// layer's biases with its template half added, [`Self::fold_template`]),
+    /// a host vector kernel reads only the source half of that layer's
+    /// rows; the result is the same, bit for bit.
     pub(super) fn head_counted(
         &self,
         source_feature: &[i8],
         work: &mut [i8],
+        folded: Option<&[u8]>,
     ) -> Result<([i32; POSE_DIM], u32)> {
         let f = self.p.arch.feature_dim();
         let mut saturated = count_saturated(source_feature);
@@ -48,8 +52,13 @@ impl Int8Model<'_> {
                 what: "head layer wider than its buffer",
             })?;
             if len == 0 {
+                let source = [bytes_of(source_feature)];
                 let parts = [template, bytes_of(source_feature)];
-                if !dense_vector(layer.weights, &parts, rq, expanded, out) {
+                let done = folded.is_some_and(|bias| {
+                    let rq = Requant { bias, ..rq };
+                    dense_vector(layer.weights, f, &source, rq, expanded, out)
+                });
+                if !done && !dense_vector(layer.weights, 0, &parts, rq, expanded, out) {
                     let mut sink = Sink::Store {
                         out,
                         outputs: width,
@@ -58,7 +67,7 @@ impl Int8Model<'_> {
                 }
             } else {
                 let x = prefix(a, len)?;
-                if !dense_vector(layer.weights, &[bytes_of(x)], rq, expanded, out) {
+                if !dense_vector(layer.weights, 0, &[bytes_of(x)], rq, expanded, out) {
                     let mut sink = Sink::Store {
                         out,
                         outputs: width,
@@ -83,6 +92,45 @@ impl Int8Model<'_> {
             };
         }
         Ok((raw, saturated))
+    }
+
+    /// Bytes of [`Self::fold_template`]'s biases: an i32 for each output of
+    /// the first hidden head layer (0 for a head without one).
+    pub(super) fn folded_len(&self) -> usize {
+        let hidden = self.p.head.len().min(self.p.arch.head.len());
+        self.p
+            .arch
+            .head
+            .first()
+            .filter(|_| hidden > 0)
+            .map_or(0, |&w| 4 * w as usize)
+    }
+
+    /// Writes into `out` ([`Self::folded_len`] bytes, little-endian i32s)
+    /// the first hidden head layer's biases with its template half added:
+    /// output `o`'s bias plus its first `F` weights times the template
+    /// feature (wrapping, as the layer itself adds them). The head then
+    /// reads that half of the weights once per model instead of once per
+    /// call (`F x F` bytes: 1 MB at the paper's widths). `false`, having
+    /// written nothing, when `out` is short or the head has no hidden
+    /// layer. (Only the host's vector kernels take the folded biases.)
+    #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
+    pub(super) fn fold_template(&self, out: &mut [i8]) -> bool {
+        let (Some(layer), Some(out)) = (self.p.head.first(), out.get_mut(..self.folded_len()))
+        else {
+            return false;
+        };
+        let f = self.p.arch.feature_dim();
+        let template = self.p.template_feature;
+        let rows = rows(layer.weights, 2 * f).zip(le_i32s(layer.bias));
+        for (word, (row, bias)) in out.as_chunks_mut::<4>().0.iter_mut().zip(rows) {
+            let (wt, _) = row.split_at(f.min(row.len()));
+            *word = bias
+                .wrapping_add(dot(wt, template))
+                .to_le_bytes()
+                .map(|b| b as i8);
+        }
+        !out.is_empty()
     }
 
     /// Converts raw head accumulators to reals with the output scales.

@@ -29,12 +29,15 @@
 mod check;
 mod encode;
 mod head;
+mod prepared;
+
+pub use prepared::Prepared;
 
 use crate::arch::{Arch, MAX_TILE, POSE_DIM};
 use crate::error::{Error, Result};
 use crate::fixed::INPUT_QMAX;
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind};
-use crate::kernel::Requant;
+use crate::kernel::{Requant, bytes_of};
 use crate::pose::{self, Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
@@ -129,10 +132,12 @@ impl<'a> Int8Model<'a> {
     /// aarch64 with the dot-product extension) encodes
     /// [`crate::arch::HOST_BLOCK`] points at a time
     /// (several times faster; same results, bit for bit): a full tile's
-    /// [`Self::scratch_len`] plus [`Arch::host_block_len`]. Elsewhere the
-    /// extra bytes go unused.
+    /// [`Self::scratch_len`] plus [`Arch::host_block_len`], plus room for
+    /// the head's folded template half ([`Self::prepare`]: an i32 for each
+    /// output of the first hidden head layer). Elsewhere the extra bytes go
+    /// unused.
     pub fn host_scratch_len(&self) -> usize {
-        self.scratch_len(MAX_TILE) + self.p.arch.host_block_len()
+        self.scratch_len(MAX_TILE) + self.p.arch.host_block_len() + self.folded_len()
     }
 
     /// The largest tile (up to [`MAX_TILE`]) that fits `available` bytes.
@@ -167,7 +172,7 @@ impl<'a> Int8Model<'a> {
             &self.template,
             source,
             options,
-            |map| self.pass(source, map, tile, scratch),
+            |map| self.pass(source, map, tile, scratch, Ready::default()),
         )
     }
 
@@ -218,22 +223,26 @@ impl<'a> Int8Model<'a> {
             source,
             passes,
             tolerance,
-            |map| Ok(self.pass(source, map, tile, scratch)?.0),
+            |map| Ok(self.pass(source, map, tile, scratch, Ready::default())?.0),
         )
     }
 
     /// One network pass on the source moved by `map`: the pose (model
-    /// frame), the saturation count and the points left out.
+    /// frame), the saturation count and the points left out. `ready` says
+    /// what [`Self::prepare`] left in the scratch.
     fn pass(
         &self,
         source: &[[f32; 3]],
         map: &PointMap,
         tile: usize,
         scratch: &mut [i8],
+        ready: Ready,
     ) -> Result<(Pose, PassCounts)> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
-        let out_of_range = self.encode_into(source, map, tile, feature, work, extra)?;
-        let (head, saturated) = self.head_counted(feature, work)?;
+        let (block, folded) = self.split_host(extra);
+        let out_of_range = self.encode_into(source, map, tile, feature, work, block, ready)?;
+        let folded = ready.folded.then(|| bytes_of(folded));
+        let (head, saturated) = self.head_counted(feature, work, folded)?;
         let counts = PassCounts {
             saturated,
             out_of_range,
@@ -260,9 +269,25 @@ impl<'a> Int8Model<'a> {
         tile: usize,
         scratch: &'s mut [i8],
     ) -> Result<Int8Inference<'s>> {
+        self.infer_ready(source, tile, scratch, Ready::default())
+    }
+
+    /// [`Self::infer_tiled`] on a scratch where [`Self::prepare`] left what
+    /// `ready` says.
+    fn infer_ready<'s>(
+        &self,
+        source: &[[f32; 3]],
+        tile: usize,
+        scratch: &'s mut [i8],
+        ready: Ready,
+    ) -> Result<Int8Inference<'s>> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
-        let (centring, out_of_range) = self.encode_centred(source, tile, feature, work, extra)?;
-        let (head, saturated) = self.head_counted(feature, work)?;
+        let (block, folded) = self.split_host(extra);
+        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
+        let map = PointMap::new(self.p.frame, &centring);
+        let out_of_range = self.encode_into(source, &map, tile, feature, work, block, ready)?;
+        let folded = ready.folded.then(|| bytes_of(folded));
+        let (head, saturated) = self.head_counted(feature, work, folded)?;
         Ok(Int8Inference {
             feature,
             head,
@@ -288,24 +313,19 @@ impl<'a> Int8Model<'a> {
         scratch: &'s mut [i8],
     ) -> Result<&'s [i8]> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
-        self.encode_centred(source, tile, feature, work, extra)?;
+        let (block, _) = self.split_host(extra);
+        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
+        let map = PointMap::new(self.p.frame, &centring);
+        self.encode_into(source, &map, tile, feature, work, block, Ready::default())?;
         Ok(feature)
     }
 
-    /// Encodes `source`, centred first if the model says so; returns how it
-    /// was moved (the identity otherwise) and the points left out.
-    fn encode_centred(
-        &self,
-        source: &[[f32; 3]],
-        tile: usize,
-        feature: &mut [i8],
-        work: &mut [i8],
-        extra: &mut [i8],
-    ) -> Result<(Pose, u32)> {
-        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
-        let map = PointMap::new(self.p.frame, &centring);
-        let out_of_range = self.encode_into(source, &map, tile, feature, work, extra)?;
-        Ok((centring, out_of_range))
+    /// The host area past the device scratch ([`Self::split_scratch`]) as
+    /// the block encoder's room ([`Arch::host_block_len`] bytes, or all
+    /// there is) and what lies past it (the folded head biases' room).
+    fn split_host<'s>(&self, extra: &'s mut [i8]) -> (&'s mut [i8], &'s mut [i8]) {
+        let block = self.p.arch.host_block_len().min(extra.len());
+        extra.split_at_mut(block)
     }
 
     /// The scratch as the feature, the encoder's and head's work area (for
@@ -329,6 +349,21 @@ impl<'a> Int8Model<'a> {
             .ok_or(too_small)?;
         Ok((feature, work, extra))
     }
+}
+
+/// What [`Int8Model::prepare`] left in a scratch's host area, for the
+/// calls on it: the block encoder's weight copies (`block`) and the head's
+/// folded template half (`folded`). The default (nothing) is what every
+/// call straight on the model takes.
+#[derive(Clone, Copy, Debug, Default)]
+struct Ready {
+    /// (Read where the block kernel exists: a host with the `std` feature.)
+    #[cfg_attr(
+        not(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std")),
+        allow(dead_code)
+    )]
+    block: bool,
+    folded: bool,
 }
 
 /// The output step of a layer with its ReLU (`relu`) or without.

@@ -89,6 +89,12 @@ enum Route {
     Sdot,
 }
 
+/// Whether this CPU has a block kernel (a [`Route`]).
+#[cfg(test)]
+pub(crate) fn has_route() -> bool {
+    Route::detect().is_some()
+}
+
 impl Route {
     /// The fastest route this CPU can run, if any.
     fn detect() -> Option<Self> {
@@ -201,6 +207,20 @@ impl<'w> BlockEncoder<'w> {
         Self::with_route(arch, layers, area, Route::detect()?)
     }
 
+    /// Copies the encoder weights into `area` as [`Self::new`] does, for
+    /// any number of later encoders on it ([`Self::prepared`]); `false`,
+    /// having done nothing that matters, where [`Self::new`] gives `None`.
+    pub(crate) fn prepare(arch: &Arch, layers: &[Int8Layer<'_>], area: &mut [i8]) -> bool {
+        Route::detect().is_some_and(|route| fill(arch, layers, area, route).is_some())
+    }
+
+    /// An encoder on an `area` that [`Self::prepare`] filled for these
+    /// layers (its weight copies are taken as they stand); `None` where
+    /// [`Self::new`] gives `None`.
+    pub(crate) fn prepared(arch: &Arch, area: &'w mut [i8]) -> Option<Self> {
+        Self::on(arch, area, Route::detect()?)
+    }
+
     /// [`Self::new`] on `route` (which the CPU must be able to run).
     fn with_route(
         arch: &Arch,
@@ -208,48 +228,34 @@ impl<'w> BlockEncoder<'w> {
         area: &'w mut [i8],
         route: Route,
     ) -> Option<Self> {
-        if area.len() < arch.host_block_len() {
-            return None;
-        }
-        let words = as_words(area);
-        let sizes = arch.host_block_words();
-        let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
-        let (sums, rest) = rest.split_at_mut_checked(sizes.sums)?;
-        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
-        let (quads, rest) = rest.split_at_mut_checked(sizes.quads)?;
-        let (maxima, rest) = rest.split_at_mut_checked(sizes.maxima)?;
+        fill(arch, layers, area, route)?;
+        Self::on(arch, area, route)
+    }
+
+    /// The encoder on an `area` that [`fill`] filled for `route`.
+    fn on(arch: &Arch, area: &'w mut [i8], route: Route) -> Option<Self> {
+        let Carved {
+            weights,
+            sums,
+            quads,
+            maxima,
+            a,
+            b,
+        } = carve(arch, area)?;
         maxima.fill(i32::MIN as u32);
-        let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
-        let b = rest.get_mut(..sizes.buffer)?;
-        let count = arch.encoder.len();
-        let mut free = &mut *sums;
-        for (l, (shape, layer)) in arch.encoder_layers().zip(layers).enumerate().skip(1) {
-            let (out, tail) = free.split_at_mut_checked(shape.outputs)?;
-            if route.needs_sums(l, count) {
-                for (sum, row) in out.iter_mut().zip(rows(layer.weights, shape.inputs)) {
-                    *sum = row_sum(row);
-                }
-            }
-            free = tail;
-        }
+        let sizes = arch.host_block_words();
         // A pooled layer on bytes with AVX2: its int16 weights last, copied
-        // later if at all. The quad routes use only the first layer's.
-        let last = arch.encoder_layers().last();
-        let on_bytes = last.filter(|_| sizes.quads > 0 && !route.on_quads());
+        // when a block first needs them. The quad routes use only the
+        // first layer's.
+        let on_bytes = arch
+            .encoder_layers()
+            .last()
+            .filter(|_| sizes.quads > 0 && !route.on_quads());
         let later = on_bytes.map_or(0, |shape| shape.pair_words());
         #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
         let (weights, wide) = weights.split_at_mut_checked(sizes.weights.checked_sub(later)?)?;
-        let widened = if route.on_quads() {
-            1
-        } else {
-            count.saturating_sub(usize::from(on_bytes.is_some()))
-        };
-        let mut free = &mut *weights;
-        for (shape, layer) in arch.encoder_layers().zip(layers).take(widened) {
-            let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
-            widen(layer.weights, shape.inputs, out);
-            free = tail;
-        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = quads;
         Some(BlockEncoder {
             weights,
             sums,
@@ -326,6 +332,75 @@ impl BlockEncoder<'_> {
             pool_maxima(self.maxima, q, feature);
         }
     }
+}
+
+/// The parts of a block encoder's area (see [`Arch::host_block_words`]).
+struct Carved<'w> {
+    weights: &'w mut [u32],
+    sums: &'w mut [u32],
+    quads: &'w mut [u32],
+    maxima: &'w mut [u32],
+    a: &'w mut [u32],
+    b: &'w mut [u32],
+}
+
+/// Cuts a block encoder's `area` (at least [`Arch::host_block_len`]
+/// bytes) into its parts; `None` when it is short.
+fn carve<'w>(arch: &Arch, area: &'w mut [i8]) -> Option<Carved<'w>> {
+    if area.len() < arch.host_block_len() {
+        return None;
+    }
+    let sizes = arch.host_block_words();
+    let words = as_words(area);
+    let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
+    let (sums, rest) = rest.split_at_mut_checked(sizes.sums)?;
+    let (quads, rest) = rest.split_at_mut_checked(sizes.quads)?;
+    let (maxima, rest) = rest.split_at_mut_checked(sizes.maxima)?;
+    let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
+    let b = rest.get_mut(..sizes.buffer)?;
+    Some(Carved {
+        weights,
+        sums,
+        quads,
+        maxima,
+        a,
+        b,
+    })
+}
+
+/// Writes what `route` reads of the weights into a block encoder's
+/// `area`: each row's weight sum where [`Route::needs_sums`] says, and the
+/// int16 rows of the layers it runs on pairs (all but a pooled layer on
+/// bytes with AVX2, which is widened only if a block needs it; only the
+/// first on the quad routes). `None` when the area is short.
+fn fill(arch: &Arch, layers: &[Int8Layer<'_>], area: &mut [i8], route: Route) -> Option<()> {
+    let Carved { weights, sums, .. } = carve(arch, area)?;
+    let sizes = arch.host_block_words();
+    let count = arch.encoder.len();
+    let mut free = sums;
+    for (l, (shape, layer)) in arch.encoder_layers().zip(layers).enumerate().skip(1) {
+        let (out, tail) = free.split_at_mut_checked(shape.outputs)?;
+        if route.needs_sums(l, count) {
+            for (sum, row) in out.iter_mut().zip(rows(layer.weights, shape.inputs)) {
+                *sum = row_sum(row);
+            }
+        }
+        free = tail;
+    }
+    let last = arch.encoder_layers().last();
+    let on_bytes = last.is_some() && sizes.quads > 0 && !route.on_quads();
+    let widened = if route.on_quads() {
+        1
+    } else {
+        count.saturating_sub(usize::from(on_bytes))
+    };
+    let mut free = weights;
+    for (shape, layer) in arch.encoder_layers().zip(layers).take(widened) {
+        let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
+        widen(layer.weights, shape.inputs, out);
+        free = tail;
+    }
+    Some(())
 }
 
 /// The two kernels of a route on byte quads.

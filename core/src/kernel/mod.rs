@@ -211,22 +211,27 @@ pub(crate) type Channel<'a> = (i32, OutputStep, &'a mut i8);
 
 /// A dense layer on one vector taken four outputs at a time (the host's
 /// vector kernels): each group's four weight rows of `inputs` bytes and its
-/// outputs. A group past the last output reads the group's first row again
-/// in its place, with no output, so a kernel can always run four rows.
+/// outputs. Each row of `weights` is `skip + inputs` bytes, of which the
+/// first `skip` are left out (see [`dense_vector`]). A group past the last
+/// output reads the group's first row again in its place, with no output,
+/// so a kernel can always run four rows.
 #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
 pub(crate) fn row_groups<'a>(
     weights: &'a [u8],
+    skip: usize,
     inputs: usize,
     q: Requant<'a>,
     out: &'a mut [i8],
 ) -> impl Iterator<Item = ([&'a [u8]; 4], [Option<Channel<'a>>; 4])> {
     let params = le_i32s(q.bias).zip(le_i32s(q.multiplier)).zip(q.shift);
-    let mut channels = rows(weights, inputs).zip(params).zip(out.iter_mut()).map(
-        move |((row, ((bias, m), &s)), y)| {
-            let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
-            (row, (bias, step, y))
-        },
-    );
+    let rows = rows(weights, skip + inputs).map(move |row| row.get(skip..).unwrap_or(&[]));
+    let mut channels =
+        rows.zip(params)
+            .zip(out.iter_mut())
+            .map(move |((row, ((bias, m), &s)), y)| {
+                let step = OutputStep::new(m, s as i8, q.zero_point, q.act_min);
+                (row, (bias, step, y))
+            });
     core::iter::from_fn(move || {
         let group: [_; 4] = core::array::from_fn(|_| channels.next());
         let first = group[0].as_ref()?.0;
@@ -359,6 +364,12 @@ fn portable_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink: &mut Si
 /// applies: on targets with neither kernel below, or where the kernel's
 /// conditions are not met (then [`dense_tile`] runs on the vector).
 ///
+/// Each row of `weights` is `skip` bytes and then one weight per input:
+/// the first `skip` weights of every row are left out, their products with
+/// a constant part of the input being in `q`'s biases already (the head's
+/// template half, folded by [`crate::Int8Model::prepare`]). Only the host
+/// kernels take a `skip` other than 0.
+///
 /// On thumbv7em (parts of multiples of 4, `expanded` holding the vector's
 /// `inputs / 2` words) the vector is expanded to int16 pairs once and four
 /// weight rows share each pair of activation words (`dsp::dot_rows4`). On
@@ -369,6 +380,7 @@ fn portable_points(weights: &[u8], q: Requant<'_>, points: &[i16], sink: &mut Si
 #[inline(always)]
 pub(crate) fn dense_vector(
     weights: &[u8],
+    skip: usize,
     parts: &[&[u8]],
     q: Requant<'_>,
     expanded: &mut [u32],
@@ -378,7 +390,10 @@ pub(crate) fn dense_vector(
     {
         let inputs: usize = parts.iter().map(|p| p.len()).sum();
         let words = inputs / 2;
-        if inputs == 0 || parts.iter().any(|p| !p.len().is_multiple_of(4)) || expanded.len() < words
+        if skip != 0
+            || inputs == 0
+            || parts.iter().any(|p| !p.len().is_multiple_of(4))
+            || expanded.len() < words
         {
             return false;
         }
@@ -431,18 +446,18 @@ pub(crate) fn dense_vector(
     }
     #[cfg(all(target_arch = "x86_64", feature = "std"))]
     {
-        x86::dense_vector(weights, parts, q, expanded, out)
+        x86::dense_vector(weights, skip, parts, q, expanded, out)
     }
     #[cfg(all(target_arch = "aarch64", feature = "std"))]
     {
-        neon::dense_vector(weights, parts, q, expanded, out)
+        neon::dense_vector(weights, skip, parts, q, expanded, out)
     }
     #[cfg(not(any(
         pcrnet_arm_dsp,
         all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std")
     )))]
     {
-        let _ = (weights, parts, q, expanded, out);
+        let _ = (weights, skip, parts, q, expanded, out);
         false
     }
 }

@@ -209,6 +209,7 @@ unsafe fn tile<D: Dot>(
 /// hold the copy.
 pub(super) fn dense_vector(
     weights: &[u8],
+    skip: usize,
     parts: &[&[u8]],
     q: Requant<'_>,
     expanded: &mut [u32],
@@ -226,27 +227,41 @@ pub(super) fn dense_vector(
     }
     if has_sdot() {
         // SAFETY: the CPU has `dotprod` (checked above).
-        unsafe { vector_sdot(weights, inputs, q, xs, out) }
+        unsafe { vector_sdot(weights, skip, inputs, q, xs, out) }
     } else {
         // SAFETY: `Smull` needs only NEON.
-        unsafe { vector::<Smull>(weights, inputs, q, xs, out) }
+        unsafe { vector::<Smull>(weights, skip, inputs, q, xs, out) }
     }
     true
 }
 
 #[target_feature(enable = "dotprod")]
-fn vector_sdot(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i8], out: &mut [i8]) {
+fn vector_sdot(
+    weights: &[u8],
+    skip: usize,
+    inputs: usize,
+    q: Requant<'_>,
+    xs: &[i8],
+    out: &mut [i8],
+) {
     // SAFETY: this function requires `dotprod` of its callers.
-    unsafe { vector::<Sdot>(weights, inputs, q, xs, out) }
+    unsafe { vector::<Sdot>(weights, skip, inputs, q, xs, out) }
 }
 
 /// # Safety
 /// The CPU must have what `D` needs.
 #[inline(always)]
-unsafe fn vector<D: Dot>(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i8], out: &mut [i8]) {
+unsafe fn vector<D: Dot>(
+    weights: &[u8],
+    skip: usize,
+    inputs: usize,
+    q: Requant<'_>,
+    xs: &[i8],
+    out: &mut [i8],
+) {
     let full = inputs / LANES * LANES;
     let (body, tail) = xs.split_at(full.min(xs.len()));
-    for (rs, channels) in row_groups(weights, inputs, q, out) {
+    for (rs, channels) in row_groups(weights, skip, inputs, q, out) {
         // SAFETY: NEON is part of every aarch64 CPU.
         let mut acc = [unsafe { vdupq_n_s32(0) }; 4];
         for (c, x) in body.chunks_exact(LANES).enumerate() {
@@ -335,15 +350,38 @@ mod tests {
             let (inputs, outputs) = (c.x.len(), c.want.len());
             let (weights, q) = (&c.layer.weights, c.layer.requant());
             let (a, b) = c.x.split_at(c.split);
-            let mut expanded = std::vec![0u32; inputs.div_ceil(4)];
-            let mut got = std::vec![0i8; outputs];
-            assert!(dense_vector(weights, &[a, b], q, &mut expanded, &mut got));
-            assert_eq!(got, c.want, "dispatched, {inputs} -> {outputs}");
-            let xs: Vec<i8> = c.x.iter().map(|&v| v as i8).collect();
-            let mut got = std::vec![0i8; outputs];
-            // SAFETY: `Smull` needs only NEON.
-            unsafe { vector::<Smull>(weights, inputs, q, &xs, &mut got) };
-            assert_eq!(got, c.want, "smull, {inputs} -> {outputs}");
+            let folded = c.folded_bias();
+            // As given, and with the first part folded into the biases
+            // (`skip`), where the second part is wide enough.
+            let mut runs = std::vec![(0, std::vec![a, b], q)];
+            if b.len() >= LANES {
+                let q = Requant { bias: &folded, ..q };
+                runs.push((c.split, std::vec![b], q));
+            }
+            for (skip, parts, q) in runs {
+                let n: usize = parts.iter().map(|p| p.len()).sum();
+                let what = std::format!("{inputs} -> {outputs}, skip {skip}");
+                let mut expanded = std::vec![0u32; n.div_ceil(4)];
+                let mut got = std::vec![0i8; outputs];
+                assert!(dense_vector(
+                    weights,
+                    skip,
+                    &parts,
+                    q,
+                    &mut expanded,
+                    &mut got
+                ));
+                assert_eq!(got, c.want, "dispatched, {what}");
+                let xs: Vec<i8> = parts
+                    .iter()
+                    .flat_map(|p| p.iter())
+                    .map(|&v| v as i8)
+                    .collect();
+                let mut got = std::vec![0i8; outputs];
+                // SAFETY: `Smull` needs only NEON.
+                unsafe { vector::<Smull>(weights, skip, n, q, &xs, &mut got) };
+                assert_eq!(got, c.want, "smull, {what}");
+            }
         }
     }
 
@@ -369,6 +407,7 @@ mod tests {
         let mut small = [0u32; 3];
         assert!(!dense_vector(
             &weights,
+            0,
             &[&[0u8; 16]],
             q,
             &mut small,

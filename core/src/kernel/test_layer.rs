@@ -72,6 +72,25 @@ pub(crate) struct VectorCase {
     pub want: Vec<i8>,
 }
 
+impl VectorCase {
+    /// The case with its first part folded into the biases, as
+    /// `Int8Model::prepare` folds the head's template half: each bias plus
+    /// the row's first `split` weights times the first part (the portable
+    /// dot product), for the kernels called with `skip = split` on the
+    /// second part alone.
+    pub(crate) fn folded_bias(&self) -> Vec<u8> {
+        let (a, _) = self.x.split_at(self.split);
+        let rows = super::rows(&self.layer.weights, self.x.len());
+        let biases = crate::format::le_i32s(&self.layer.bias);
+        rows.zip(biases)
+            .flat_map(|(row, b)| {
+                b.wrapping_add(super::dot(&row[..self.split], a))
+                    .to_le_bytes()
+            })
+            .collect()
+    }
+}
+
 /// The vector kernels' cases: one part or two, with and without a tail
 /// past 16 (or 64) inputs, row counts that are and are not multiples of
 /// four.

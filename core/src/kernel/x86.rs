@@ -170,6 +170,7 @@ fn points8(weights: &[u8], q: Requant<'_>, points: &[i16; 3 * ROWS], sink: &mut 
 /// other vector or CPU, or when `expanded` cannot hold the int16 copy.
 pub(super) fn dense_vector(
     weights: &[u8],
+    skip: usize,
     parts: &[&[u8]],
     q: Requant<'_>,
     expanded: &mut [u32],
@@ -184,7 +185,7 @@ pub(super) fn dense_vector(
         // `vnni::vector` requires.
         #[allow(unsafe_code)]
         unsafe {
-            vnni::vector(weights, parts, q, out)
+            vnni::vector(weights, skip, parts, q, out)
         };
         return true;
     }
@@ -193,17 +194,18 @@ pub(super) fn dense_vector(
         // requires.
         #[allow(unsafe_code)]
         unsafe {
-            vnni::vector_avx(weights, parts, q, out)
+            vnni::vector_avx(weights, skip, parts, q, out)
         };
         return true;
     }
-    dense_vector_avx2(weights, parts, inputs, q, expanded, out)
+    dense_vector_avx2(weights, skip, parts, inputs, q, expanded, out)
 }
 
 /// [`dense_vector`] on AVX2 alone (which the caller found), for `inputs`
 /// (at least 16) in all.
 fn dense_vector_avx2(
     weights: &[u8],
+    skip: usize,
     parts: &[&[u8]],
     inputs: usize,
     q: Requant<'_>,
@@ -219,16 +221,16 @@ fn dense_vector_avx2(
     // SAFETY: the CPU has AVX2 (checked above), all `vector` requires.
     #[allow(unsafe_code)]
     unsafe {
-        vector(weights, inputs, q, xs, out)
+        vector(weights, skip, inputs, q, xs, out)
     };
     true
 }
 
 #[target_feature(enable = "avx2")]
-fn vector(weights: &[u8], inputs: usize, q: Requant<'_>, xs: &[i16], out: &mut [i8]) {
+fn vector(weights: &[u8], skip: usize, inputs: usize, q: Requant<'_>, xs: &[i16], out: &mut [i8]) {
     let full = inputs / LANES * LANES;
     let (body, tail) = xs.split_at(full.min(xs.len()));
-    for (rs, channels) in row_groups(weights, inputs, q, out) {
+    for (rs, channels) in row_groups(weights, skip, inputs, q, out) {
         let mut acc = [_mm256_setzero_si256(); ROWS];
         for (c, x) in body.chunks_exact(LANES).enumerate() {
             // SAFETY: `x` is 16 values (32 bytes) and every row holds
@@ -458,36 +460,49 @@ mod tests {
         for c in vector_cases(13) {
             let (inputs, outputs) = (c.x.len(), c.want.len());
             let (a, b) = c.x.split_at(c.split);
-            let mut expanded = std::vec![0u32; inputs.div_ceil(2)];
-            let mut got = std::vec![0i8; outputs];
+            let folded = c.folded_bias();
             let q = c.layer.requant();
-            let w = &c.layer.weights;
-            assert!(dense_vector_avx2(
-                w,
-                &[a, b],
-                inputs,
-                q,
-                &mut expanded,
-                &mut got
-            ));
-            assert_eq!(got, c.want, "AVX2, {inputs} -> {outputs}");
-            if vnni {
-                got.fill(0);
-                // SAFETY: the CPU has AVX-512 VNNI and BW (checked above).
-                #[allow(unsafe_code)]
-                unsafe {
-                    vnni::vector(w, &[a, b], q, &mut got)
-                };
-                assert_eq!(got, c.want, "VNNI, {inputs} -> {outputs}");
+            // As given, and with the first part folded into the biases
+            // (`skip`), where the second part is wide enough.
+            let mut runs = std::vec![(0, std::vec![a, b], q)];
+            if b.len() >= LANES {
+                let q = Requant { bias: &folded, ..q };
+                runs.push((c.split, std::vec![b], q));
             }
-            if avxvnni {
-                got.fill(0);
-                // SAFETY: the CPU has AVX-VNNI and AVX2 (checked above).
-                #[allow(unsafe_code)]
-                unsafe {
-                    vnni::vector_avx(w, &[a, b], q, &mut got)
-                };
-                assert_eq!(got, c.want, "AVX-VNNI, {inputs} -> {outputs}");
+            let w = &c.layer.weights;
+            for (skip, parts, q) in runs {
+                let n: usize = parts.iter().map(|p| p.len()).sum();
+                let mut expanded = std::vec![0u32; n.div_ceil(2)];
+                let mut got = std::vec![0i8; outputs];
+                let what = std::format!("{inputs} -> {outputs}, skip {skip}");
+                assert!(dense_vector_avx2(
+                    w,
+                    skip,
+                    &parts,
+                    n,
+                    q,
+                    &mut expanded,
+                    &mut got
+                ));
+                assert_eq!(got, c.want, "AVX2, {what}");
+                if vnni {
+                    got.fill(0);
+                    // SAFETY: the CPU has AVX-512 VNNI and BW (checked above).
+                    #[allow(unsafe_code)]
+                    unsafe {
+                        vnni::vector(w, skip, &parts, q, &mut got)
+                    };
+                    assert_eq!(got, c.want, "VNNI, {what}");
+                }
+                if avxvnni {
+                    got.fill(0);
+                    // SAFETY: the CPU has AVX-VNNI and AVX2 (checked above).
+                    #[allow(unsafe_code)]
+                    unsafe {
+                        vnni::vector_avx(w, skip, &parts, q, &mut got)
+                    };
+                    assert_eq!(got, c.want, "AVX-VNNI, {what}");
+                }
             }
         }
     }

@@ -30,7 +30,13 @@ macro_rules! vector_kernel {
      $xor:ident, $splat:ident, $zero:ident, $sum:ident) => {
         $(#[$doc])*
         #[target_feature(enable = $features)]
-        pub(super) fn $name(weights: &[u8], parts: &[&[u8]], q: Requant<'_>, out: &mut [i8]) {
+        pub(super) fn $name(
+            weights: &[u8],
+            skip: usize,
+            parts: &[&[u8]],
+            q: Requant<'_>,
+            out: &mut [i8],
+        ) {
             let inputs: usize = parts.iter().map(|p| p.len()).sum();
             let mut sum = 0i32;
             for part in parts {
@@ -42,7 +48,7 @@ macro_rules! vector_kernel {
             }
             let correction = sum.wrapping_mul(128);
             let flip = $splat(i8::MIN);
-            for (rs, channels) in row_groups(weights, inputs, q, out) {
+            for (rs, channels) in row_groups(weights, skip, inputs, q, out) {
                 let mut acc = [$zero(); 4];
                 let mut tails = [0i32; 4];
                 let mut offset = 0;
