@@ -47,7 +47,9 @@
 //!
 //! [`Int8Model::network_pose`] is the network alone (no check, no
 //! refinement); [`Int8Model::infer`], [`Int8Model::encode`] and
-//! [`Int8Model::head`] expose the raw feature and head outputs.
+//! [`Int8Model::head`] expose the raw feature and head outputs. On a host
+//! calling one model many times, [`Int8Model::prepare`] makes a scratch
+//! ready once ([`Prepared`]: the same results, less work per call).
 //!
 //! ## Guarantees
 //! - No allocation, no panic reachable from any blob or any cloud: every
