@@ -47,7 +47,11 @@ use super::{Requant, as_words, rows, rows_mut};
 use crate::arch::{Arch, HOST_BLOCK as BLOCK, INPUT_DIM};
 use crate::fixed::OutputStep;
 use crate::format::{Int8Layer, le_i32s};
+#[cfg(target_arch = "x86_64")]
+use area::widen;
+use area::{Carved, carve, fill, pair};
 
+mod area;
 #[cfg(target_arch = "x86_64")]
 mod avxvnni;
 #[cfg(target_arch = "x86_64")]
@@ -334,75 +338,6 @@ impl BlockEncoder<'_> {
     }
 }
 
-/// The parts of a block encoder's area (see [`Arch::host_block_words`]).
-struct Carved<'w> {
-    weights: &'w mut [u32],
-    sums: &'w mut [u32],
-    quads: &'w mut [u32],
-    maxima: &'w mut [u32],
-    a: &'w mut [u32],
-    b: &'w mut [u32],
-}
-
-/// Cuts a block encoder's `area` (at least [`Arch::host_block_len`]
-/// bytes) into its parts; `None` when it is short.
-fn carve<'w>(arch: &Arch, area: &'w mut [i8]) -> Option<Carved<'w>> {
-    if area.len() < arch.host_block_len() {
-        return None;
-    }
-    let sizes = arch.host_block_words();
-    let words = as_words(area);
-    let (weights, rest) = words.split_at_mut_checked(sizes.weights)?;
-    let (sums, rest) = rest.split_at_mut_checked(sizes.sums)?;
-    let (quads, rest) = rest.split_at_mut_checked(sizes.quads)?;
-    let (maxima, rest) = rest.split_at_mut_checked(sizes.maxima)?;
-    let (a, rest) = rest.split_at_mut_checked(sizes.buffer)?;
-    let b = rest.get_mut(..sizes.buffer)?;
-    Some(Carved {
-        weights,
-        sums,
-        quads,
-        maxima,
-        a,
-        b,
-    })
-}
-
-/// Writes what `route` reads of the weights into a block encoder's
-/// `area`: each row's weight sum where [`Route::needs_sums`] says, and the
-/// int16 rows of the layers it runs on pairs (all but a pooled layer on
-/// bytes with AVX2, which is widened only if a block needs it; only the
-/// first on the quad routes). `None` when the area is short.
-fn fill(arch: &Arch, layers: &[Int8Layer<'_>], area: &mut [i8], route: Route) -> Option<()> {
-    let Carved { weights, sums, .. } = carve(arch, area)?;
-    let sizes = arch.host_block_words();
-    let count = arch.encoder.len();
-    let mut free = sums;
-    for (l, (shape, layer)) in arch.encoder_layers().zip(layers).enumerate().skip(1) {
-        let (out, tail) = free.split_at_mut_checked(shape.outputs)?;
-        if route.needs_sums(l, count) {
-            for (sum, row) in out.iter_mut().zip(rows(layer.weights, shape.inputs)) {
-                *sum = row_sum(row);
-            }
-        }
-        free = tail;
-    }
-    let last = arch.encoder_layers().last();
-    let on_bytes = last.is_some() && sizes.quads > 0 && !route.on_quads();
-    let widened = if route.on_quads() {
-        1
-    } else {
-        count.saturating_sub(usize::from(on_bytes))
-    };
-    let mut free = weights;
-    for (shape, layer) in arch.encoder_layers().zip(layers).take(widened) {
-        let (out, tail) = free.split_at_mut_checked(shape.pair_words())?;
-        widen(layer.weights, shape.inputs, out);
-        free = tail;
-    }
-    Some(())
-}
-
 /// The two kernels of a route on byte quads.
 #[allow(unsafe_code)]
 trait QuadKernels {
@@ -524,23 +459,6 @@ unsafe fn encode_avx2<'a, 'q>(
     }
 }
 
-/// Sign-extends a layer's int8 weight rows of `inputs` values into int16
-/// pair words, each row padded with a zero to an even length.
-fn widen(weights: &[u8], inputs: usize, out: &mut [u32]) {
-    let pairs = inputs.div_ceil(2);
-    for (row, out) in rows(weights, inputs).zip(rows_mut(out, pairs)) {
-        for (j, word) in out.iter_mut().enumerate() {
-            let w = |k: usize| row.get(k).map_or(0, |&b| b as i8 as i16);
-            *word = pair(w(2 * j), w(2 * j + 1));
-        }
-    }
-}
-
-/// Two int16 values as one word, `lo` in the low half.
-fn pair(lo: i16, hi: i16) -> u32 {
-    (lo as u16 as u32) | ((hi as u16 as u32) << 16)
-}
-
 /// Rows a group of the quad routes' kernels takes together, sharing each
 /// load of the block's inputs (four outputs fill a quad of the next
 /// layer's input).
@@ -581,12 +499,6 @@ fn group<'a, T>(
         }
     }
     (rs, biases, steps)
-}
-
-/// The sum of an int8 weight row (as a word), which the byte kernels that
-/// hold each input as `x + 128` take `-128` times into the bias.
-fn row_sum(row: &[u8]) -> u32 {
-    row.iter().map(|&w| w as i8 as i32).sum::<i32>() as u32
 }
 
 /// Weights `4j..4j + 4` of a row as one word, zeros past its end.

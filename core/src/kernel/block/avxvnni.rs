@@ -462,7 +462,7 @@ mod tests {
         for c in block_cases(41) {
             let (q, inputs) = (c.layer.requant(), c.inputs);
             let sums: Vec<u32> = super::super::super::rows(&c.layer.weights, inputs)
-                .map(super::super::row_sum)
+                .map(super::super::area::row_sum)
                 .collect();
             let layer = ByteLayer {
                 weights: &c.layer.weights,

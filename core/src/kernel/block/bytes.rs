@@ -248,7 +248,7 @@ mod tests {
     fn check(layer: &TestLayer, inputs: usize, outputs: usize, x: &[i8], what: &str) -> bool {
         let q = layer.requant();
         let sums: Vec<u32> = rows(&layer.weights, inputs)
-            .map(super::super::row_sum)
+            .map(super::super::area::row_sum)
             .collect();
         let pooled = ByteLayer {
             weights: &layer.weights,

@@ -412,8 +412,8 @@ fn stepped(acc: int32x4_t, step: &OutputStep) -> int32x4_t {
 #[cfg(test)]
 mod tests {
     use super::super::super::test_layer::block_cases;
+    use super::super::area::widen;
     use super::super::tests::{check_layer, pairs_by_point, quads_by_point};
-    use super::super::widen;
     use super::*;
 
     /// Both layers of the SDOT route (the byte quads one, and the int16

@@ -336,7 +336,7 @@ pub(super) mod tests {
         for c in block_cases(36) {
             let (q, inputs) = (c.layer.requant(), c.inputs);
             let sums: Vec<u32> = rows(&c.layer.weights, inputs)
-                .map(super::super::row_sum)
+                .map(super::super::area::row_sum)
                 .collect();
             let layer = ByteLayer {
                 weights: &c.layer.weights,

@@ -66,9 +66,9 @@ fn pair_step(acc: &mut [[__m512i; WIDE]; ROWS], w: [u32; ROWS], x: &[u32]) {
 #[cfg(test)]
 mod tests {
     use super::super::super::test_layer::block_cases;
+    use super::super::area::widen;
     use super::super::tests::{check_layer, pairs_by_point};
     use super::super::vnni::tests::vnni;
-    use super::super::widen;
     use super::*;
 
     /// `layer_wide` gives the portable kernel's activations, stored as
