@@ -201,8 +201,11 @@ pub unsafe extern "C" fn pcrnet_model_scratch_len(model: *const PcrnetModel, til
 /// CPU with AVX2, or an aarch64 one with the dot-product extension,
 /// encodes many points per weight pass (the block kernel, picked at run
 /// time; results identical bit for bit): the `PCRNET_MAX_TILE` scratch
-/// plus the kernel's int16 weights and activations. Firmware builds never use the extra bytes: give them
-/// `pcrnet_model_scratch_len`. 0 for a handle that is not loaded.
+/// plus the kernel's int16 weights and activations (and the room the Rust
+/// API's `Int8Model::prepare` folds the head's template half into, which
+/// these calls leave unused). Firmware builds never use the extra bytes:
+/// give them `pcrnet_model_scratch_len`. 0 for a handle that is not
+/// loaded.
 ///
 /// # Safety
 /// `model` must be null or point to a `PcrnetModel`.
