@@ -410,6 +410,51 @@ fn user_errors_name_the_flag_or_file_once() {
     }
 }
 
+/// What a reader or the trainer leaves out or cannot use is said: points
+/// with a non-finite coordinate are counted, and an object that fixes no
+/// pose is refused before any epoch runs (nothing is written).
+#[test]
+fn left_out_points_and_unusable_objects_are_said() {
+    let dir = std::env::temp_dir().join(format!("pcrnet-cli-said-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let nan = dir.join("nan.xyz");
+    let rows = "nan 0 0\n0.1 0.2 0.3\n0 nan 1\n0.5 0.1 0.2\n0.2 0.4 0.1\n0.3 -0.2 0.1\n";
+    std::fs::write(&nan, rows).unwrap();
+    let model = models().join("embedded-default-int8.pcrn");
+    let out = pcrnet()
+        .args([
+            "register".as_ref(),
+            nan.as_os_str(),
+            "--model".as_ref(),
+            model.as_os_str(),
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("2 of 6 points left out"), "{stderr}");
+    for (name, rows, expected) in [
+        ("one.xyz", "1 2 3\n", "has no extent"),
+        ("line.xyz", "0 0 0\n1 0 0\n2 0 0\n3 0 0\n", "lie on a line"),
+    ] {
+        let (object, run) = (dir.join(name), dir.join(format!("run-{name}")));
+        std::fs::write(&object, rows).unwrap();
+        let out = pcrnet()
+            .args(["train".as_ref(), "--object".as_ref(), object.as_os_str()])
+            .args(["--epochs", "1", "--out"])
+            .arg(&run)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {stderr}");
+        assert!(stderr.contains(expected), "{name}: {stderr}");
+        let written = std::fs::read_dir(&run).map_or(0, |d| d.count());
+        assert_eq!(written, 0, "{name}: training wrote into {}", run.display());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Issue 11, item 1: `pcrnet train --object FILE` trains for one object in
 /// its own units, end to end, and the blob it writes registers that
 /// object's clouds in those units.

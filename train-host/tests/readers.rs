@@ -185,6 +185,27 @@ fn pcd_ascii_organised_nan_rows_dropped() {
     assert_eq!(pcd::parse(f.as_bytes()).unwrap(), &PTS[..2]);
 }
 
+/// Every format drops a point with a non-finite coordinate and counts it
+/// (`LocalCloud::left_out`), so a caller can say so.
+#[test]
+fn non_finite_points_are_counted() {
+    let mut pcd = pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 2, 2, "ascii");
+    pcd += "1 2 3\nnan nan nan\n-0.5 0.25 8\n0 NaN 1\n";
+    let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\ninf 0 0\n-0.5 0.25 8\n";
+    let xyz = "nan 0 0\n1 2 3\n0 nan 1\n-0.5 0.25 8\n-inf 1 1\n";
+    for (format, bytes, left_out) in [
+        (Format::Pcd, pcd.as_str(), 2),
+        (Format::Ply, ply, 1),
+        (Format::Xyz, xyz, 3),
+    ] {
+        let cloud = format
+            .parse_local(bytes.as_bytes(), 100, Some([0.0; 3]))
+            .unwrap();
+        assert_eq!(cloud.points, &PTS[..2], "{format:?}");
+        assert_eq!(cloud.left_out, left_out, "{format:?}");
+    }
+}
+
 #[test]
 fn pcd_v06_header_without_version_or_count() {
     let f = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA binary\n";

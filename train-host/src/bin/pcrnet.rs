@@ -238,7 +238,20 @@ fn run(command: Command) -> anyhow::Result<()> {
                 let reading = Progress::spinner(format!("reading {}", path.display()));
                 let mut cloud = read_cloud_local(path, max_cloud_points, origin)?;
                 drop(reading);
-                anyhow::ensure!(!cloud.points.is_empty(), "{}: no points", path.display());
+                anyhow::ensure!(
+                    !cloud.points.is_empty(),
+                    "{}: no point with three finite coordinates ({} read)",
+                    path.display(),
+                    cloud.left_out
+                );
+                if cloud.left_out > 0 {
+                    eprintln!(
+                        "{}: {} of {} points left out (a coordinate is nan or inf, or beyond f32)",
+                        path.display(),
+                        cloud.left_out,
+                        cloud.left_out + cloud.points.len()
+                    );
+                }
                 warn_if_coarse(path, &cloud.points);
                 let kept = reduce_cloud(&cloud.points, reduce, reduce_to, voxel, 0);
                 if kept.len() < cloud.points.len() {

@@ -426,6 +426,15 @@ pub fn run(
     Ok(out)
 }
 
+/// The device's degeneracy verdict on `cloud` as its own template (as
+/// `pcrnet train --object` would bind it): `Some` for a cloud that fixes
+/// no pose (its points coincide or lie on a line), an error for one with
+/// no extent at all.
+pub fn self_degeneracy(cloud: &[[f32; 3]]) -> Result<Option<Degeneracy>, MethodError> {
+    let reference = Reference::new(cloud, default_template_points())?;
+    source_degeneracy(None, Some(&reference), cloud)
+}
+
 /// The device's degeneracy verdict on `source`, against the template cloud
 /// if one is given (recorded as a blob records it) or else the blob's own
 /// template. A template with no extent is an error for every method.

@@ -15,8 +15,9 @@
 //! - Only x, y and z are kept; every other field, property or column is read
 //!   past and dropped.
 //! - Points with a non-finite coordinate (NaN placeholders of organised PCD
-//!   clouds, stray `inf`s) are dropped, in every format. A valid file whose
-//!   points are all dropped, or that declares none, gives an empty cloud.
+//!   clouds, stray `inf`s) are dropped, in every format, and counted
+//!   ([`LocalCloud::left_out`]). A valid file whose points are all
+//!   dropped, or that declares none, gives an empty cloud.
 //! - No input panics, and no buffer is sized from a count in the file before
 //!   the bytes that count promises have been checked to be there.
 //!
@@ -264,16 +265,25 @@ impl Format {
                 } else {
                     let points =
                         off::sample_about(&mesh, origin, DEFAULT_OFF_SAMPLES, DEFAULT_OFF_SEED)?;
-                    return Ok(LocalCloud { origin, points });
+                    return Ok(LocalCloud {
+                        origin,
+                        points,
+                        left_out: 0,
+                    });
                 }
             }
         };
         let origin = origin.unwrap_or_else(|| median(&points));
-        let points = points
+        let read = points.len();
+        let points: Vec<_> = points
             .into_iter()
             .filter_map(|p| localise(p, origin))
             .collect();
-        Ok(LocalCloud { origin, points })
+        Ok(LocalCloud {
+            origin,
+            left_out: read - points.len(),
+            points,
+        })
     }
 }
 
@@ -290,6 +300,10 @@ pub struct LocalCloud {
     pub origin: [f64; 3],
     /// The points relative to `origin`.
     pub points: Vec<[f32; 3]>,
+    /// Points read but left out: a coordinate not finite (the NaN
+    /// placeholders of organised PCD clouds, a stray `nan` or `inf`) or
+    /// not fitting `f32` about `origin`.
+    pub left_out: usize,
 }
 
 /// Coordinate-wise median of finite points (the upper one of an even
@@ -384,11 +398,6 @@ pub(crate) fn points_vec(n: usize, section: &str) -> Result<Vec<[f64; 3]>, Forma
 
 pub(crate) fn out_of_memory(points: usize) -> String {
     format!("cannot allocate {points} points: not enough memory")
-}
-
-/// Keeps the point if all three coordinates are finite.
-pub(crate) fn finite(p: [f64; 3]) -> Option<[f64; 3]> {
-    p.iter().all(|v| v.is_finite()).then_some(p)
 }
 
 /// `p - origin` rounded to `f32`, or `None` if a coordinate is not finite

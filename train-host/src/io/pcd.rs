@@ -20,7 +20,7 @@
 //! crate is deprecated by its author and allocates the claimed output size up
 //! front, and `pcd-rs` embeds its own but panics on inconsistent sizes.
 
-use super::{FormatError, Scalar, finite, next_line, parse_coordinate, snippet, text};
+use super::{FormatError, Scalar, next_line, parse_coordinate, snippet, text};
 
 const FMT: &str = "PCD";
 
@@ -82,7 +82,9 @@ pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, F
 }
 
 /// [`parse_limited`] at full precision: coordinates as `f64` (binary `f32`
-/// fields widen exactly, text and `f64` fields are not rounded).
+/// fields widen exactly, text and `f64` fields are not rounded). Every
+/// point read is returned, non-finite ones included: [`parse_limited`] and
+/// [`super::Format::parse_local`] drop them (the latter counts them).
 pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]>, FormatError> {
     let h = parse_header(bytes)?;
     FormatError::check_count("PCD POINTS", h.points, max_points)?;
@@ -350,7 +352,7 @@ fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatError> {
             p[k] = parse_coordinate(tok, k, section())?;
         }
         seen += 1;
-        out.extend(finite(p));
+        out.push(p);
     }
     if seen < h.points {
         return Err(FormatError::truncated(
@@ -399,7 +401,7 @@ fn parse_binary(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatError> {
         for (v, c) in p.iter_mut().zip(&h.xyz) {
             *v = read_coord(rec, c.offset, c.scalar, SECTION)?;
         }
-        out.extend(finite(p));
+        out.push(p);
     }
     Ok(out)
 }
@@ -462,7 +464,7 @@ fn parse_compressed(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatErro
             let at = h.points * c.offset + i * c.stride;
             *v = read_coord(&raw, at, c.scalar, SECTION)?;
         }
-        out.extend(finite(p));
+        out.push(p);
     }
     Ok(out)
 }

@@ -13,7 +13,7 @@
 //! every element as a hash map of properties, which is heavy for large
 //! clouds when only x, y and z are wanted.
 
-use super::{FormatError, Scalar, finite, next_line, parse_num, snippet, text};
+use super::{FormatError, Scalar, next_line, parse_num, snippet, text};
 
 const FMT: &str = "PLY";
 
@@ -75,7 +75,9 @@ pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, F
 }
 
 /// [`parse_limited`] at full precision: coordinates as `f64` (binary `f32`
-/// fields widen exactly, text and `f64` fields are not rounded).
+/// fields widen exactly, text and `f64` fields are not rounded). Every
+/// point read is returned, non-finite ones included: [`parse_limited`] and
+/// [`super::Format::parse_local`] drop them (the latter counts them).
 pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]>, FormatError> {
     let h = parse_header(bytes)?;
     let vertices = h.elements.get(h.vertex).map_or(0, |e| e.count);
@@ -280,7 +282,7 @@ fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f64; 3]>, Form
                                 FormatError::data(section.clone(), "property outside row")
                             })?;
                     }
-                    out.extend(finite(p));
+                    out.push(p);
                 }
             }
             pos += need;
@@ -325,7 +327,7 @@ fn parse_binary(h: &Header, body: &[u8], be: bool) -> Result<Vec<[f64; 3]>, Form
                 }
             }
             if is_vertex {
-                out.extend(finite(p));
+                out.push(p);
             }
         }
     }
@@ -380,7 +382,7 @@ fn parse_ascii(h: &Header, body: &[u8]) -> Result<Vec<[f64; 3]>, FormatError> {
                 }
             }
             if is_vertex {
-                out.extend(finite(p));
+                out.push(p);
             }
         }
     }

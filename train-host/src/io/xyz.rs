@@ -3,7 +3,7 @@
 //! Further columns (normals, colours, labels) are ignored, blank lines and
 //! `#` comments (whole-line or trailing) are skipped.
 
-use super::{DEFAULT_MAX_POINTS, FormatError, finite, parse_coordinate, text};
+use super::{DEFAULT_MAX_POINTS, FormatError, parse_coordinate, text};
 
 /// Parses an XYZ text file held in memory and returns its finite points.
 pub fn parse(bytes: &[u8]) -> Result<Vec<[f32; 3]>, FormatError> {
@@ -16,7 +16,9 @@ pub fn parse_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f32; 3]>, F
 }
 
 /// [`parse_limited`] at full precision: coordinates as `f64` (binary `f32`
-/// fields widen exactly, text and `f64` fields are not rounded).
+/// fields widen exactly, text and `f64` fields are not rounded). Every
+/// point read is returned, non-finite ones included: [`parse_limited`] and
+/// [`super::Format::parse_local`] drop them (the latter counts them).
 pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]>, FormatError> {
     let body = text(bytes, "XYZ")?;
     let mut out = Vec::new();
@@ -36,7 +38,7 @@ pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]
             })?;
             *v = parse_coordinate(tok, k, section())?;
         }
-        out.extend(finite(p));
+        out.push(p);
     }
     Ok(out)
 }

@@ -3,6 +3,7 @@
 //! (`export`, `upgrade`: [`export`], [`upgrade`]).
 
 mod blobs;
+mod object;
 pub use blobs::{ExportArgs, UpgradeArgs, export, upgrade};
 use blobs::{load_template, trained_for, write_blobs};
 
@@ -363,6 +364,7 @@ fn sampling(a: SamplingArg) -> Sampling {
 
 fn load_data(args: &TrainArgs, seed: u64) -> anyhow::Result<(Dataset, Dataset)> {
     let (mut train, mut val) = if let Some(object) = &args.object {
+        object::check_object(object, args.points)?;
         let train = Dataset::object(object, args.points, sampling(args.sampling), seed)?;
         (train.clone(), train)
     } else {
