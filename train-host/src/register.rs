@@ -109,6 +109,18 @@ pub fn trained_passes(blob: &[u8]) -> Result<usize, pcrnet_core::Error> {
     }
 }
 
+/// Turns stored with the blob's own template (the device tries at most
+/// one more starting pose than this).
+pub fn template_turns(blob: &[u8]) -> Result<usize, pcrnet_core::Error> {
+    match Int8Model::from_bytes(blob) {
+        Ok(m) => Ok(m.template().turns().len()),
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            Ok(F32Model::from_bytes(blob)?.template().turns().len())
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// What is wrong with running a blob trained for `trained` passes as
 /// `kind` with `passes` passes (`None`: the method's default), or `None`
 /// if nothing: iterating a one-pass PCRNet (it was never trained to

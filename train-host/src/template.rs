@@ -175,9 +175,15 @@ fn normals(model: &[[f32; 3]], kept: &[[f32; 3]]) -> Vec<[i8; 3]> {
         .collect()
 }
 
+/// Turns a template recorded here carries ([`principal_turns`]): a half
+/// turn and two quarter turns about each principal axis. The device tries
+/// at most `1 + PRINCIPAL_TURNS` starting poses with it.
+pub const PRINCIPAL_TURNS: usize = 9;
+
 /// Half turns then quarter turns (+-90 degrees) about the principal axes
 /// of `model` (the template in the model frame, centroid at the origin),
-/// largest variance first: unit quaternions `[w, x, y, z]`.
+/// largest variance first: unit quaternions `[w, x, y, z]`
+/// ([`PRINCIPAL_TURNS`] of them).
 fn principal_turns(model: &[[f32; 3]]) -> Vec<[f32; 4]> {
     let n = model.len().max(1) as f64;
     let mut c = Matrix3::<f64>::zeros();
@@ -204,7 +210,7 @@ fn principal_turns(model: &[[f32; 3]]) -> Vec<[f32; 4]> {
         turns.push([h, h * a[0], h * a[1], h * a[2]]);
         turns.push([h, -h * a[0], -h * a[1], -h * a[2]]);
     }
-    turns.truncate(MAX_TURNS);
+    turns.truncate(PRINCIPAL_TURNS.min(MAX_TURNS));
     turns
 }
 
@@ -302,7 +308,7 @@ mod tests {
         assert!((r.frame.scale - 1.0 / 3.0).abs() < 1e-3, "{:?}", r.frame);
         let t = template::Template::new(r.cloud()).unwrap();
         assert_eq!(t.len(), 256);
-        assert_eq!(t.turns().len(), 9);
+        assert_eq!(t.turns().len(), PRINCIPAL_TURNS);
         // Stored points lie in the unit box of the model frame.
         for i in 0..t.len() {
             assert!(

@@ -391,6 +391,54 @@ fn user_errors_name_the_flag_or_file_once() {
             vec!["inspect".into(), "/nonexistent.pcrn".into()],
             "/nonexistent.pcrn",
         ),
+        // More starting poses than the template has turns (+ 1), with the
+        // blob's own template and with a template file bound in its place.
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--model".into(),
+                int8.clone(),
+                "--hypotheses".into(),
+                "99".into(),
+            ],
+            "--hypotheses 99: the template has 9 turns, so the device tries 1 to 10",
+        ),
+        (
+            vec![
+                "register".into(),
+                tpl.clone(),
+                src.clone(),
+                "--model".into(),
+                int8.clone(),
+                "--hypotheses".into(),
+                "11".into(),
+            ],
+            "--hypotheses 11: the template has 9 turns",
+        ),
+        // A negative value after a space reaches the flag's own check.
+        (
+            vec![
+                "register".into(),
+                src.clone(),
+                "--model".into(),
+                int8.clone(),
+                "--max-residual".into(),
+                "-1".into(),
+            ],
+            "--max-residual -1 must be finite and at least 0",
+        ),
+        // Refused once, before any pair is read.
+        (
+            vec![
+                "eval".into(),
+                "--pairs".into(),
+                "/nonexistent/pairs.json".into(),
+                "--method".into(),
+                "device".into(),
+            ],
+            "--method device needs a model",
+        ),
     ];
     for (args, expected) in cases {
         let out = pcrnet()

@@ -43,7 +43,7 @@ enum Command {
     /// (The trained model's demo is `cargo xtask demo`.)
     Untrained {
         /// Seed for weights, shape and transform.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
         seed: u64,
         /// Write the int8 and f32 blobs into this folder.
         #[arg(long)]
@@ -85,17 +85,17 @@ enum Command {
         #[arg(long, default_value = "ell")]
         kind: String,
         /// Number of points.
-        #[arg(long, default_value_t = 512)]
+        #[arg(long, default_value_t = 512, allow_negative_numbers = true)]
         points: usize,
         /// Seed of the sampling.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
         seed: u64,
         /// Output XYZ file of the shape.
         #[arg(long)]
         out: PathBuf,
         /// Seed of the source's transform; with it, SOURCE.f32 and SOURCE.xyz
         /// are written next to --out.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         source_seed: Option<u64>,
     },
     /// Register SOURCE onto TEMPLATE (files: .pcd .ply .off .xyz .txt) and
@@ -115,7 +115,8 @@ enum Command {
         /// Model and settings of the method.
         #[command(flatten)]
         options: MethodOptions,
-        /// Write the source moved onto the template here (XYZ text).
+        /// Write the source moved onto the template here, in the format the
+        /// extension names (.pcd and .ply binary, .xyz and .txt text, .off).
         #[arg(long)]
         aligned: Option<PathBuf>,
         /// Write the whole result as JSON to this file (`-`: standard output).
@@ -123,11 +124,11 @@ enum Command {
         json: Option<PathBuf>,
         /// Refuse cloud files that declare or hold more points than this
         /// (before allocating: a small hostile file can declare billions).
-        #[arg(long, default_value_t = pcrnet_train::io::DEFAULT_MAX_POINTS)]
+        #[arg(long, default_value_t = pcrnet_train::io::DEFAULT_MAX_POINTS, allow_negative_numbers = true)]
         max_cloud_points: usize,
         /// Keep at most this many points of each cloud (0: all): a large
         /// scan registers as well from a few thousand, much faster.
-        #[arg(long, default_value_t = pcrnet_train::reduce::DEFAULT_SOURCE_POINTS)]
+        #[arg(long, default_value_t = pcrnet_train::reduce::DEFAULT_SOURCE_POINTS, allow_negative_numbers = true)]
         reduce_to: usize,
         /// How to keep them: random (seeded; keeps the density), fps
         /// (farthest points: even coverage, slow on millions), voxel (the
@@ -135,7 +136,7 @@ enum Command {
         #[arg(long, value_enum, default_value_t = Reduction::Random)]
         reduce: Reduction,
         /// Cube side for --reduce voxel, in the clouds' units.
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         voxel: f32,
     },
 }
@@ -299,6 +300,7 @@ fn register(
     options.check()?;
     let method = options.method(kind);
     let blob = options.read_model()?;
+    options.check_hypotheses(kind, blob.as_deref(), template.is_some())?;
     if let Some(warning) = options.mode_warning(kind, blob.as_deref()) {
         eprintln!("warning: {warning}");
     }

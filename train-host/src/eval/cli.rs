@@ -20,7 +20,7 @@ pub struct PairsArgs {
     #[arg(long, conflicts_with = "generated")]
     pub data: Option<PathBuf>,
     /// Use this many generated shapes instead (no files needed).
-    #[arg(long, conflicts_with = "object")]
+    #[arg(long, conflicts_with = "object", allow_negative_numbers = true)]
     pub generated: Option<usize>,
     /// Poses of one object of your own instead (a cloud or an OFF mesh, as
     /// `train --object`); with --count, that many pairs.
@@ -34,13 +34,13 @@ pub struct PairsArgs {
     pub classes: Option<Vec<String>>,
     /// Points per cloud (default: 512, as the experiments and the shipped
     /// model; with --object 1,024, as `train --object`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub points: Option<usize>,
     /// Number of pairs (0: one per shape).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub count: usize,
     /// Seed of preprocessing, template order and pairs.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
     /// How sources are made from templates.
     #[command(flatten)]
@@ -84,58 +84,58 @@ pub struct MethodOptions {
     /// Network passes of device / ipcrnet (ipcrnet: 20; device: as the blob
     /// was trained, 1 for PCRNet), steps of pointnetlk (20) or iterations of
     /// icp (100).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub iterations: Option<usize>,
     /// Starting poses the device pipeline tries: 1 (the network's pose)
     /// up to 1 + the turns stored in the blob (default: `pcrnet-core`'s
     /// recommended 10, the network's pose and its half and quarter turns
     /// about the template's principal axes).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub hypotheses: Option<usize>,
     /// ICP iterations every hypothesis of the device pipeline gets before
     /// the two best go on.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub screen_iterations: Option<usize>,
     /// Most ICP iterations of the device pipeline in all (0: no refinement).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub icp_iterations: Option<usize>,
     /// What the device pipeline's ICP minimises.
     #[arg(long, value_enum)]
     pub metric: Option<super::methods::DeviceMetric>,
     /// Most source points the device pipeline scores and refines (every
     /// k-th point is used).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub max_points: Option<usize>,
     /// Device ICP leaves out pairs farther apart than this, as a share of
     /// the template's size.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub icp_distance: Option<f32>,
     /// Device ICP stops once an update moves the pose by less than this
     /// (`||dT - I||_F`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub icp_tolerance: Option<f32>,
     /// The device residual counts a point at most this far from the
     /// template, and the fitness counts points within it (a share of the
     /// template's size).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub inlier_distance: Option<f32>,
     /// The device pipeline calls a pose reliable when its relative plane
     /// residual is at most this (a share of the template's size).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub max_residual: Option<f32>,
     /// Template points the device pipeline stores when a template cloud is
     /// given in place of the blob's own (farthest-point subsampled, all of
     /// them when the cloud has fewer; 1 to 65535, default 512): its check
     /// and ICP run against these: more points refine finer, and a blob
     /// stores about 10 bytes of flash per point (point, normal, search grid).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub template_points: Option<usize>,
     /// Refine the network's pose with ICP.
     #[arg(long)]
     pub refine_icp: bool,
     /// i-PCRNet stop rule: stop once a pass moves the pose by less than
     /// this (`||dT - I||_F`; the paper: 1e-7).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub tolerance: Option<f32>,
 }
 
@@ -186,6 +186,36 @@ impl MethodOptions {
         crate::register::mode_mismatch(kind, trained, self.iterations)
     }
 
+    /// Refuses a `--hypotheses` the device pipeline cannot run in full:
+    /// more than 1 + the template's turns (the blob's own, or
+    /// [`crate::template::PRINCIPAL_TURNS`] for a template file bound in
+    /// its place, `bound`), which the pipeline would cut silently.
+    pub fn check_hypotheses(
+        &self,
+        kind: MethodKind,
+        blob: Option<&[u8]>,
+        bound: bool,
+    ) -> anyhow::Result<()> {
+        let (Some(asked), MethodKind::Device) = (self.hypotheses, kind) else {
+            return Ok(());
+        };
+        let turns = match blob {
+            _ if bound => crate::template::PRINCIPAL_TURNS,
+            Some(blob) => match crate::register::template_turns(blob) {
+                Ok(turns) => turns,
+                // The method reports what is wrong with the blob.
+                Err(_) => return Ok(()),
+            },
+            None => return Ok(()),
+        };
+        anyhow::ensure!(
+            asked <= turns + 1,
+            "--hypotheses {asked}: the template has {turns} turns, so the device tries 1 to {} starting poses (the network's pose, then it followed by each turn)",
+            turns + 1
+        );
+        Ok(())
+    }
+
     /// `kind` with these settings (the paper's where not given).
     pub fn method(&self, kind: MethodKind) -> Method {
         let mut m = Method::new(kind);
@@ -229,10 +259,10 @@ pub struct ExperimentArgs {
     #[arg(long, default_value = "results")]
     pub results: PathBuf,
     /// Pairs per set.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 200, allow_negative_numbers = true)]
     pub pairs: usize,
     /// Seed of the pair sets.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
 }
 
@@ -287,14 +317,21 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
 
 /// Runs `pcrnet eval`.
 pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
-    let set = PairSet::load(&args.pairs)?;
-    let pairs = set.materialise(&set.spec.load_shapes()?)?;
+    // What is wrong with the flags is said once, before any pair is read.
     let method = args.options.method(args.method);
     args.options.check()?;
     let blob = args.options.read_model()?;
+    if method.needs_model() && blob.is_none() {
+        return Err(super::methods::MethodError::NoModel(args.method).into());
+    }
+    // Every pair's template is bound in place of the blob's own.
+    args.options
+        .check_hypotheses(args.method, blob.as_deref(), true)?;
     if let Some(warning) = args.options.mode_warning(args.method, blob.as_deref()) {
         eprintln!("warning: {warning}");
     }
+    let set = PairSet::load(&args.pairs)?;
+    let pairs = set.materialise(&set.spec.load_shapes()?)?;
     let name = args
         .options
         .model

@@ -21,11 +21,12 @@ pub struct ExportArgs {
     pub template: PathBuf,
     /// Points the template is reduced to (default: as in training,
     /// recorded in the checkpoint).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub points: Option<usize>,
     /// Template points stored in the blob for checking and refining poses
-    /// on the device (6 bytes of flash each).
-    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
+    /// on the device (about 10 bytes of flash each: 6 for the point, 3 for
+    /// its normal, about 1 for the search grid).
+    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS, allow_negative_numbers = true)]
     pub template_points: usize,
     /// Output folder.
     #[arg(long)]
@@ -57,21 +58,22 @@ pub struct UpgradeArgs {
     #[arg(long)]
     pub template: PathBuf,
     /// Points the template is reduced to, as in training.
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, allow_negative_numbers = true)]
     pub points: usize,
-    /// Template points stored in the blob (6 bytes of flash each).
-    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
+    /// Template points stored in the blob (about 10 bytes of flash each: 6
+    /// for the point, 3 for its normal, about 1 for the search grid).
+    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS, allow_negative_numbers = true)]
     pub template_points: usize,
     /// Gaussian noise on the calibration sources: a fixed SIGMA or a range
     /// LO,HI, as `train --noise` (0 for clean sources).
     #[arg(long, default_value = "0,0.04")]
     pub noise: String,
     /// Seed of the template reduction and the calibration clouds.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
     /// Network passes the model was trained for (format 2 did not record
     /// it): 1 for PCRNet, the training's `--iterations` for i-PCRNet.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..), allow_negative_numbers = true)]
     pub passes: u16,
     /// Output folder (model-f32.pcrn, model-int8.pcrn).
     #[arg(long)]

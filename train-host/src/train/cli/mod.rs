@@ -68,7 +68,7 @@ pub struct TrainArgs {
     pub data: Vec<PathBuf>,
     /// Train on this many generated shapes (validation: a quarter as many),
     /// alone or added to the --data roots.
-    #[arg(long, conflicts_with = "object")]
+    #[arg(long, conflicts_with = "object", allow_negative_numbers = true)]
     pub generated: Option<usize>,
     /// Train for one object of your own: a point cloud file, or an OFF mesh
     /// (sampled by area), in any unit. It is also the template (unless
@@ -80,7 +80,7 @@ pub struct TrainArgs {
     #[arg(long, value_delimiter = ',')]
     pub classes: Option<Vec<String>>,
     /// Train (and validate) on the training shape of this index only.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub single_model: Option<usize>,
     /// `embedded`, `paper` (PCRNet head), `ipcrnet` (paper encoder,
     /// i-PCRNet head) or custom widths `E1,E2,...:H1,H2,...`.
@@ -90,37 +90,37 @@ pub struct TrainArgs {
     #[arg(long, value_enum, default_value_t = ModelArg::Pcrnet)]
     pub model: ModelArg,
     /// i-PCRNet passes.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, allow_negative_numbers = true)]
     pub iterations: usize,
     /// Points per cloud.
-    #[arg(long, default_value_t = DEFAULT_POINTS)]
+    #[arg(long, default_value_t = DEFAULT_POINTS, allow_negative_numbers = true)]
     pub points: usize,
     /// How clouds are reduced to --points.
     #[arg(long, value_enum, default_value_t = SamplingArg::Fps)]
     pub sampling: SamplingArg,
     /// Pairs per step.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = 32, allow_negative_numbers = true)]
     pub batch: usize,
     /// Epochs.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, allow_negative_numbers = true)]
     pub epochs: usize,
     /// Steps per epoch (default: training shapes / batch; 64 with --object).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub steps_per_epoch: Option<usize>,
     /// Base learning rate (Adam).
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true)]
     pub lr: f32,
     /// Learning-rate schedule.
     #[arg(long, value_enum, default_value_t = ScheduleArg::Cosine)]
     pub schedule: ScheduleArg,
     /// Epochs between halvings with --schedule step.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, allow_negative_numbers = true)]
     pub step_epochs: usize,
     /// Training loss.
     #[arg(long, value_enum, default_value_t = LossArg::Chamfer)]
     pub loss: LossArg,
     /// Seed of weights and pairs.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
     /// How sources are made from templates.
     #[command(flatten)]
@@ -136,13 +136,13 @@ pub struct TrainArgs {
     #[arg(long)]
     pub no_centre: bool,
     /// Clip the gradient's global norm.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub clip: Option<f32>,
     /// Validation pairs (0: one per validation shape; 64 with --object).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub val_pairs: usize,
     /// Also checkpoint every this many steps (0: at epoch ends only).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub checkpoint_every: usize,
     /// Output folder: checkpoint, log, config, blobs.
     #[arg(long)]
@@ -156,7 +156,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub force: bool,
     /// Stop after this many steps and report step times (timing runs; no export).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub max_steps: Option<usize>,
     /// No effect: training always ends by exporting both blobs (f32 and
     /// int8), as `pcrnet export` does. Accepted so that commands recorded
@@ -168,8 +168,9 @@ pub struct TrainArgs {
     #[arg(long)]
     pub template: Option<PathBuf>,
     /// Template points stored in the blob for checking and refining poses
-    /// on the device (6 bytes of flash each).
-    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS)]
+    /// on the device (about 10 bytes of flash each: 6 for the point, 3 for
+    /// its normal, about 1 for the search grid).
+    #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS, allow_negative_numbers = true)]
     pub template_points: usize,
     /// No progress bars.
     #[arg(long)]
@@ -182,10 +183,10 @@ pub struct TrainArgs {
 #[derive(Debug, Clone, Args)]
 pub struct PairArgs {
     /// Largest Euler angle per axis (degrees).
-    #[arg(long, default_value_t = 45.0)]
+    #[arg(long, default_value_t = 45.0, allow_negative_numbers = true)]
     pub max_deg: f32,
     /// Largest translation per axis.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub max_t: f32,
     /// Gaussian noise on the source: a fixed SIGMA or a range LO,HI each
     /// pair draws its sigma from (alone: 0,0.04).
@@ -203,7 +204,7 @@ pub struct PairArgs {
     pub single_view: bool,
     /// Share of pairs with no motion at all (source = template up to crops
     /// and noise), so a network learns that f(T, T) is the identity.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub identity_share: f32,
 }
 
