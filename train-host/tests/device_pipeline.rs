@@ -215,3 +215,34 @@ fn a_cloud_larger_than_calibrated_is_flagged() {
     assert!(big.saturated > 0, "{big:?}");
     assert!(!big.reliable);
 }
+
+/// A cloud registered onto itself (bound as the template) comes back as
+/// the identity with a residual near zero, and is reliable. Four points,
+/// (0,0,0), (1,0,0), (0,1,0), (0,0,1), give point-to-plane ICP four
+/// equations for six unknowns, so it keeps the network's pose and flags
+/// it; point-to-point ICP matches the four exactly.
+#[test]
+fn a_cloud_onto_itself_is_the_identity() {
+    let cloud = sample(Shape::Ell, 512, 21);
+    let r = register(&cloud, &cloud).unwrap();
+    let identity = [1.0, 0.0, 0.0, 0.0];
+    assert!(r.reliable, "{r:?}");
+    assert!(angle_deg(&r.pose.rotation, &identity) < 0.1, "{r:?}");
+    assert!(r.relative_residual < 1e-4, "{r:?}");
+    let four = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+    ];
+    let plane = register(&four, &four).unwrap();
+    assert!(!plane.reliable, "{plane:?}");
+    let point = Options {
+        metric: pcrnet_core::refine::Metric::PointToPoint,
+        ..Options::default()
+    };
+    let (r, _) = pipeline(&shipped(), Some(Bound::new(&four)), &four, &point).unwrap();
+    assert!(r.reliable, "{r:?}");
+    assert!(angle_deg(&r.pose.rotation, &identity) < 0.1, "{r:?}");
+    assert!(r.relative_residual < 1e-4, "{r:?}");
+}
