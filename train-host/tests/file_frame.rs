@@ -154,12 +154,18 @@ fn writers_round_trip_exactly() {
         [123.456, 7.0, -8.25],
     ];
     let f32s: Vec<[f32; 3]> = vec![[0.1, -2.5e-8, 3.4e38], [-0.0, 1e-40, 7.0]];
-    for format in [Format::Pcd, Format::Ply, Format::Xyz, Format::Off] {
+    for format in [
+        Format::Pcd,
+        Format::Ply,
+        Format::Xyz,
+        Format::Csv,
+        Format::Off,
+    ] {
         let read = |bytes: &[u8]| -> Vec<[f64; 3]> {
             match format {
                 Format::Pcd => pcd::parse_f64_limited(bytes, 10).unwrap(),
                 Format::Ply => ply::parse_f64_limited(bytes, 10).unwrap(),
-                Format::Xyz => xyz::parse_f64_limited(bytes, 10).unwrap(),
+                Format::Xyz | Format::Csv => xyz::parse_f64_limited(bytes, 10).unwrap(),
                 Format::Off => off::parse_limited(bytes, 10).unwrap().vertices,
             }
         };

@@ -185,6 +185,24 @@ fn pcd_ascii_organised_nan_rows_dropped() {
     assert_eq!(pcd::parse(f.as_bytes()).unwrap(), &PTS[..2]);
 }
 
+/// `.csv` files read as XYZ text: a first line of column names is skipped,
+/// a line that mixes names and numbers is still an error, and so are names
+/// after the first point.
+#[test]
+fn csv_with_a_header() {
+    assert_eq!(Format::from_path(Path::new("scan.CSV")), Some(Format::Csv));
+    let csv = "x,y,z,intensity\n1,2,3,7\n-0.5,0.25,8,7\n";
+    assert_eq!(Format::Csv.parse(csv.as_bytes()).unwrap(), &PTS[..2]);
+    assert_eq!(
+        Format::Xyz.parse(b"# scan\nX Y Z\n1 2 3\n").unwrap(),
+        &PTS[..1]
+    );
+    for bad in ["1.0,abc,3\n1,2,3\n", "1,2,3\nx,y,z\n"] {
+        let e = Format::Csv.parse(bad.as_bytes()).unwrap_err();
+        assert!(e.to_string().contains("is not a number"), "{bad:?}: {e}");
+    }
+}
+
 /// Every format drops a point with a non-finite coordinate and counts it
 /// (`LocalCloud::left_out`), so a caller can say so.
 #[test]
@@ -966,7 +984,9 @@ fn xyz_errors() {
         xyz::parse(b"1 2 3\n\n4 5 six\n"),
         &["XYZ line 3", "z value", "six"],
     );
-    assert_err_mentions(xyz::parse(b"x,y,z\n1,2,3\n"), &["XYZ line 1", "x value"]);
+    // A first line of names alone is a header (`csv_with_a_header`); one
+    // that mixes names and numbers is not.
+    assert_err_mentions(xyz::parse(b"x,2,z\n1,2,3\n"), &["XYZ line 1", "x value"]);
     assert_err_mentions(xyz::parse(b"1 2 3\n\xff\xfe\n"), &["not text"]);
 }
 
@@ -1071,6 +1091,7 @@ fn mutated_files_never_panic() {
         (ply_bin, Format::Ply),
         (UNIT_SQUARE.as_bytes().to_vec(), Format::Off),
         (b"1 2 3\n4,5,6\n".to_vec(), Format::Xyz),
+        (b"x,y,z\n1,2,3\n4,5,6\n".to_vec(), Format::Csv),
     ];
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let interesting = [b'0', b'9', b'\n', b' ', 0, 0xff, b'-', b'#', 0x80];

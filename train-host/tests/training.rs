@@ -416,6 +416,22 @@ fn a_folder_of_data_roots_is_refused() {
         "{e}"
     );
     assert!(e.to_string().contains("pass one root"), "{e}");
+    // A class that is not there is named, with the ones that are.
+    let classes = ["chiar".to_string()];
+    let e = Dataset::load_modelnet(
+        &root.join("mn"),
+        Split::Train,
+        Some(&classes[..]),
+        32,
+        Sampling::Random,
+        1,
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("no cloud file of class chiar; its classes are a"),
+        "{e}"
+    );
     // Each root alone loads.
     for (dir, label) in [("mn", "a"), ("air", "air")] {
         let d =

@@ -98,7 +98,7 @@ enum Command {
         #[arg(long, allow_negative_numbers = true)]
         source_seed: Option<u64>,
     },
-    /// Register SOURCE onto TEMPLATE (files: .pcd .ply .off .xyz .txt) and
+    /// Register SOURCE onto TEMPLATE (files: .pcd .ply .off .xyz .txt .csv) and
     /// print the pose as quaternion + translation and as a 4x4 matrix, with
     /// the residual and whether to trust it. Without TEMPLATE, the model's
     /// own template (stored in the blob) is used, exactly as on a device.
@@ -500,7 +500,9 @@ fn warn_if_coarse(path: &Path, cloud: &[[f32; 3]]) {
     }
     let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0f32, f32::max);
     let spacing = far * f32::EPSILON;
-    if spacing > 1e-4 * extent {
+    // A cloud with no extent is degenerate, which the result reports: the
+    // precision of its coordinates is not what is wrong with it.
+    if extent > 0.0 && spacing > 1e-4 * extent {
         eprintln!(
             "warning: {}: coordinates reach {far:e} while the cloud spans {extent:e}; f32 keeps only {spacing:e} there. Give the template file too (both clouds are then read about a local origin), or express the cloud in the model's frame",
             path.display()

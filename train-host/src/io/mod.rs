@@ -1,4 +1,5 @@
-//! Point cloud file readers: PCD, PLY, OFF (sampled to points) and XYZ text.
+//! Point cloud file readers: PCD, PLY, OFF (sampled to points), XYZ and
+//! CSV text.
 //!
 //! [`read_cloud`] picks the format from the file extension and returns the
 //! points as `[x, y, z]` in `f32`. Each format also has a `parse` function
@@ -206,11 +207,14 @@ pub enum Format {
     Off,
     /// Whitespace- or comma-separated text, one point per line.
     Xyz,
+    /// Comma-separated text (`.csv`): read as [`Format::Xyz`] (a first
+    /// line of column names is skipped), written with an `x,y,z` header.
+    Csv,
 }
 
 impl Format {
     /// Format named by the extension of `path` (case-insensitive):
-    /// `.pcd`, `.ply`, `.off`, `.xyz` or `.txt`.
+    /// `.pcd`, `.ply`, `.off`, `.xyz`, `.txt` or `.csv`.
     pub fn from_path(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         match ext.as_str() {
@@ -218,6 +222,7 @@ impl Format {
             "ply" => Some(Format::Ply),
             "off" => Some(Format::Off),
             "xyz" | "txt" => Some(Format::Xyz),
+            "csv" => Some(Format::Csv),
             _ => None,
         }
     }
@@ -256,7 +261,7 @@ impl Format {
         let points = match self {
             Format::Pcd => pcd::parse_f64_limited(bytes, max_points)?,
             Format::Ply => ply::parse_f64_limited(bytes, max_points)?,
-            Format::Xyz => xyz::parse_f64_limited(bytes, max_points)?,
+            Format::Xyz | Format::Csv => xyz::parse_f64_limited(bytes, max_points)?,
             Format::Off => {
                 let mesh = off::parse_limited(bytes, max_points)?;
                 let origin = origin.unwrap_or_else(|| median(&mesh.vertices));
@@ -329,6 +334,7 @@ impl fmt::Display for Format {
             Format::Ply => "PLY",
             Format::Off => "OFF",
             Format::Xyz => "XYZ",
+            Format::Csv => "CSV",
         })
     }
 }

@@ -12,6 +12,7 @@
 //! | `.pcd` | PCD 0.7, fields x y z, `DATA binary` (little-endian) |
 //! | `.ply` | PLY 1.0 `binary_little_endian`, `element vertex` x y z |
 //! | `.xyz`, `.txt` | one `x y z` line per point |
+//! | `.csv` | an `x,y,z` header, then one `x,y,z` line per point |
 //! | `.off` | `OFF` with the points as vertices and no faces |
 
 use std::fmt::Debug;
@@ -104,8 +105,9 @@ pub fn encode<C: Coordinate>(format: Format, points: &[[C; 3]]) -> Vec<u8> {
             put_binary(&mut out, points);
             out
         }
-        Format::Xyz => text_lines(String::new(), points).into_bytes(),
-        Format::Off => text_lines(format!("OFF\n{n} 0 0\n"), points).into_bytes(),
+        Format::Xyz => text_lines(String::new(), points, ' ').into_bytes(),
+        Format::Csv => text_lines("x,y,z\n".into(), points, ',').into_bytes(),
+        Format::Off => text_lines(format!("OFF\n{n} 0 0\n"), points, ' ').into_bytes(),
     }
 }
 
@@ -118,13 +120,14 @@ fn put_binary<C: Coordinate>(out: &mut Vec<u8>, points: &[[C; 3]]) {
     }
 }
 
-/// `head` then one `x y z` line per point, each value's shortest decimal
-/// that reads back to the same value (`{:?}`).
-fn text_lines<C: Coordinate>(mut head: String, points: &[[C; 3]]) -> String {
+/// `head` then one `x y z` line per point (the values apart by `sep`),
+/// each value's shortest decimal that reads back to the same value
+/// (`{:?}`).
+fn text_lines<C: Coordinate>(mut head: String, points: &[[C; 3]], sep: char) -> String {
     use std::fmt::Write;
     for [x, y, z] in points {
         // Writing to a String cannot fail.
-        let _ = writeln!(head, "{x:?} {y:?} {z:?}");
+        let _ = writeln!(head, "{x:?}{sep}{y:?}{sep}{z:?}");
     }
     head
 }

@@ -131,6 +131,9 @@ impl Dataset {
         } else {
             list_dir(root)?
         };
+        // Every class folder with the split, for the message when nothing
+        // matches.
+        let mut found = Vec::new();
         for class_dir in class_dirs {
             if !class_dir.is_dir() {
                 continue;
@@ -139,6 +142,9 @@ impl Dataset {
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
+            if class_dir.join(split.dir()).is_dir() {
+                found.push(name.clone());
+            }
             if classes.is_some_and(|c| !c.iter().any(|x| x == &name)) {
                 continue;
             }
@@ -159,11 +165,18 @@ impl Dataset {
             }
         }
         if files.is_empty() {
+            found.sort();
+            let (asked, found) = (
+                classes.map_or("any class".into(), |c| format!("class {}", c.join(", "))),
+                match found.as_slice() {
+                    [] => "it has no class folder with that split".to_string(),
+                    names => format!("its classes are {}", names.join(", ")),
+                },
+            );
             return Err(DataError::Empty(format!(
-                "{} ({} split, classes {:?})",
+                "{} ({} split): no cloud file of {asked}; {found}",
                 root.display(),
                 split.dir(),
-                classes
             )));
         }
         let loaded: Vec<Result<Option<Labelled>, DataError>> = files
