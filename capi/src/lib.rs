@@ -388,7 +388,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -2 => c"the point array is not 4-byte aligned",
         -3 => c"the model handle is not loaded: call pcrnet_model_load and check its status",
         -10 => c"not a model blob: magic bytes PCRN missing",
-        -11 => c"unsupported model format version: re-export the model with `pcrnet export` (or `pcrnet upgrade` a version-2 f32 blob)",
+        -11 => c"unsupported model format version: re-export the model with `pcrnet export` (or `pcrnet upgrade` a version-2 f32 blob); a blob newer than this library needs a later library",
         -12 => c"the blob holds another kind of model: the C API loads int8 blobs (`pcrnet export` writes one)",
         -13 => c"model blob truncated: flash the whole file",
         -14 => c"unexpected bytes after the model blob's CRC: pass the blob's exact length",

@@ -106,11 +106,18 @@ impl fmt::Display for Error {
         match *self {
             Error::BadMagic => write!(f, "not a model blob: magic bytes `PCRN` missing"),
             Error::UnsupportedVersion { found } => {
-                write!(
-                    f,
-                    "unsupported model format version {found} (this build reads {}); re-export the model with `pcrnet export`, or upgrade a version-2 f32 blob with `pcrnet upgrade`",
-                    crate::format::FORMAT_VERSION
-                )
+                let reads = crate::format::FORMAT_VERSION;
+                if found > reads {
+                    write!(
+                        f,
+                        "model format version {found} is newer than this build reads ({reads}): use the pcrnet-core (or pcrnet) that wrote it, or a later one"
+                    )
+                } else {
+                    write!(
+                        f,
+                        "unsupported model format version {found} (this build reads {reads}); re-export the model with `pcrnet export`, or upgrade a version-2 f32 blob with `pcrnet upgrade`"
+                    )
+                }
             }
             Error::WrongKind { expected, found } => {
                 let wanted = match expected {
@@ -135,7 +142,7 @@ impl fmt::Display for Error {
             }
             Error::BadCrc { stored, computed } => write!(
                 f,
-                "model blob CRC mismatch: stored {stored:#010x}, computed {computed:#010x}"
+                "model blob CRC mismatch: stored {stored:#010x}, computed {computed:#010x}; the blob was damaged or changed after export: copy or flash it again, or re-export it"
             ),
             Error::Malformed => write!(f, "model payload does not decode"),
             Error::InconsistentDimensions { what } => {

@@ -54,6 +54,18 @@ fn header_errors_are_specific() {
             found: FORMAT_VERSION + 1
         })
     );
+    // A newer blob needs a newer library; an older one, re-exporting.
+    let newer = Error::UnsupportedVersion {
+        found: FORMAT_VERSION + 1,
+    };
+    assert!(
+        newer.to_string().contains("newer than this build"),
+        "{newer}"
+    );
+    let older = Error::UnsupportedVersion {
+        found: FORMAT_VERSION - 1,
+    };
+    assert!(older.to_string().contains("re-export"), "{older}");
 
     assert_eq!(
         F32Model::from_bytes(&good).err(),
