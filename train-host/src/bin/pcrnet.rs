@@ -340,7 +340,7 @@ fn register(
     } else {
         say(format!("translation: {:?}", pose.translation));
         say(format!(
-            "local origin (the template's median; both clouds were moved by it before rounding to f32): {origin:?}; translation about it: {:?}",
+            "local origin (the median of the template file's points, or of an OFF mesh's vertices; both clouds were moved by it before rounding to f32): {origin:?}; translation about it: {:?}",
             pose.local_translation
         ));
     }
