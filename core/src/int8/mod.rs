@@ -166,13 +166,27 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
     ) -> Result<Registration> {
         let tile = self.tile_for(scratch.len())?;
+        self.register_ready(source, options, tile, scratch, Ready::default())
+    }
+
+    /// [`Self::register`] with `tile` points per pass on a scratch where
+    /// [`Self::prepare`] left what `ready` says.
+    #[inline(always)]
+    fn register_ready(
+        &self,
+        source: &[[f32; 3]],
+        options: &Options,
+        tile: usize,
+        scratch: &mut [i8],
+        ready: Ready,
+    ) -> Result<Registration> {
         registration::run(
             &self.p.frame,
             self.centring(),
             &self.template,
             source,
             options,
-            |map| self.pass(source, map, tile, scratch, Ready::default()),
+            |map| self.pass(source, map, tile, scratch, ready),
         )
     }
 
@@ -217,13 +231,28 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
     ) -> Result<(Pose, usize)> {
         let tile = self.tile_for(scratch.len())?;
+        self.network_pose_ready(source, passes, tolerance, tile, scratch, Ready::default())
+    }
+
+    /// [`Self::network_pose`] with `tile` points per pass on a scratch
+    /// where [`Self::prepare`] left what `ready` says.
+    #[inline(always)]
+    fn network_pose_ready(
+        &self,
+        source: &[[f32; 3]],
+        passes: usize,
+        tolerance: f32,
+        tile: usize,
+        scratch: &mut [i8],
+        ready: Ready,
+    ) -> Result<(Pose, usize)> {
         registration::network_pose(
             &self.p.frame,
             self.centring(),
             source,
             passes,
             tolerance,
-            |map| Ok(self.pass(source, map, tile, scratch, Ready::default())?.0),
+            |map| Ok(self.pass(source, map, tile, scratch, ready)?.0),
         )
     }
 

@@ -4,7 +4,7 @@
 use super::{Int8Inference, Int8Model, Ready};
 use crate::error::Result;
 use crate::pose::Pose;
-use crate::registration::{self, Options, Registration};
+use crate::registration::{Options, Registration};
 
 /// An [`Int8Model`] with a scratch it has made ready
 /// ([`Int8Model::prepare`]): calls on it give the model's own results, bit
@@ -85,20 +85,8 @@ impl<'a> Prepared<'_, 'a, '_> {
 
     /// [`Int8Model::register`] on the prepared scratch.
     pub fn register(&mut self, source: &[[f32; 3]], options: &Options) -> Result<Registration> {
-        let Prepared {
-            model,
-            scratch,
-            tile,
-            ready,
-        } = self;
-        registration::run(
-            &model.p.frame,
-            model.centring(),
-            &model.template,
-            source,
-            options,
-            |map| model.pass(source, map, *tile, scratch, *ready),
-        )
+        self.model
+            .register_ready(source, options, self.tile, self.scratch, self.ready)
     }
 
     /// [`Int8Model::network_pose`] on the prepared scratch.
@@ -108,20 +96,9 @@ impl<'a> Prepared<'_, 'a, '_> {
         passes: usize,
         tolerance: f32,
     ) -> Result<(Pose, usize)> {
-        let Prepared {
-            model,
-            scratch,
-            tile,
-            ready,
-        } = self;
-        registration::network_pose(
-            &model.p.frame,
-            model.centring(),
-            source,
-            passes,
-            tolerance,
-            |map| Ok(model.pass(source, map, *tile, scratch, *ready)?.0),
-        )
+        let (tile, ready) = (self.tile, self.ready);
+        self.model
+            .network_pose_ready(source, passes, tolerance, tile, self.scratch, ready)
     }
 
     /// [`Int8Model::infer`] on the prepared scratch (the feature a view
