@@ -175,7 +175,7 @@ fn normals(model: &[[f32; 3]], kept: &[[f32; 3]]) -> Vec<[i8; 3]> {
         .collect()
 }
 
-/// Turns a template recorded here carries ([`principal_turns`]): a half
+/// Turns a template recorded here carries (`principal_turns`): a half
 /// turn and two quarter turns about each principal axis. The device tries
 /// at most `1 + PRINCIPAL_TURNS` starting poses with it.
 pub const PRINCIPAL_TURNS: usize = 9;
