@@ -4,7 +4,7 @@
 //! `Int8Model::register` with the shipped embedded default and its demo
 //! source (512 points, `models/`): the network only (the score's
 //! nearest-point searches included), one hypothesis with ICP, and the
-//! default ten. The same calls the QEMU harness counts in instructions on
+//! default ten; and the network only on a prepared scratch. The same calls the QEMU harness counts in instructions on
 //! the Cortex-M4F (README, "The whole device pipeline"); here their host
 //! time, most of it the template's nearest-point search.
 
@@ -45,6 +45,17 @@ fn registration(c: &mut Criterion) {
             })
         });
     }
+    // The network alone on a scratch prepared once (`Int8Model::prepare`),
+    // beside the same call on the model itself above.
+    let mut prepared = model.prepare(&mut scratch).expect("the host scratch fits");
+    let network_only = Options::network_only();
+    group.bench_function("network_only_prepared", |b| {
+        b.iter(|| {
+            prepared
+                .register(black_box(&source), &network_only)
+                .map(|r| r.pose)
+        })
+    });
     group.finish();
 }
 
