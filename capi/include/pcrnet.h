@@ -26,6 +26,12 @@
 #define PCRNET_MODEL_WORDS 320
 
 /*
+ Storage words of a `PcrnetPrepared` (8 bytes each; 64 bytes on every
+ target, checked at compile time).
+ */
+#define PCRNET_PREPARED_WORDS 8
+
+/*
  `PcrnetOptions::metric`: point-to-point ICP.
  */
 #define PCRNET_METRIC_POINT_TO_POINT 0
@@ -74,6 +80,10 @@ enum PcrnetStatus
    The model handle was not filled by a successful `pcrnet_model_load`.
    */
   PCRNET_ERROR_NOT_LOADED = -3,
+  /*
+   The prepared handle was not filled by a successful `pcrnet_prepare`.
+   */
+  PCRNET_ERROR_NOT_PREPARED = -4,
   /*
    The blob does not start with the magic bytes `PCRN`.
    */
@@ -287,6 +297,15 @@ typedef struct {
   bool reliable;
 } PcrnetRegistration;
 
+/*
+ A model handle and a scratch made ready by `pcrnet_prepare`: storage
+ the caller owns. Its contents are private; its size and 8-byte
+ alignment are fixed on every target.
+ */
+typedef struct {
+  uint64_t storage[PCRNET_PREPARED_WORDS];
+} PcrnetPrepared;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -401,6 +420,54 @@ PcrnetStatus pcrnet_network_pose(const PcrnetModel *model,
  static memory; an unknown value gives "unknown status".
  */
 const char *pcrnet_status_message(int32_t status);
+
+/*
+ Makes `scratch` ready for many calls of `model` and fills `prepared`.
+ `pcrnet_model_host_scratch_len` bytes let a host prepare everything;
+ at least `pcrnet_model_scratch_len(model, 1)` are needed. Until the
+ last call on `prepared`, the model handle, its blob and the scratch
+ must stay valid and unchanged, and the scratch must be used by no other
+ call; after `pcrnet_model_load` on the same model handle, prepare
+ again. On failure `prepared` is marked not prepared.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`; `scratch` to
+ `scratch_len` writable bytes (or null) overlapping nothing else;
+ `prepared` to writable storage of a `PcrnetPrepared` (or be null).
+ */
+PcrnetStatus pcrnet_prepare(const PcrnetModel *model,
+                            int8_t *scratch,
+                            size_t scratch_len,
+                            PcrnetPrepared *prepared);
+
+/*
+ `pcrnet_register` on a prepared handle (its model and scratch).
+
+ # Safety
+ `prepared` must be null or point to a `PcrnetPrepared` whose model
+ handle and scratch are still valid (see `pcrnet_prepare`); `points`,
+ `options` and `out` as `pcrnet_register` says.
+ */
+PcrnetStatus pcrnet_prepared_register(PcrnetPrepared *prepared,
+                                      const float *points,
+                                      size_t n_points,
+                                      const PcrnetOptions *options,
+                                      PcrnetRegistration *out);
+
+/*
+ `pcrnet_network_pose` on a prepared handle (its model and scratch).
+
+ # Safety
+ As `pcrnet_prepared_register` for `prepared` and `points`; `pose` and
+ `passes_run` as `pcrnet_network_pose` says.
+ */
+PcrnetStatus pcrnet_prepared_network_pose(PcrnetPrepared *prepared,
+                                          const float *points,
+                                          size_t n_points,
+                                          uint32_t passes,
+                                          float tolerance,
+                                          float *pose,
+                                          uint32_t *passes_run);
 
 #ifdef __cplusplus
 }  // extern "C"

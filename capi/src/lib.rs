@@ -49,7 +49,12 @@
 use core::ffi::c_char;
 use core::mem::{align_of, size_of};
 
+mod prepared;
 mod types;
+pub use prepared::{
+    PCRNET_PREPARED_WORDS, PcrnetPrepared, pcrnet_prepare, pcrnet_prepared_network_pose,
+    pcrnet_prepared_register,
+};
 pub use types::{
     PCRNET_DEGENERATE_LINE, PCRNET_DEGENERATE_NONE, PCRNET_DEGENERATE_POINT,
     PCRNET_METRIC_POINT_TO_PLANE, PCRNET_METRIC_POINT_TO_POINT, PcrnetOptions, PcrnetRegistration,
@@ -57,7 +62,7 @@ pub use types::{
 };
 
 use PcrnetStatus::*;
-use pcrnet_core::{Int8Model, MAX_TILE, Options};
+use pcrnet_core::{Int8Model, MAX_TILE, Options, Pose, Registration};
 
 /// Most points per encoder pass (`pcrnet_core::MAX_TILE`); a scratch
 /// sized for it is the fastest.
@@ -273,18 +278,41 @@ pub unsafe extern "C" fn pcrnet_register(
     scratch_len: usize,
     out: *mut PcrnetRegistration,
 ) -> PcrnetStatus {
+    let m = match self::model(model) {
+        Ok(m) => m,
+        Err(s) => return s,
+    };
+    // SAFETY: the caller's contract for every pointer.
+    unsafe {
+        register_into(points, n_points, options, out, |source, options| {
+            let scratch = scratch_mut(scratch, scratch_len)?;
+            Ok(m.register(source, options, scratch)?)
+        })
+    }
+}
+
+/// What `pcrnet_register` and `pcrnet_prepared_register` share around
+/// `call` (the registration itself): `options` and `out` checked, the
+/// options and points converted, `out` written on success.
+///
+/// # Safety
+/// `points`, `options` and `out` as `pcrnet_register` says.
+unsafe fn register_into(
+    points: *const f32,
+    n_points: usize,
+    options: *const PcrnetOptions,
+    out: *mut PcrnetRegistration,
+    call: impl FnOnce(&[[f32; 3]], &Options) -> Result<Registration, PcrnetStatus>,
+) -> PcrnetStatus {
     let run = || -> Result<PcrnetRegistration, PcrnetStatus> {
-        let m = self::model(model)?;
         if options.is_null() || out.is_null() {
             return Err(PCRNET_ERROR_NULL_POINTER);
         }
         // SAFETY: non-null and the caller's contract.
         let options = Options::try_from(unsafe { &*options })?;
-        // SAFETY: the caller's contract for `points` and `scratch`.
-        let (source, scratch) =
-            unsafe { (cloud(points, n_points)?, scratch_mut(scratch, scratch_len)?) };
-        let r = m.register(source, &options, scratch)?;
-        Ok((&r).into())
+        // SAFETY: the caller's contract for `points`.
+        let source = unsafe { cloud(points, n_points)? };
+        Ok((&call(source, &options)?).into())
     };
     match run() {
         Ok(r) => {
@@ -317,18 +345,43 @@ pub unsafe extern "C" fn pcrnet_network_pose(
     pose: *mut f32,
     passes_run: *mut u32,
 ) -> PcrnetStatus {
+    let m = match self::model(model) {
+        Ok(m) => m,
+        Err(s) => return s,
+    };
+    // SAFETY: the caller's contract for every pointer.
+    unsafe {
+        network_pose_into(points, n_points, pose, passes_run, |source| {
+            let scratch = scratch_mut(scratch, scratch_len)?;
+            Ok(m.network_pose(source, passes as usize, tolerance, scratch)?)
+        })
+    }
+}
+
+/// What `pcrnet_network_pose` and `pcrnet_prepared_network_pose` share
+/// around `call` (the passes themselves): `pose` and `passes_run`
+/// checked, the points converted, the pose and the passes run written on
+/// success.
+///
+/// # Safety
+/// `points`, `pose` and `passes_run` as `pcrnet_network_pose` says.
+unsafe fn network_pose_into(
+    points: *const f32,
+    n_points: usize,
+    pose: *mut f32,
+    passes_run: *mut u32,
+    call: impl FnOnce(&[[f32; 3]]) -> Result<(Pose, usize), PcrnetStatus>,
+) -> PcrnetStatus {
     let run = || -> Result<([f32; 7], u32), PcrnetStatus> {
-        let m = self::model(model)?;
         if pose.is_null() || passes_run.is_null() {
             return Err(PCRNET_ERROR_NULL_POINTER);
         }
         if !(pose as usize).is_multiple_of(align_of::<f32>()) {
             return Err(PCRNET_ERROR_MISALIGNED);
         }
-        // SAFETY: the caller's contract for `points` and `scratch`.
-        let (source, scratch) =
-            unsafe { (cloud(points, n_points)?, scratch_mut(scratch, scratch_len)?) };
-        let (p, n) = m.network_pose(source, passes as usize, tolerance, scratch)?;
+        // SAFETY: the caller's contract for `points`.
+        let source = unsafe { cloud(points, n_points)? };
+        let (p, n) = call(source)?;
         let mut out = [0f32; 7];
         out[..4].copy_from_slice(&p.rotation);
         out[4..].copy_from_slice(&p.translation);
@@ -387,6 +440,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -1 => c"a required pointer is null",
         -2 => c"the point array is not 4-byte aligned",
         -3 => c"the model handle is not loaded: call pcrnet_model_load and check its status",
+        -4 => c"the prepared handle is not prepared: call pcrnet_prepare (again after loading its model handle again) and check its status",
         -10 => c"not a model blob: magic bytes PCRN missing",
         -11 => c"unsupported model format version: re-export the model with `pcrnet export` (or `pcrnet upgrade` a version-2 f32 blob); a blob newer than this library needs a later library",
         -12 => c"the blob holds another kind of model: the C API loads int8 blobs (`pcrnet export` writes one)",

@@ -18,6 +18,8 @@ pub enum PcrnetStatus {
     PCRNET_ERROR_MISALIGNED = -2,
     /// The model handle was not filled by a successful `pcrnet_model_load`.
     PCRNET_ERROR_NOT_LOADED = -3,
+    /// The prepared handle was not filled by a successful `pcrnet_prepare`.
+    PCRNET_ERROR_NOT_PREPARED = -4,
     /// The blob does not start with the magic bytes `PCRN`.
     PCRNET_ERROR_BAD_MAGIC = -10,
     /// The blob's format version is not one this build reads.

@@ -360,3 +360,98 @@ fn every_status_has_a_message_naming_what_to_do() {
         assert!(seen.insert(text), "{s:?} shares its message");
     }
 }
+
+/// A prepared handle (`pcrnet_prepare`) registers and runs the network
+/// exactly as the plain calls do, on the host scratch and on the smallest
+/// one; a handle never prepared, or whose preparation failed, is a status
+/// and nothing is written.
+#[test]
+fn prepared_calls_are_bit_identical_to_the_plain_ones() {
+    use PcrnetStatus::*;
+    let blob = shipped_blob();
+    let model = loaded(&blob);
+    let source = shipped_source();
+    let points = source.as_ptr() as *const f32;
+    let host_len = unsafe { pcrnet_model_host_scratch_len(&*model) };
+    let small_len = unsafe { pcrnet_model_scratch_len(&*model, 1) };
+    let mut plain = vec![0i8; host_len];
+    for len in [host_len, small_len] {
+        let mut scratch = vec![0i8; len];
+        let mut prepared = PcrnetPrepared::new();
+        let status =
+            unsafe { pcrnet_prepare(&*model, scratch.as_mut_ptr(), scratch.len(), &mut prepared) };
+        assert_eq!(status, PCRNET_OK);
+        for options in [Options::default(), Options::network_only()] {
+            let c_options = PcrnetOptions::from(options);
+            let mut got = sentinel();
+            let status = unsafe {
+                pcrnet_prepared_register(&mut prepared, points, source.len(), &c_options, &mut got)
+            };
+            assert_eq!(status, PCRNET_OK);
+            let (status, want) = register(&model, &source, &c_options, &mut plain);
+            assert_eq!(status, PCRNET_OK);
+            assert_eq!(got, want, "scratch {len}");
+        }
+        let (mut pose, mut passes) = ([0f32; 7], 0u32);
+        let status = unsafe {
+            pcrnet_prepared_network_pose(
+                &mut prepared,
+                points,
+                source.len(),
+                3,
+                0.0,
+                pose.as_mut_ptr(),
+                &mut passes,
+            )
+        };
+        assert_eq!(status, PCRNET_OK);
+        let rust = Int8Model::from_bytes(&blob).unwrap();
+        let (p, n) = rust.network_pose(&source, 3, 0.0, &mut plain).unwrap();
+        assert_eq!(
+            (passes as usize, pose[..4].to_vec(), pose[4..].to_vec()),
+            (n, p.rotation.to_vec(), p.translation.to_vec())
+        );
+    }
+    // Never prepared; prepared on a scratch one byte short (refused, and
+    // marked not prepared); null handles.
+    let options = options_default();
+    let mut blank = PcrnetPrepared::new();
+    let mut out = sentinel();
+    let call = |p: *mut PcrnetPrepared, out: &mut PcrnetRegistration| unsafe {
+        pcrnet_prepared_register(p, points, source.len(), &options, out)
+    };
+    assert_eq!(call(&mut blank, &mut out), PCRNET_ERROR_NOT_PREPARED);
+    let mut short = vec![0i8; small_len - 1];
+    let mut failed = PcrnetPrepared::new();
+    let mut scratch = vec![0i8; small_len];
+    let status =
+        unsafe { pcrnet_prepare(&*model, scratch.as_mut_ptr(), scratch.len(), &mut failed) };
+    assert_eq!(status, PCRNET_OK);
+    let status = unsafe { pcrnet_prepare(&*model, short.as_mut_ptr(), short.len(), &mut failed) };
+    assert_eq!(status, PCRNET_ERROR_SCRATCH_TOO_SMALL);
+    assert_eq!(call(&mut failed, &mut out), PCRNET_ERROR_NOT_PREPARED);
+    assert_eq!(
+        call(std::ptr::null_mut(), &mut out),
+        PCRNET_ERROR_NULL_POINTER
+    );
+    let unloaded = zeroed_model();
+    let status =
+        unsafe { pcrnet_prepare(&*unloaded, scratch.as_mut_ptr(), scratch.len(), &mut failed) };
+    assert_eq!(status, PCRNET_ERROR_NOT_LOADED);
+    let status = unsafe {
+        pcrnet_prepare(
+            &*model,
+            scratch.as_mut_ptr(),
+            scratch.len(),
+            std::ptr::null_mut(),
+        )
+    };
+    assert_eq!(status, PCRNET_ERROR_NULL_POINTER);
+    assert_eq!(out, sentinel(), "a failed call wrote its output");
+    let message =
+        unsafe { CStr::from_ptr(pcrnet_status_message(PCRNET_ERROR_NOT_PREPARED as i32)) };
+    assert!(
+        message.to_str().unwrap().contains("pcrnet_prepare"),
+        "{message:?}"
+    );
+}

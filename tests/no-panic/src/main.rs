@@ -93,6 +93,7 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
     let mut out = core::mem::MaybeUninit::<capi::PcrnetRegistration>::uninit();
     let mut pose = [0f32; 7];
     let mut passes_run = 0u32;
+    let mut prepared = capi::PcrnetPrepared::new();
     // SAFETY: every pointer is to live storage of the right size; the C
     // API checks null, alignment and lengths itself.
     unsafe {
@@ -118,6 +119,24 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
             black_box(0.0),
             scratch,
             scratch_len,
+            black_box(pose.as_mut_ptr()),
+            black_box(&mut passes_run),
+        ));
+        let prepared: *mut capi::PcrnetPrepared = black_box(&mut prepared);
+        black_box(capi::pcrnet_prepare(model, scratch, scratch_len, prepared));
+        black_box(capi::pcrnet_prepared_register(
+            prepared,
+            points,
+            n_points,
+            black_box(options.as_ptr()),
+            black_box(out.as_mut_ptr()),
+        ));
+        black_box(capi::pcrnet_prepared_network_pose(
+            prepared,
+            points,
+            n_points,
+            black_box(1),
+            black_box(0.0),
             black_box(pose.as_mut_ptr()),
             black_box(&mut passes_run),
         ));
