@@ -49,7 +49,7 @@ use crate::fixed::OutputStep;
 use crate::format::{Int8Layer, le_i32s};
 #[cfg(target_arch = "x86_64")]
 use area::widen;
-use area::{Carved, carve, fill, pair};
+use area::{Carved, carve, fill, pair, pooled_on_bytes};
 
 mod area;
 #[cfg(target_arch = "x86_64")]
@@ -251,10 +251,7 @@ impl<'w> BlockEncoder<'w> {
         // A pooled layer on bytes with AVX2: its int16 weights last, copied
         // when a block first needs them. The quad routes use only the
         // first layer's.
-        let on_bytes = arch
-            .encoder_layers()
-            .last()
-            .filter(|_| sizes.quads > 0 && !route.on_quads());
+        let on_bytes = pooled_on_bytes(arch, route);
         let later = on_bytes.map_or(0, |shape| shape.pair_words());
         #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
         let (weights, wide) = weights.split_at_mut_checked(sizes.weights.checked_sub(later)?)?;

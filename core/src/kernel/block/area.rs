@@ -4,7 +4,7 @@
 //! [`BlockEncoder::prepare`](super::BlockEncoder::prepare)).
 
 use super::{Route, as_words, rows, rows_mut};
-use crate::arch::Arch;
+use crate::arch::{Arch, LayerShape};
 use crate::format::Int8Layer;
 
 /// The parts of a block encoder's area (see [`Arch::host_block_words`]).
@@ -53,7 +53,6 @@ pub(super) fn fill(
     route: Route,
 ) -> Option<()> {
     let Carved { weights, sums, .. } = carve(arch, area)?;
-    let sizes = arch.host_block_words();
     let count = arch.encoder.len();
     let mut free = sums;
     for (l, (shape, layer)) in arch.encoder_layers().zip(layers).enumerate().skip(1) {
@@ -65,12 +64,10 @@ pub(super) fn fill(
         }
         free = tail;
     }
-    let last = arch.encoder_layers().last();
-    let on_bytes = last.is_some() && sizes.quads > 0 && !route.on_quads();
     let widened = if route.on_quads() {
         1
     } else {
-        count.saturating_sub(usize::from(on_bytes))
+        count.saturating_sub(usize::from(pooled_on_bytes(arch, route).is_some()))
     };
     let mut free = weights;
     for (shape, layer) in arch.encoder_layers().zip(layers).take(widened) {
@@ -79,6 +76,16 @@ pub(super) fn fill(
         free = tail;
     }
     Some(())
+}
+
+/// The pooled layer's shape when `route` runs it on bytes (AVX2, its input
+/// an int8 activation): its int16 weights come last in the area and are
+/// copied only when a block needs them. `None` on the quad routes, or when
+/// the pooled layer reads the coordinates.
+pub(super) fn pooled_on_bytes(arch: &Arch, route: Route) -> Option<LayerShape> {
+    let quads = arch.host_block_words().quads;
+    let last = arch.encoder_layers().last();
+    last.filter(|_| quads > 0 && !route.on_quads())
 }
 
 /// Sign-extends a layer's int8 weight rows of `inputs` values into int16
