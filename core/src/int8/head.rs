@@ -97,13 +97,8 @@ impl Int8Model<'_> {
     /// Bytes of [`Self::fold_template`]'s biases: an i32 for each output of
     /// the first hidden head layer (0 for a head without one).
     pub(super) fn folded_len(&self) -> usize {
-        let hidden = self.p.head.len().min(self.p.arch.head.len());
-        self.p
-            .arch
-            .head
-            .first()
-            .filter(|_| hidden > 0)
-            .map_or(0, |&w| 4 * w as usize)
+        // Loading checked that the blob has a layer for every hidden width.
+        self.p.arch.head.first().map_or(0, |&w| 4 * w as usize)
     }
 
     /// Writes into `out` ([`Self::folded_len`] bytes, little-endian i32s)

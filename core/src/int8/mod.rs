@@ -267,6 +267,22 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
         ready: Ready,
     ) -> Result<(Pose, PassCounts)> {
+        let (_, head, counts) = self.encode_and_head(source, map, tile, scratch, ready)?;
+        Ok((self.pose(&head)?, counts))
+    }
+
+    /// Encodes `source` moved by `map` and runs the head, on a scratch
+    /// where [`Self::prepare`] left what `ready` says: the feature (a view
+    /// into the scratch), the head's raw outputs and what the pass counted.
+    #[inline(always)]
+    fn encode_and_head<'s>(
+        &self,
+        source: &[[f32; 3]],
+        map: &PointMap,
+        tile: usize,
+        scratch: &'s mut [i8],
+        ready: Ready,
+    ) -> Result<(&'s [i8], [i32; POSE_DIM], PassCounts)> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
         let (block, folded) = self.split_host(extra);
         let out_of_range = self.encode_into(source, map, tile, feature, work, block, ready)?;
@@ -276,7 +292,7 @@ impl<'a> Int8Model<'a> {
             saturated,
             out_of_range,
         };
-        Ok((self.pose(&head)?, counts))
+        Ok((feature, head, counts))
     }
 
     /// Encodes `source` and runs the head, returning the raw results.
@@ -310,19 +326,14 @@ impl<'a> Int8Model<'a> {
         scratch: &'s mut [i8],
         ready: Ready,
     ) -> Result<Int8Inference<'s>> {
-        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
-        let (block, folded) = self.split_host(extra);
-        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
-        let map = PointMap::new(self.p.frame, &centring);
-        let out_of_range = self.encode_into(source, &map, tile, feature, work, block, ready)?;
-        let folded = ready.folded.then(|| bytes_of(folded));
-        let (head, saturated) = self.head_counted(feature, work, folded)?;
+        let (centring, map) = self.centred(source)?;
+        let (feature, head, counts) = self.encode_and_head(source, &map, tile, scratch, ready)?;
         Ok(Int8Inference {
             feature,
             head,
             centring,
-            saturated,
-            out_of_range,
+            saturated: counts.saturated,
+            out_of_range: counts.out_of_range,
         })
     }
 
@@ -343,10 +354,17 @@ impl<'a> Int8Model<'a> {
     ) -> Result<&'s [i8]> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
         let (block, _) = self.split_host(extra);
-        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
-        let map = PointMap::new(self.p.frame, &centring);
+        let (_, map) = self.centred(source)?;
         self.encode_into(source, &map, tile, feature, work, block, Ready::default())?;
         Ok(feature)
+    }
+
+    /// How `source` is moved before the network (centred first if the
+    /// model says so; the identity otherwise), and the map into the model
+    /// frame that does it.
+    fn centred(&self, source: &[[f32; 3]]) -> Result<(Pose, PointMap)> {
+        let centring = pose::centring(source, self.centring(), &self.p.frame)?;
+        Ok((centring, PointMap::new(self.p.frame, &centring)))
     }
 
     /// The host area past the device scratch ([`Self::split_scratch`]) as
