@@ -100,23 +100,29 @@ pub fn pipeline(
 
 /// The network passes a blob of either kind was trained for (1: PCRNet).
 pub fn trained_passes(blob: &[u8]) -> Result<usize, pcrnet_core::Error> {
-    match Int8Model::from_bytes(blob) {
-        Ok(m) => Ok(m.trained_passes()),
-        Err(pcrnet_core::Error::WrongKind { .. }) => {
-            Ok(F32Model::from_bytes(blob)?.trained_passes())
-        }
-        Err(e) => Err(e),
-    }
+    either_model(blob, |m| m.trained_passes(), |m| m.trained_passes())
 }
 
 /// Turns stored with the blob's own template (the device tries at most
 /// one more starting pose than this).
 pub fn template_turns(blob: &[u8]) -> Result<usize, pcrnet_core::Error> {
+    either_model(
+        blob,
+        |m| m.template().turns().len(),
+        |m| m.template().turns().len(),
+    )
+}
+
+/// `int8` of the blob's model if it is an int8 one, else `f32` of it as an
+/// f32 one, or the error loading it gives.
+fn either_model<T>(
+    blob: &[u8],
+    int8: impl FnOnce(&Int8Model<'_>) -> T,
+    f32: impl FnOnce(&F32Model<'_>) -> T,
+) -> Result<T, pcrnet_core::Error> {
     match Int8Model::from_bytes(blob) {
-        Ok(m) => Ok(m.template().turns().len()),
-        Err(pcrnet_core::Error::WrongKind { .. }) => {
-            Ok(F32Model::from_bytes(blob)?.template().turns().len())
-        }
+        Ok(m) => Ok(int8(&m)),
+        Err(pcrnet_core::Error::WrongKind { .. }) => Ok(f32(&F32Model::from_bytes(blob)?)),
         Err(e) => Err(e),
     }
 }

@@ -245,13 +245,8 @@ fn run(command: Command) -> anyhow::Result<()> {
                     path.display(),
                     cloud.left_out
                 );
-                if cloud.left_out > 0 {
-                    eprintln!(
-                        "{}: {} of {} points left out (a coordinate is nan or inf, or beyond f32)",
-                        path.display(),
-                        cloud.left_out,
-                        cloud.left_out + cloud.points.len()
-                    );
+                if let Some(note) = cloud.left_out_note(path) {
+                    eprintln!("{note}");
                 }
                 warn_if_coarse(path, &cloud.points);
                 let kept = reduce_cloud(&cloud.points, reduce, reduce_to, voxel, 0);

@@ -311,6 +311,21 @@ pub struct LocalCloud {
     pub left_out: usize,
 }
 
+impl LocalCloud {
+    /// What a reader left out of `path`, for the user (`None` when
+    /// nothing): how many of the points read, and why.
+    pub fn left_out_note(&self, path: &Path) -> Option<String> {
+        (self.left_out > 0).then(|| {
+            format!(
+                "{}: {} of {} points left out (a coordinate is nan or inf, or beyond f32)",
+                path.display(),
+                self.left_out,
+                self.left_out + self.points.len()
+            )
+        })
+    }
+}
+
 /// Coordinate-wise median of finite points (the upper one of an even
 /// count), `[0, 0, 0]` if there are none.
 fn median(points: &[[f64; 3]]) -> [f64; 3] {

@@ -18,12 +18,8 @@ use crate::io::{DEFAULT_MAX_POINTS, Format, read_cloud_local};
 pub(super) fn check_object(path: &Path, points: usize) -> anyhow::Result<()> {
     let cloud = read_cloud_local(path, DEFAULT_MAX_POINTS, Some([0.0; 3]))?;
     let shown = path.display();
-    if cloud.left_out > 0 {
-        eprintln!(
-            "{shown}: {} of {} points left out (a coordinate is nan or inf, or beyond f32)",
-            cloud.left_out,
-            cloud.left_out + cloud.points.len()
-        );
+    if let Some(note) = cloud.left_out_note(path) {
+        eprintln!("{note}");
     }
     let verdict = self_degeneracy(&cloud.points).with_context(|| format!("{shown}"))?;
     let why = match verdict {
