@@ -18,7 +18,9 @@
 //!
 //! The model is a blob ([`format`]) whose weights are used in place (flash),
 //! and all working memory is a caller-owned scratch slice, so the crate
-//! never allocates. Sizes are known up front ([`int8_scratch_len`]).
+//! never allocates. Sizes are known up front: [`scratch_len_for`] reads
+//! them from the blob's bytes in a `const` ([`int8_scratch_len`] from the
+//! layer widths).
 //!
 //! ```
 //! # fn main() -> Result<(), pcrnet_core::Error> {
@@ -93,6 +95,7 @@ mod kernel;
 pub mod pose;
 pub mod refine;
 pub mod registration;
+mod sizes;
 pub mod template;
 #[doc(hidden)]
 pub mod testing;
@@ -105,3 +108,4 @@ pub use int8::{Int8Inference, Int8Model, Prepared};
 pub use pose::Pose;
 pub use refine::{Degeneracy, Metric};
 pub use registration::{Options, Registration};
+pub use sizes::scratch_len_for;
