@@ -26,10 +26,23 @@
 #define PCRNET_MODEL_WORDS 320
 
 /*
+ Bytes of a `PcrnetModel` (`8 * PCRNET_MODEL_WORDS`), for C code to
+ check its view of the type:
+ `_Static_assert(sizeof(PcrnetModel) == PCRNET_MODEL_SIZE, "...")`.
+ */
+#define PCRNET_MODEL_SIZE 2560
+
+/*
  Storage words of a `PcrnetPrepared` (8 bytes each; 64 bytes on every
  target, checked at compile time).
  */
 #define PCRNET_PREPARED_WORDS 8
+
+/*
+ Bytes of a `PcrnetPrepared` (`8 * PCRNET_PREPARED_WORDS`), for C code
+ to check its view of the type with `_Static_assert`.
+ */
+#define PCRNET_PREPARED_SIZE 64
 
 /*
  `PcrnetOptions::metric`: point-to-point ICP.

@@ -52,8 +52,8 @@ use core::mem::{align_of, size_of};
 mod prepared;
 mod types;
 pub use prepared::{
-    PCRNET_PREPARED_WORDS, PcrnetPrepared, pcrnet_prepare, pcrnet_prepared_network_pose,
-    pcrnet_prepared_register,
+    PCRNET_PREPARED_SIZE, PCRNET_PREPARED_WORDS, PcrnetPrepared, pcrnet_prepare,
+    pcrnet_prepared_network_pose, pcrnet_prepared_register,
 };
 pub use types::{
     PCRNET_DEGENERATE_LINE, PCRNET_DEGENERATE_NONE, PCRNET_DEGENERATE_POINT,
@@ -97,6 +97,14 @@ impl Default for PcrnetModel {
         Self::new()
     }
 }
+
+/// Bytes of a `PcrnetModel` (`8 * PCRNET_MODEL_WORDS`), for C code to
+/// check its view of the type:
+/// `_Static_assert(sizeof(PcrnetModel) == PCRNET_MODEL_SIZE, "...")`.
+pub const PCRNET_MODEL_SIZE: usize = 2560;
+
+const _: () = assert!(size_of::<PcrnetModel>() == PCRNET_MODEL_SIZE);
+const _: () = assert!(PCRNET_MODEL_SIZE == 8 * PCRNET_MODEL_WORDS);
 
 // The handle must hold the Rust model on every target.
 const _: () = assert!(size_of::<Int8Model<'static>>() <= size_of::<PcrnetModel>());

@@ -18,6 +18,13 @@ use super::{
 /// target, checked at compile time).
 pub const PCRNET_PREPARED_WORDS: usize = 8;
 
+/// Bytes of a `PcrnetPrepared` (`8 * PCRNET_PREPARED_WORDS`), for C code
+/// to check its view of the type with `_Static_assert`.
+pub const PCRNET_PREPARED_SIZE: usize = 64;
+
+const _: () = assert!(size_of::<PcrnetPrepared>() == PCRNET_PREPARED_SIZE);
+const _: () = assert!(PCRNET_PREPARED_SIZE == 8 * PCRNET_PREPARED_WORDS);
+
 /// A model handle and a scratch made ready by `pcrnet_prepare`: storage
 /// the caller owns. Its contents are private; its size and 8-byte
 /// alignment are fixed on every target.
