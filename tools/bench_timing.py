@@ -1,7 +1,7 @@
 """The timing rule every side-by-side benchmark here shares: both sides are
 timed round by round in turn, after one warm-up round each, so that whatever
 else the machine does falls on both alike. A round runs every item once; our
-side's rounds run in `ort_bench serve` (`train-host/examples/ort_bench.rs`),
+side's rounds run in `ort_bench serve` (`train-host/eval/examples/ort_bench.rs`),
 kept waiting between them. The results are each side's median round and best
 (fastest) round, in milliseconds per item."""
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Open3D's half of the ICP comparison in `cargo xtask ort-bench` (issue 13).
 
-Reads DIR/icp/ as `train-host/examples/ort_bench.rs` wrote it (templates,
+Reads DIR/icp/ as `train-host/eval/examples/ort_bench.rs` wrote it (templates,
 sources, true poses, our ICP's poses), runs Open3D's point-to-point
 `registration_icp` on the same pairs from the identity on one thread, with
 every nearest neighbour as a correspondence (no distance cut-off, as ours):

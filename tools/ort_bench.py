@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """ONNX Runtime's half of `cargo xtask ort-bench` (issue 13).
 
-Reads what `train-host/examples/ort_bench.rs` wrote into DIR/<model>/, rebuilds
+Reads what `train-host/eval/examples/ort_bench.rs` wrote into DIR/<model>/, rebuilds
 each network as an ONNX graph (frame, centring, per-point MatMul + Add + Relu,
 ReduceMax over the points, Concat with the template feature, the head), checks
 that ONNX Runtime's f32 outputs match ours, quantizes it statically with

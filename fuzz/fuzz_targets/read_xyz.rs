@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use pcrnet_train::io::Format;
+use pcrnet_io::Format;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(points) = Format::Xyz.parse_limited(data, 1 << 20) {

@@ -448,7 +448,7 @@ fn pcrnet(args: &[&str]) -> Result<(), String> {
         "run",
         "--release",
         "-p",
-        "pcrnet-train",
+        "pcrnet-cli",
         "--bin",
         "pcrnet",
         "--",

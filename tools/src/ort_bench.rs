@@ -3,7 +3,7 @@
 //!
 //! ONNX Runtime, onnx and numpy are installed with pip into a virtual
 //! environment under `target/ort-venv` (pinned versions, first run only);
-//! nothing of it is on the test path. `train-host/examples/ort_bench.rs`
+//! nothing of it is on the test path. `train-host/eval/examples/ort_bench.rs`
 //! writes the weights, blobs and clouds; `tools/ort_bench.py` rebuilds the
 //! network as an ONNX graph, checks its f32 outputs against ours, quantizes
 //! it with ONNX Runtime's static quantizer, times it in turn with ours round
@@ -81,7 +81,7 @@ pub fn run(root: &Path, data: Option<&str>, cpu: Option<Cpu>) -> Result<(), Stri
         "--release",
         "-q",
         "-p",
-        "pcrnet-train",
+        "pcrnet-eval",
         "--example",
         "ort_bench",
         "--",

@@ -6,13 +6,13 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use pcrnet_core::{Arch, F32Model, Int8Model};
-use pcrnet_train::eval::cli::MethodOptions;
-use pcrnet_train::eval::methods::{self, MethodKind};
-use pcrnet_train::frame::FilePose;
-use pcrnet_train::io::write::Coordinate;
-use pcrnet_train::io::{LocalCloud, read_cloud_local};
-use pcrnet_train::progress::Progress;
-use pcrnet_train::reduce::{Reduction, reduce_cloud};
+use pcrnet_eval::cli::MethodOptions;
+use pcrnet_eval::methods::{self, MethodKind};
+use pcrnet_io::frame::FilePose;
+use pcrnet_io::progress::Progress;
+use pcrnet_io::reduce::{Reduction, reduce_cloud};
+use pcrnet_io::write::Coordinate;
+use pcrnet_io::{LocalCloud, read_cloud_local};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use pcrnet_train::{
@@ -58,24 +58,24 @@ enum Command {
     /// Train PCRNet / i-PCRNet in f32 on ModelNet-style data or generated
     /// shapes; writes checkpoints, a JSON-lines log and, at the end, both
     /// blobs (f32 and int8, as `export`) into --out.
-    Train(Box<pcrnet_train::train::cli::TrainArgs>),
+    Train(Box<pcrnet_train::cli::TrainArgs>),
     /// Export a training checkpoint to the f32 and int8 blobs, with the
     /// template's feature embedded.
-    Export(pcrnet_train::train::cli::ExportArgs),
+    Export(pcrnet_train::cli::ExportArgs),
     /// Upgrade a format-2 f32 blob to the current format (frame, template
     /// points, turns), writing f32 and re-quantized int8 blobs.
-    Upgrade(pcrnet_train::train::cli::UpgradeArgs),
+    Upgrade(pcrnet_train::cli::UpgradeArgs),
     /// Make a saved, seeded test set of pairs (from ModelNet-style folders,
     /// your own clouds, or generated shapes).
-    Pairs(pcrnet_train::eval::cli::PairsArgs),
+    Pairs(pcrnet_eval::cli::PairsArgs),
     /// Score a method on a saved pair set (rotation / translation errors,
     /// AUC, success ratios, time).
-    Eval(pcrnet_train::eval::cli::EvalArgs),
+    Eval(pcrnet_eval::cli::EvalArgs),
     /// Run one of the paper's experiments (or `all`): trains missing
     /// models, scores every method, writes JSON and plots.
-    Experiment(pcrnet_train::eval::cli::ExperimentArgs),
+    Experiment(pcrnet_eval::cli::ExperimentArgs),
     /// Write RESULTS.md from the experiment reports.
-    Results(pcrnet_train::eval::cli::ResultsArgs),
+    Results(pcrnet_eval::cli::ResultsArgs),
     /// Write a generated shape (centred, in the unit box) as XYZ text, and
     /// optionally a source made from it: the shape under a seeded random
     /// rigid transform (Euler U[-45, 45] deg, translation U[-1, 1]) as
@@ -124,11 +124,11 @@ enum Command {
         json: Option<PathBuf>,
         /// Refuse cloud files that declare or hold more points than this
         /// (before allocating: a small hostile file can declare billions).
-        #[arg(long, default_value_t = pcrnet_train::io::DEFAULT_MAX_POINTS, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = pcrnet_io::DEFAULT_MAX_POINTS, allow_negative_numbers = true)]
         max_cloud_points: usize,
         /// Keep at most this many points of each cloud (0: all): a large
         /// scan registers as well from a few thousand, much faster.
-        #[arg(long, default_value_t = pcrnet_train::reduce::DEFAULT_SOURCE_POINTS, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = pcrnet_io::reduce::DEFAULT_SOURCE_POINTS, allow_negative_numbers = true)]
         reduce_to: usize,
         /// How to keep them: random (seeded; keeps the density), fps
         /// (farthest points: even coverage, slow on millions), voxel (the
@@ -173,13 +173,13 @@ fn run(command: Command) -> anyhow::Result<()> {
             )?;
             untrained(arch, seed, out)?
         }
-        Command::Train(args) => pcrnet_train::train::cli::train(*args)?,
-        Command::Export(args) => pcrnet_train::train::cli::export(args)?,
-        Command::Upgrade(args) => pcrnet_train::train::cli::upgrade(args)?,
-        Command::Pairs(args) => pcrnet_train::eval::cli::pairs(args)?,
-        Command::Eval(args) => pcrnet_train::eval::cli::eval(args)?,
-        Command::Experiment(args) => pcrnet_train::eval::cli::experiment(args)?,
-        Command::Results(args) => pcrnet_train::eval::cli::results(args)?,
+        Command::Train(args) => pcrnet_train::cli::train(*args)?,
+        Command::Export(args) => pcrnet_train::cli::export(args)?,
+        Command::Upgrade(args) => pcrnet_train::cli::upgrade(args)?,
+        Command::Pairs(args) => pcrnet_eval::cli::pairs(args)?,
+        Command::Eval(args) => pcrnet_eval::cli::eval(args)?,
+        Command::Experiment(args) => pcrnet_eval::cli::experiment(args)?,
+        Command::Results(args) => pcrnet_eval::cli::results(args)?,
         Command::Shape {
             kind,
             points,
@@ -477,7 +477,7 @@ fn write_stdout(text: &str) {
 
 /// Writes `cloud` in the format its extension names.
 fn write_cloud<C: Coordinate>(path: &Path, cloud: &[[C; 3]]) -> anyhow::Result<()> {
-    Ok(pcrnet_train::io::write::write_cloud(path, cloud)?)
+    Ok(pcrnet_io::write::write_cloud(path, cloud)?)
 }
 
 /// Warns when `f32` cannot hold `cloud`'s shape: its coordinates are so

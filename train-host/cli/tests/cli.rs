@@ -9,7 +9,7 @@ fn pcrnet() -> Command {
 }
 
 fn models() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
 }
 
 #[test]

@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use pcrnet_train::io::write::encode;
-use pcrnet_train::io::{Format, off, pcd, ply, xyz};
+use pcrnet_io::write::encode;
+use pcrnet_io::{Format, off, pcd, ply, xyz};
 use pcrnet_train::shapes::{Shape, sample};
 
 /// A UTM-like offset: easting 500 km, northing 5,400 km, 120 m up.

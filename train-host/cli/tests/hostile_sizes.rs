@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use pcrnet_train::io::{DEFAULT_MAX_POINTS, Format, FormatError};
+use pcrnet_io::{DEFAULT_MAX_POINTS, Format, FormatError};
 
 /// LZF data that decompresses to `total` zero bytes at the format's best
 /// ratio: one literal byte, then back-references of up to 264 bytes.
@@ -107,8 +107,8 @@ fn a_small_file_declaring_150m_points_fails_cleanly_under_an_address_space_limit
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("huge.pcd");
     std::fs::write(&path, &file).unwrap();
-    let template =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/embedded-default-template.xyz");
+    let template = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../models/embedded-default-template.xyz");
     let run = |extra: &[&str]| {
         Command::new("sh")
             .arg("-c")

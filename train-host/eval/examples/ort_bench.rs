@@ -18,7 +18,7 @@
 //! template and a source made from it by the experiments' pairs (Euler
 //! angles U[-45°, 45°], translation U[-1, 1], noise 0.01), `truth.json`
 //! with the true poses, and `ours.json` with our point-to-point ICP's
-//! poses (`pcrnet_train::eval::icp`), run for a fixed 50 iterations and
+//! poses (`pcrnet_eval::icp`), run for a fixed 50 iterations and
 //! with its own stop rule.
 //!
 //! `ort_bench serve DIR` then reads what that wrote and times one round
@@ -43,12 +43,12 @@ use anyhow::{Context, bail};
 use pcrnet_core::arch::{PAPER_ENCODER, PCRNET_HEAD};
 use pcrnet_core::float::Params;
 use pcrnet_core::{Arch, F32Model, Int8Model};
-use pcrnet_train::eval::{self, icp::IcpConfig};
+use pcrnet_eval::icp::{self, IcpConfig};
+use pcrnet_train::data::{self, PairConfig, Sampling};
+use pcrnet_train::dataset::{Dataset, Split};
+use pcrnet_train::geometry::{Mat3, quat_to_mat};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
-use pcrnet_train::train::data::{self, PairConfig, Sampling};
-use pcrnet_train::train::dataset::{Dataset, Split};
-use pcrnet_train::train::geometry::{Mat3, quat_to_mat};
 use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
 use serde_json::json;
 
@@ -80,7 +80,7 @@ fn main() -> anyhow::Result<()> {
     let (clouds, what) = clouds(data.as_deref(), count)?;
     println!("{} clouds of {POINTS} points ({what})", clouds.len());
 
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let f32_blob = std::fs::read(root.join("models/embedded-default-f32.pcrn"))?;
     let int8_blob = std::fs::read(root.join("models/embedded-default-int8.pcrn"))?;
     write_network("embedded", &f32_blob, &int8_blob, &clouds, &out)?;
@@ -138,7 +138,7 @@ fn write_icp(clouds: &[Vec<[f32; 3]>], out: &Path) -> anyhow::Result<()> {
         let mut poses = Vec::new();
         let mut iterations = Vec::new();
         for (c, source) in clouds.iter().zip(&sources) {
-            let r = eval::icp::icp(c, source, config)?;
+            let r = icp::icp(c, source, config)?;
             poses.push(json!({"r": quat_to_mat(r.pose.rotation), "t": r.pose.translation}));
             iterations.push(r.iterations);
         }
@@ -312,9 +312,7 @@ fn serve(dir: &Path) -> anyhow::Result<()> {
         let ms = if what == "icp" {
             let config =
                 icp_config(setting).with_context(|| format!("unknown ICP setting in {line:?}"))?;
-            one_round(&pairs, |(t, s)| {
-                black_box(eval::icp::icp(t, s, config)).is_ok()
-            })?
+            one_round(&pairs, |(t, s)| black_box(icp::icp(t, s, config)).is_ok())?
         } else {
             let (_, f, q, fscratch, clouds) = networks
                 .iter_mut()

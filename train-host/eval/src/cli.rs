@@ -6,11 +6,12 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::Args;
 
-use super::experiments::{self, Context, EXPERIMENTS};
 use super::methods::{Method, MethodKind};
 use super::pairs::{PairSet, PairSetSpec, Shapes};
-use crate::train::cli::PairArgs;
-use crate::train::data::Sampling;
+use crate::experiments::{self, EXPERIMENTS};
+use crate::report::{self, Context};
+use pcrnet_train::cli::PairArgs;
+use pcrnet_train::data::Sampling;
 
 /// Arguments of `pcrnet pairs`.
 #[derive(Debug, Clone, Args)]
@@ -180,15 +181,15 @@ impl MethodOptions {
     }
 
     /// What is wrong with running `blob` as `kind` with these options
-    /// (see [`crate::register::mode_mismatch`]), if anything.
+    /// (see [`crate::methods::mode_mismatch`]), if anything.
     pub fn mode_warning(&self, kind: MethodKind, blob: Option<&[u8]>) -> Option<String> {
         let trained = crate::register::trained_passes(blob?).ok()?;
-        crate::register::mode_mismatch(kind, trained, self.iterations)
+        crate::methods::mode_mismatch(kind, trained, self.iterations)
     }
 
     /// Refuses a `--hypotheses` the device pipeline cannot run in full:
     /// more than 1 + the template's turns (the blob's own, or
-    /// [`crate::template::PRINCIPAL_TURNS`] for a template file bound in
+    /// [`pcrnet_train::template::PRINCIPAL_TURNS`] for a template file bound in
     /// its place, `bound`), which the pipeline would cut silently.
     pub fn check_hypotheses(
         &self,
@@ -200,7 +201,7 @@ impl MethodOptions {
             return Ok(());
         };
         let turns = match blob {
-            _ if bound => crate::template::PRINCIPAL_TURNS,
+            _ if bound => pcrnet_train::template::PRINCIPAL_TURNS,
             Some(blob) => match crate::register::template_turns(blob) {
                 Ok(turns) => turns,
                 // The method reports what is wrong with the blob.
@@ -294,8 +295,8 @@ pub fn pairs(args: PairsArgs) -> anyhow::Result<()> {
     let spec = PairSetSpec {
         shapes,
         points: args.points.unwrap_or(match args.object {
-            Some(_) => crate::train::cli::DEFAULT_POINTS,
-            None => experiments::POINTS,
+            Some(_) => pcrnet_train::cli::DEFAULT_POINTS,
+            None => report::POINTS,
         }),
         sampling: Sampling::Fps,
         pairs: args.source.config(false)?,
@@ -348,7 +349,7 @@ pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
         m.count
     );
     let passes: Vec<f64> = s.pairs.iter().map(|p| p.iterations as f64).collect();
-    let passes = super::metrics::Stats::of(&passes);
+    let passes = pcrnet_train::metrics::Stats::of(&passes);
     println!(
         "iterations: mean {:.2}, median {:.1}, max {:.0}",
         passes.mean, passes.median, passes.max

@@ -7,13 +7,11 @@
 //! ones.
 
 use super::MethodScore;
-use super::experiments::{
-    Context, Recorder, Report, SEEN, UNSEEN, folder, pair_set, success_chart,
-};
 use super::methods::{Method, MethodKind};
 use super::recipes::HELDOUT_RECIPES;
 use super::trust::{device, table};
-use crate::train::data::PairConfig;
+use crate::report::{Context, Recorder, Report, SEEN, UNSEEN, folder, pair_set, success_chart};
+use pcrnet_train::data::PairConfig;
 
 /// Noise sigma of both sets (as the `trust` experiment's held-out set).
 const SIGMA: f32 = 0.01;

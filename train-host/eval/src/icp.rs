@@ -139,7 +139,7 @@ pub fn icp(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::{Shape, random_transform, sample};
+    use pcrnet_train::shapes::{Shape, random_transform, sample};
 
     #[test]
     fn recovers_a_small_transform() {

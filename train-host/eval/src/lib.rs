@@ -1,20 +1,29 @@
-//! Evaluation: the baselines the networks are compared with (ICP,
-//! PointNetLK), the metrics ([`metrics`]), saved pair sets ([`pairs`]),
-//! scoring a method on a set ([`score`]), the paper's experiments
-//! ([`experiments`]) and their plots ([`plot`]).
+//! # pcrnet-eval
+//!
+//! Evaluation of PCRNet models on the host: the registration runners
+//! ([`register`]: the device pipeline, the network alone, PointNetLK), the
+//! methods compared ([`methods`]: those and the ICP baseline [`icp`]),
+//! saved pair sets ([`pairs`]), scoring a method on a set ([`score`], with
+//! `pcrnet_train::metrics`), the paper's experiments ([`experiments`],
+//! sharing [`report`]) and their plots ([`plot`]).
+//!
+//! Modules depend one way: `register` below `methods`, `report` below the
+//! experiments (`paper`, `trust`, `resampled`, `heldout`, `recipes`), and
+//! `experiments` (the dispatch) above them all.
 
 pub mod cli;
 pub mod experiments;
 pub mod heldout;
 pub mod icp;
 pub mod methods;
-pub mod metrics;
 pub mod nearest;
 pub mod pairs;
 pub mod paper;
 pub mod plot;
 pub mod pointnetlk;
 pub mod recipes;
+pub mod register;
+pub mod report;
 pub mod resampled;
 pub mod trust;
 
@@ -26,6 +35,7 @@ use serde::{Deserialize, Serialize};
 use crate::register::Precision;
 use methods::Method;
 use pairs::Pair;
+use pcrnet_train::metrics;
 
 /// A [`Pose`] from an f64 rotation matrix and translation (quaternion with
 /// `w >= 0`, as `pcrnet-core` makes them).
@@ -119,7 +129,7 @@ pub fn score(
     parallel: bool,
 ) -> Result<MethodScore, ScoreError> {
     let blob = model.map(|(_, b)| b);
-    let progress = crate::progress::Progress::bar(pairs.len() as u64, method.name(None));
+    let progress = pcrnet_io::progress::Progress::bar(pairs.len() as u64, method.name(None));
     type Scored = (PairScore, Option<Precision>, Option<String>);
     let one = |(index, p): (usize, &Pair)| -> Result<Scored, ScoreError> {
         progress.inc(1);

@@ -21,15 +21,13 @@
 use std::borrow::Cow;
 use std::time::Instant;
 
-use pcrnet_core::refine::{self, Subset};
-use pcrnet_core::registration::MIN_EXTENT;
-use pcrnet_core::template::Template;
-use pcrnet_core::{Degeneracy, F32Model, Frame, Int8Model, Options, Pose};
+use pcrnet_core::{Degeneracy, Pose};
 use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
 use crate::register::{ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk};
-use crate::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError, bind_reference};
+use pcrnet_train::degeneracy::source_degeneracy;
+use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError, bind_reference};
 
 /// A method family.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -426,48 +424,36 @@ pub fn run(
     Ok(out)
 }
 
-/// The device's degeneracy verdict on `cloud` as its own template (as
-/// `pcrnet train --object` would bind it): `Some` for a cloud that fixes
-/// no pose (its points coincide or lie on a line), an error for one with
-/// no extent at all.
-pub fn self_degeneracy(cloud: &[[f32; 3]]) -> Result<Option<Degeneracy>, MethodError> {
-    let reference = Reference::new(cloud, default_template_points())?;
-    source_degeneracy(None, Some(&reference), cloud)
-}
-
-/// The device's degeneracy verdict on `source`, against the template cloud
-/// if one is given (recorded as a blob records it) or else the blob's own
-/// template. A template with no extent is an error for every method.
-fn source_degeneracy(
-    blob: Option<&[u8]>,
-    reference: Option<&Reference>,
-    source: &[[f32; 3]],
-) -> Result<Option<Degeneracy>, MethodError> {
-    let judge = |t: &Template<'_>, frame: Frame| {
-        let subset = Subset::new(source, frame, Options::default().max_points);
-        refine::degeneracy(t, &subset, MIN_EXTENT)
-    };
-    if let Some(reference) = reference {
-        let t = Template::new(reference.cloud()).map_err(TemplateError::from)?;
-        return Ok(judge(&t, reference.frame));
-    }
-    let Some(blob) = blob else {
-        return Ok(None);
-    };
-    if let Ok(m) = Int8Model::from_bytes(blob) {
-        Ok(judge(m.template(), *m.frame()))
-    } else if let Ok(m) = F32Model::from_bytes(blob) {
-        Ok(judge(m.template(), *m.frame()))
+/// What is wrong with running a blob trained for `trained` passes as
+/// `kind` with `passes` passes (`None`: the method's default), or `None`
+/// if nothing: iterating a one-pass PCRNet (it was never trained to
+/// correct its own output, and diverges on unseen shapes: 73 deg mean in
+/// issue 10), one pass of an i-PCRNet (it stops short of its accuracy), or
+/// a pass count other than the one the blob was trained for.
+pub fn mode_mismatch(kind: MethodKind, trained: usize, passes: Option<usize>) -> Option<String> {
+    let mode = if trained == 1 {
+        "one pass (PCRNet)".to_string()
     } else {
-        // The method itself reports what is wrong with the blob.
-        Ok(None)
+        format!("{trained} passes (i-PCRNet)")
+    };
+    match (kind, passes) {
+        (MethodKind::Ipcrnet, _) if trained == 1 => Some(format!(
+            "this model was trained for {mode}; --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
+        )),
+        (MethodKind::Pcrnet, _) if trained > 1 => Some(format!(
+            "this model was trained for {mode}; --method pcrnet runs one and stops short of its accuracy (use --method ipcrnet or device)"
+        )),
+        (MethodKind::Ipcrnet | MethodKind::Device, Some(n)) if n != trained => Some(format!(
+            "this model was trained for {mode}; --iterations {n} runs it for {n}"
+        )),
+        _ => None,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::{Shape, sample};
+    use pcrnet_train::shapes::{Shape, sample};
 
     #[test]
     fn names_and_defaults() {
@@ -507,8 +493,8 @@ mod tests {
     fn one_reference_gives_the_bound_poses() {
         use crate::register::Bound;
         use crate::register::tests::identity_biased;
-        use crate::shapes::random_transform;
-        use crate::{F32Params, TrainedFor};
+        use pcrnet_train::shapes::random_transform;
+        use pcrnet_train::{F32Params, TrainedFor};
         let template = sample(Shape::Ell, 600, 3);
         let source = random_transform(&sample(Shape::Ell, 400, 11), 8.0, 0.05, 4);
         let reference = Reference::new(&template, 64).unwrap();
@@ -541,5 +527,29 @@ mod tests {
         }
         // The int8 blob's poses came from ICP on the stored points.
         assert!(refined >= 2, "{refined} device runs refined");
+    }
+
+    /// Issue 10, item 9, as a kind: every mismatch between the mode a blob
+    /// was trained for and the method run is named, with what to use.
+    #[test]
+    fn mode_mismatches_are_named() {
+        use MethodKind::{Device, Icp, Ipcrnet, Pcrnet};
+        let said = |kind, trained, passes| mode_mismatch(kind, trained, passes).unwrap_or_default();
+        assert!(said(Ipcrnet, 1, None).contains("trained for one pass (PCRNet)"));
+        assert!(said(Ipcrnet, 1, None).contains("--method pcrnet or device"));
+        assert!(said(Pcrnet, 8, None).contains("trained for 8 passes (i-PCRNet)"));
+        assert!(said(Pcrnet, 8, None).contains("--method ipcrnet or device"));
+        assert!(said(Device, 1, Some(5)).contains("--iterations 5"));
+        assert!(said(Ipcrnet, 8, Some(3)).contains("--iterations 3"));
+        for ok in [
+            mode_mismatch(Pcrnet, 1, None),
+            mode_mismatch(Ipcrnet, 8, None),
+            mode_mismatch(Ipcrnet, 8, Some(8)),
+            mode_mismatch(Device, 8, None),
+            mode_mismatch(Device, 1, Some(1)),
+            mode_mismatch(Icp, 1, Some(30)),
+        ] {
+            assert_eq!(ok, None);
+        }
     }
 }

@@ -330,7 +330,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
-    use crate::shapes::{Shape, sample};
+    use pcrnet_train::shapes::{Shape, sample};
 
     fn brute(points: &[[f64; 3]], q: &[f64; 3]) -> f64 {
         points

@@ -6,7 +6,7 @@
 //! shapes come from, how they are preprocessed, how sources are made) and,
 //! per pair, the template's file name and index, the pair's seed (which
 //! fixes the transform, the crop plane, the thinned subset and the noise;
-//! see [`crate::train::data::make_pair`]) and the true pose. Loading
+//! see [`pcrnet_train::data::make_pair`]) and the true pose. Loading
 //! re-creates every source from its seed and checks that the template's
 //! file and the true pose are still what was saved, so a changed data
 //! folder or pair generator is an error, not a silent change of the test.
@@ -21,9 +21,9 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::train::data::{self, PairConfig, Sampling};
-use crate::train::dataset::{DataError, Dataset, Split};
-use crate::train::geometry::Mat3;
+use pcrnet_train::data::{self, PairConfig, Sampling};
+use pcrnet_train::dataset::{DataError, Dataset, Split};
+use pcrnet_train::geometry::Mat3;
 
 /// Version of the pair-set file layout.
 pub const FORMAT: u32 = 1;
@@ -322,7 +322,7 @@ impl PairSet {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::geometry::apply;
+    use pcrnet_train::geometry::apply;
 
     fn spec(count: usize) -> PairSetSpec {
         PairSetSpec {

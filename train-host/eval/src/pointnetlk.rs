@@ -11,7 +11,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3, Vector6};
 use pcrnet_core::Pose;
 
 use super::pose_from_matrix;
-use crate::net::F32Params;
+use pcrnet_train::net::F32Params;
 
 /// A rigid transform in f64.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -158,8 +158,8 @@ impl<'a> PointNetLk<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::{Shape, sample};
     use pcrnet_core::Arch;
+    use pcrnet_train::shapes::{Shape, sample};
 
     #[test]
     fn exp_and_inverse_are_consistent() {

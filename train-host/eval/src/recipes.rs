@@ -6,8 +6,8 @@ use std::path::Path;
 use anyhow::Context as _;
 use clap::Parser;
 
-use super::experiments::Context;
-use crate::train::export::{F32_BLOB, INT8_BLOB};
+use crate::report::Context;
+use pcrnet_train::export::{F32_BLOB, INT8_BLOB};
 
 /// What a recipe trains on, below the data root.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -275,7 +275,7 @@ impl Model {
 #[derive(Parser)]
 struct TrainCommand {
     #[command(flatten)]
-    args: crate::train::cli::TrainArgs,
+    args: pcrnet_train::cli::TrainArgs,
 }
 
 /// Loads model `name` from `<work>/models/`, training it first (by its
@@ -289,8 +289,8 @@ pub(super) fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
         eprintln!("training {name}: pcrnet train {}", args.join(" "));
         let cmd = TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))?;
         let mut train_args = cmd.args;
-        train_args.resume = dir.join(crate::train::CHECKPOINT_FILE).is_file();
-        crate::train::cli::train(train_args)?;
+        train_args.resume = dir.join(pcrnet_train::CHECKPOINT_FILE).is_file();
+        pcrnet_train::cli::train(train_args)?;
     }
     let read = |p: &Path| std::fs::read(p).with_context(|| format!("reading {}", p.display()));
     Ok(Model {
@@ -302,8 +302,8 @@ pub(super) fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::experiments::POINTS;
     use super::*;
+    use crate::report::POINTS;
 
     /// Every recipe is a valid `pcrnet train` command line (the experiments
     /// train missing models through it), at the experiments' point count.

@@ -14,9 +14,9 @@
 
 use pcrnet_core::{F32Model, Int8Model, Options, Pose, Registration};
 
-use crate::eval::pointnetlk::{LkResult, PointNetLk};
-use crate::net::F32Params;
-use crate::template::{DEFAULT_TEMPLATE_POINTS, TemplateError, bind};
+use crate::pointnetlk::{LkResult, PointNetLk};
+use pcrnet_train::net::F32Params;
+use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, TemplateError, bind};
 
 /// Which network ran.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -127,37 +127,6 @@ fn either_model<T>(
     }
 }
 
-/// What is wrong with running a blob trained for `trained` passes as
-/// `kind` with `passes` passes (`None`: the method's default), or `None`
-/// if nothing: iterating a one-pass PCRNet (it was never trained to
-/// correct its own output, and diverges on unseen shapes: 73 deg mean in
-/// issue 10), one pass of an i-PCRNet (it stops short of its accuracy), or
-/// a pass count other than the one the blob was trained for.
-pub fn mode_mismatch(
-    kind: crate::eval::methods::MethodKind,
-    trained: usize,
-    passes: Option<usize>,
-) -> Option<String> {
-    use crate::eval::methods::MethodKind;
-    let mode = if trained == 1 {
-        "one pass (PCRNet)".to_string()
-    } else {
-        format!("{trained} passes (i-PCRNet)")
-    };
-    match (kind, passes) {
-        (MethodKind::Ipcrnet, _) if trained == 1 => Some(format!(
-            "this model was trained for {mode}; --method ipcrnet iterates it anyway, which can diverge (use --method pcrnet or device)"
-        )),
-        (MethodKind::Pcrnet, _) if trained > 1 => Some(format!(
-            "this model was trained for {mode}; --method pcrnet runs one and stops short of its accuracy (use --method ipcrnet or device)"
-        )),
-        (MethodKind::Ipcrnet | MethodKind::Device, Some(n)) if n != trained => Some(format!(
-            "this model was trained for {mode}; --iterations {n} runs it for {n}"
-        )),
-        _ => None,
-    }
-}
-
 /// The network's pose alone.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NetworkPose {
@@ -241,12 +210,12 @@ pub fn register_pointnetlk(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::eval::metrics::rotation_error_deg;
-    use crate::shapes::{Shape, random_transform, sample};
-    use crate::template::Reference;
-    use crate::train::geometry::{euler_to_mat, mat_vec, quat_to_mat, transpose};
-    use crate::{CalibrationRule, F32Params, TrainedFor, quantize};
     use pcrnet_core::Arch;
+    use pcrnet_train::geometry::{euler_to_mat, mat_vec, quat_to_mat, transpose};
+    use pcrnet_train::metrics::rotation_error_deg;
+    use pcrnet_train::shapes::{Shape, random_transform, sample};
+    use pcrnet_train::template::Reference;
+    use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
 
     #[test]
     fn int8_and_f32_blobs_register_files_consistently() {
@@ -400,29 +369,5 @@ pub(crate) mod tests {
         assert!(r.reliable && r.fitness == 1.0 && r.residual < 0.05, "{r:?}");
         let (z, _) = (r.pose.rotation[3], r.pose.rotation[0]);
         assert!((2.0 * z.asin().to_degrees() + 15.0).abs() < 0.1, "{r:?}");
-    }
-
-    /// Issue 10, item 9, as a kind: every mismatch between the mode a blob
-    /// was trained for and the method run is named, with what to use.
-    #[test]
-    fn mode_mismatches_are_named() {
-        use crate::eval::methods::MethodKind::{Device, Icp, Ipcrnet, Pcrnet};
-        let said = |kind, trained, passes| mode_mismatch(kind, trained, passes).unwrap_or_default();
-        assert!(said(Ipcrnet, 1, None).contains("trained for one pass (PCRNet)"));
-        assert!(said(Ipcrnet, 1, None).contains("--method pcrnet or device"));
-        assert!(said(Pcrnet, 8, None).contains("trained for 8 passes (i-PCRNet)"));
-        assert!(said(Pcrnet, 8, None).contains("--method ipcrnet or device"));
-        assert!(said(Device, 1, Some(5)).contains("--iterations 5"));
-        assert!(said(Ipcrnet, 8, Some(3)).contains("--iterations 3"));
-        for ok in [
-            mode_mismatch(Pcrnet, 1, None),
-            mode_mismatch(Ipcrnet, 8, None),
-            mode_mismatch(Ipcrnet, 8, Some(8)),
-            mode_mismatch(Device, 8, None),
-            mode_mismatch(Device, 1, Some(1)),
-            mode_mismatch(Icp, 1, Some(30)),
-        ] {
-            assert_eq!(ok, None);
-        }
     }
 }

@@ -7,13 +7,13 @@
 
 use anyhow::Context as _;
 
-use super::experiments::{Context, Recorder, Report, folder, pair_set, pair_spec, success_chart};
 use super::methods::{Method, MethodKind};
 use super::pairs::{PairSetSpec, Shapes};
 use super::recipes::{OBJECT_FILE, OBJECT_POINTS, OBJECT_RECIPES};
 use super::trust::{SHIPPED_INT8, device, table};
 use super::{MethodScore, pairs::Pair};
-use crate::train::data::PairConfig;
+use crate::report::{Context, Recorder, Report, folder, pair_set, pair_spec, success_chart};
+use pcrnet_train::data::PairConfig;
 
 /// Noise sigma of the noisy and single-view sets.
 const SIGMA: f32 = 0.01;

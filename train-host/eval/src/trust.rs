@@ -5,14 +5,14 @@
 
 use anyhow::Context as _;
 
-use super::experiments::{
-    Context, Recorder, Report, Table, UNSEEN, folder, label, pair_set, success_chart,
-};
 use super::methods::{DeviceMetric, Method, MethodKind};
-use super::metrics::Confidence;
 use super::pairs::PairSetSpec;
 use super::{GOOD_BELOW_DEG, MethodScore};
-use crate::train::data::PairConfig;
+use crate::report::{
+    Context, Recorder, Report, Table, UNSEEN, folder, label, pair_set, success_chart,
+};
+use pcrnet_train::data::PairConfig;
+use pcrnet_train::metrics::Confidence;
 
 /// The shipped embedded default, relative to the repository root.
 pub const SHIPPED_INT8: &str = "models/embedded-default-int8.pcrn";

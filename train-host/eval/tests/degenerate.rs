@@ -7,8 +7,8 @@
 use std::path::PathBuf;
 
 use pcrnet_core::Degeneracy;
-use pcrnet_train::eval::methods::{self, Method, MethodError, MethodKind};
-use pcrnet_train::io::read_cloud;
+use pcrnet_eval::methods::{self, Method, MethodError, MethodKind};
+use pcrnet_io::read_cloud;
 
 const KINDS: [MethodKind; 5] = [
     MethodKind::Device,
@@ -19,7 +19,7 @@ const KINDS: [MethodKind; 5] = [
 ];
 
 fn models() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
 }
 
 /// The blob each method takes: PointNetLK the f32 one.

@@ -6,13 +6,13 @@
 use std::path::PathBuf;
 
 use pcrnet_core::{Degeneracy, Error, Int8Model, MAX_TILE, Options, Registration};
-use pcrnet_train::register::{Bound, pipeline};
+use pcrnet_eval::register::{Bound, pipeline};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::TemplateError;
 
 fn shipped() -> Vec<u8> {
     let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/embedded-default-int8.pcrn");
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models/embedded-default-int8.pcrn");
     std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
@@ -195,8 +195,8 @@ fn sources_sampled_apart_from_the_template_are_judged_by_the_plane_residual() {
 fn a_cloud_larger_than_calibrated_is_flagged() {
     let blob = shipped();
     let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/embedded-default-source.xyz");
-    let source = pcrnet_train::io::read_cloud(&path).unwrap();
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models/embedded-default-source.xyz");
+    let source = pcrnet_io::read_cloud(&path).unwrap();
     let centre = pcrnet_core::pose::centroid(&source).unwrap();
     let scaled = |s: f32| -> Vec<[f32; 3]> {
         source

@@ -2,13 +2,14 @@
 //! needed): saved pair sets -> every method -> metrics -> RESULTS.md.
 
 use pcrnet_core::Arch;
-use pcrnet_train::eval::experiments::{Provenance, Report, Table, render_results};
-use pcrnet_train::eval::methods::{Method, MethodKind, run};
-use pcrnet_train::eval::pairs::{Pair, PairSet, PairSetSpec, Shapes};
-use pcrnet_train::eval::score;
+use pcrnet_eval::experiments::render_results;
+use pcrnet_eval::methods::{Method, MethodKind, run};
+use pcrnet_eval::pairs::{Pair, PairSet, PairSetSpec, Shapes};
+use pcrnet_eval::report::{Provenance, Report, Table};
+use pcrnet_eval::score;
+use pcrnet_train::data::{PairConfig, Sampling};
 use pcrnet_train::shapes::random_transform;
 use pcrnet_train::template::Reference;
-use pcrnet_train::train::data::{PairConfig, Sampling};
 use pcrnet_train::{CalibrationRule, F32Params, TrainedFor, quantize};
 
 fn temp_dir(tag: &str) -> std::path::PathBuf {
@@ -77,7 +78,7 @@ fn every_method_scores_deterministically() {
         let b = score(&m, model, &set, false).unwrap();
         assert_eq!(a.summary.count, 8);
         // Parallel and sequential runs give the same errors (times differ).
-        let errs = |s: &pcrnet_train::eval::MethodScore| {
+        let errs = |s: &pcrnet_eval::MethodScore| {
             s.pairs
                 .iter()
                 .map(|p| (p.rot_deg, p.trans, p.iterations))

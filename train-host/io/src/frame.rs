@@ -5,7 +5,7 @@
 //! `f32` (the spacing of `f32` at 5.4e6 is 0.5 m). `pcrnet register`
 //! therefore reads both clouds in `f64` and moves them by one shared local
 //! origin, the template's coordinate-wise median
-//! ([`crate::io::read_cloud_local`]), before rounding; the methods run in
+//! ([`crate::read_cloud_local`]), before rounding; the methods run in
 //! that local frame, and [`FilePose`] turns their pose back into the
 //! files' frame in `f64`.
 //!

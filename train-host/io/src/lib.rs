@@ -1,5 +1,11 @@
-//! Point cloud file readers: PCD, PLY, OFF (sampled to points), XYZ and
-//! CSV text.
+//! # pcrnet-io
+//!
+//! Point clouds in and out of files for the pcrnet tools, with no training
+//! dependency: readers for PCD, PLY, OFF (sampled to points), XYZ and CSV
+//! text and raw little-endian `f32` ([`mod@write`] has the writers), the file's
+//! own frame kept exact ([`frame`]), seeded reduction of large clouds
+//! ([`reduce`], with [`sampling`]'s farthest point sampling), and a
+//! progress bar for long jobs ([`progress`]).
 //!
 //! [`read_cloud`] picks the format from the file extension and returns the
 //! points as `[x, y, z]` in `f32`. Each format also has a `parse` function
@@ -40,9 +46,13 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+pub mod frame;
 pub mod off;
 pub mod pcd;
 pub mod ply;
+pub mod progress;
+pub mod reduce;
+pub mod sampling;
 pub mod write;
 pub mod xyz;
 

@@ -13,7 +13,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::progress::Progress;
-use crate::train::data::{farthest_point_sampling_with, random_subset};
+use crate::sampling::{farthest_point_sampling_with, random_subset};
 
 /// Points `pcrnet register` keeps by default: well above what the device
 /// uses (the network sees every point it is given; ICP scores 256), small

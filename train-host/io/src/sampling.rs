@@ -1,4 +1,5 @@
-//! Farthest point sampling: each pick is the point farthest from all those
+//! Sampling a cloud down to `k` of its points: a seeded random subset
+//! ([`random_subset`]), or farthest point sampling: each pick is the point farthest from all those
 //! picked so far (squared Euclidean distance; of equally far points, the
 //! first in the cloud's order), starting from a given point.
 //!
@@ -11,6 +12,9 @@
 //! and the first point at the largest distance, found by a second,
 //! early-stopping pass, is the one a scan in order would pick: the result
 //! is the straightforward loop's, bit for bit (see the tests).
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
 
 /// Points per group of running maxima.
 const LANES: usize = 8;
@@ -103,6 +107,17 @@ fn farthest(xs: &[f32], ys: &[f32], zs: &[f32], c: [f32; 3], dist: &mut [f32]) -
 #[inline(always)]
 fn lower(new: f32, old: f32) -> f32 {
     if new < old { new } else { old }
+}
+
+/// `k` distinct points of `cloud` in a random order (partial Fisher-Yates).
+pub fn random_subset(cloud: &[[f32; 3]], k: usize, rng: &mut ChaCha8Rng) -> Vec<[f32; 3]> {
+    let mut idx: Vec<usize> = (0..cloud.len()).collect();
+    let k = k.min(idx.len());
+    for i in 0..k {
+        let j = rng.random_range(i..idx.len());
+        idx.swap(i, j);
+    }
+    idx[..k].iter().map(|&i| cloud[i]).collect()
 }
 
 #[cfg(test)]

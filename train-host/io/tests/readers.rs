@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use pcrnet_train::io::{
+use pcrnet_io::{
     self, DEFAULT_OFF_SAMPLES, Format, FormatError, ReadError, off, pcd, ply, read_cloud,
     read_off_sampled, xyz,
 };
@@ -1016,7 +1016,7 @@ fn read_cloud_dispatches_by_extension() {
     assert_eq!(sampled, read_cloud(&off_file).unwrap());
     assert_eq!(
         sampled,
-        read_off_sampled(&off_file, DEFAULT_OFF_SAMPLES, io::DEFAULT_OFF_SEED).unwrap()
+        read_off_sampled(&off_file, DEFAULT_OFF_SAMPLES, pcrnet_io::DEFAULT_OFF_SEED).unwrap()
     );
     assert_eq!(read_off_sampled(&off_file, 10, 3).unwrap().len(), 10);
     assert_eq!(Format::from_path(Path::new("x/y.Ply")), Some(Format::Ply));
@@ -1166,7 +1166,7 @@ fn a_utf8_byte_order_mark_is_accepted_in_every_format() {
     ];
     for (name, body) in files {
         let path = temp_file(name, &cat(&[bom, body]));
-        let read = pcrnet_train::io::read_cloud(&path);
+        let read = pcrnet_io::read_cloud(&path);
         assert_eq!(
             read.unwrap_or_else(|e| panic!("{name}: {e}")),
             points,

@@ -6,9 +6,9 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use pcrnet_core::arch::{PAPER_ENCODER, PCRNET_HEAD};
-use pcrnet_train::train::dataset::Dataset;
-use pcrnet_train::train::{TrainConfig, Trainer};
+use pcrnet_train::dataset::Dataset;
 use pcrnet_train::{EMBEDDED_ENCODER, EMBEDDED_HEAD};
+use pcrnet_train::{TrainConfig, Trainer};
 
 fn train_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("train_step");

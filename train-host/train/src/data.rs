@@ -43,6 +43,7 @@
 //! only on (seed, epoch, slot): batches can be built in parallel and a run
 //! resumes at any step without replaying a generator.
 
+use pcrnet_io::sampling::{farthest_point_sampling, random_subset};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -159,8 +160,6 @@ pub fn mix_seed(seed: u64, a: u64, b: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-pub use super::fps::{farthest_point_sampling, farthest_point_sampling_with};
-
 /// Reduces (or pads) a cloud to `points` points and normalises it (see the
 /// module docs). Returns `None` for a cloud without finite points.
 pub fn preprocess(
@@ -244,17 +243,6 @@ pub fn reduce(
     };
     pad(&mut out, points, &mut rng);
     Some(out)
-}
-
-/// `k` distinct points of `cloud` in a random order (partial Fisher-Yates).
-pub(crate) fn random_subset(cloud: &[[f32; 3]], k: usize, rng: &mut ChaCha8Rng) -> Vec<[f32; 3]> {
-    let mut idx: Vec<usize> = (0..cloud.len()).collect();
-    let k = k.min(idx.len());
-    for i in 0..k {
-        let j = rng.random_range(i..idx.len());
-        idx.swap(i, j);
-    }
-    idx[..k].iter().map(|&i| cloud[i]).collect()
 }
 
 /// Pads by repeating random points of the original length.

@@ -16,8 +16,8 @@ use super::data::{
     reduce,
 };
 use super::model::Batch;
-use crate::io::{self, ReadError};
 use crate::shapes::{self, Shape};
+use pcrnet_io::{self as io, ReadError};
 
 /// Which split of a ModelNet-style folder.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -18,7 +18,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::train::geometry::Mat3;
+use crate::geometry::Mat3;
 
 /// Rotation error in degrees: the angle of the axis-angle form of
 /// `M = R_est R_gt^T`, computed in f64 as
@@ -193,7 +193,7 @@ impl Summary {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::geometry::{IDENTITY, euler_to_mat};
+    use crate::geometry::{IDENTITY, euler_to_mat};
 
     #[test]
     fn known_angles() {
@@ -203,7 +203,7 @@ mod tests {
         // Accurate near 0 and near 180 degrees, and symmetric.
         let a = euler_to_mat([0.3, -0.7, 1.1]);
         assert!(rotation_error_deg(&a, &a) < 1e-4);
-        let b = crate::train::geometry::mat_mul(&euler_to_mat([0.0, 0.0, 1e-3]), &a);
+        let b = crate::geometry::mat_mul(&euler_to_mat([0.0, 0.0, 1e-3]), &a);
         assert!((rotation_error_deg(&b, &a) - 1e-3f64.to_degrees()).abs() < 1e-3);
         assert!((rotation_error_deg(&a, &b) - rotation_error_deg(&b, &a)).abs() < 1e-9);
         let flip = euler_to_mat([std::f32::consts::PI, 0.0, 0.0]);

@@ -109,6 +109,6 @@ pub fn random_transform(pts: &[[f32; 3]], max_deg: f32, max_t: f32, seed: u64) -
     let a: [f32; 3] = std::array::from_fn(|_| rng.random_range(-max_deg..=max_deg).to_radians());
     let t: [f32; 3] = std::array::from_fn(|_| rng.random_range(-max_t..=max_t));
     // R = Rz * Ry * Rx
-    let r = crate::train::geometry::euler_to_mat(a);
-    crate::train::geometry::transform_points(&r, &t, pts)
+    let r = crate::geometry::euler_to_mat(a);
+    crate::geometry::transform_points(&r, &t, pts)
 }

@@ -14,7 +14,7 @@ use pcrnet_core::template::{self, MAX_GRID};
 use pcrnet_core::{F32Model, Frame, Int8Model};
 
 use crate::shapes::frame_of;
-use crate::train::data::farthest_point_sampling;
+use pcrnet_io::sampling::farthest_point_sampling;
 
 /// Model units per int16 step of stored template points: the template fills
 /// `[-0.5, 0.5]^3`, and a moved source point stays representable up to

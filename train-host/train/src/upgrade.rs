@@ -133,7 +133,7 @@ mod tests {
         ));
         let shipped = std::fs::read(
             std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../models/embedded-default-f32.pcrn"),
+                .join("../../models/embedded-default-f32.pcrn"),
         )
         .unwrap();
         let e = read_v2_f32(&shipped).unwrap_err();

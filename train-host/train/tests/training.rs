@@ -6,10 +6,10 @@ use std::path::PathBuf;
 
 use pcrnet_core::{Arch, F32Model, Int8Model, MAX_TILE, Options, Pose};
 use pcrnet_train::TrainedFor;
+use pcrnet_train::geometry::{apply, quat_to_mat};
+use pcrnet_train::model::{self, ModelKind};
 use pcrnet_train::template::Reference;
-use pcrnet_train::train::geometry::{apply, quat_to_mat};
-use pcrnet_train::train::model::{self, ModelKind};
-use pcrnet_train::train::{
+use pcrnet_train::{
     Checkpoint, Dataset, LossKind, PairConfig, RunOptions, Sampling, Schedule, Split, TrainConfig,
     Trainer, data, export, initial_params, rotation_error_deg,
 };
@@ -165,7 +165,7 @@ fn resume_equals_uninterrupted() {
     };
     first.run(&opts).unwrap();
     assert_eq!(first.progress.global_step, 5);
-    let ck = Checkpoint::load(&dir.join(pcrnet_train::train::CHECKPOINT_FILE)).unwrap();
+    let ck = Checkpoint::load(&dir.join(pcrnet_train::CHECKPOINT_FILE)).unwrap();
     assert_eq!(ck.progress.global_step, 4);
     let mut resumed = Trainer::from_checkpoint(ck, train, val).unwrap();
     let rest = resumed
@@ -179,11 +179,11 @@ fn resume_equals_uninterrupted() {
     assert_eq!(resumed.adam, full.adam);
     assert_eq!(resumed.progress, full.progress);
     // The last checkpoint on disk is the final state.
-    let last = Checkpoint::load(&dir.join(pcrnet_train::train::CHECKPOINT_FILE)).unwrap();
+    let last = Checkpoint::load(&dir.join(pcrnet_train::CHECKPOINT_FILE)).unwrap();
     assert_eq!(last, full.checkpoint());
     // The log lines agree apart from wall time.
     let log = |d: &PathBuf| -> Vec<serde_json::Value> {
-        std::fs::read_to_string(d.join(pcrnet_train::train::LOG_FILE))
+        std::fs::read_to_string(d.join(pcrnet_train::LOG_FILE))
             .unwrap()
             .lines()
             .map(|l| {
@@ -325,9 +325,9 @@ fn centred_pairs_keep_the_pose() {
     }
     // Validation compares the estimate with this same pose: a perfect
     // predictor scores zero.
-    let s = pcrnet_train::train::Summary::of(
+    let s = pcrnet_train::Summary::of(
         &[rotation_error_deg(&r, &r)],
-        &[pcrnet_train::train::translation_error(&t, &t)],
+        &[pcrnet_train::translation_error(&t, &t)],
         None,
     );
     assert!(
@@ -388,7 +388,7 @@ fn pairs_and_preprocessing() {
         .sqrt();
     assert!(rms > 1e-4 && rms < 0.05, "noise rms {rms}");
     // Farthest point sampling spreads points: its subset covers the box.
-    let fps = data::farthest_point_sampling(tpl, 16, 0);
+    let fps = pcrnet_io::sampling::farthest_point_sampling(tpl, 16, 0);
     assert_eq!(fps.len(), 16);
     let pre = data::preprocess(tpl, 50, Sampling::Fps, 1).unwrap();
     assert_eq!(pre.len(), 50);
@@ -412,7 +412,7 @@ fn a_folder_of_data_roots_is_refused() {
     }
     let e = Dataset::load_modelnet(&root, Split::Train, None, 32, Sampling::Random, 1).unwrap_err();
     assert!(
-        matches!(&e, pcrnet_train::train::dataset::DataError::NestedRoot { inner, .. } if inner.ends_with("mn")),
+        matches!(&e, pcrnet_train::dataset::DataError::NestedRoot { inner, .. } if inner.ends_with("mn")),
         "{e}"
     );
     assert!(e.to_string().contains("pass one root"), "{e}");
@@ -666,7 +666,7 @@ fn resampled_training_sources() {
     no_rest.rest[4].clear();
     let name = no_rest.names[4].clone();
     match Trainer::new(config, no_rest, val) {
-        Err(e @ pcrnet_train::train::TrainError::NothingToResample(_)) => {
+        Err(e @ pcrnet_train::TrainError::NothingToResample(_)) => {
             let msg = e.to_string();
             assert!(msg.contains(&name) && msg.contains("--points"), "{msg}");
         }

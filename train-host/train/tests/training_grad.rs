@@ -2,12 +2,12 @@
 
 use pcrnet_core::Arch;
 use pcrnet_train::F32Params;
-use pcrnet_train::train::geometry::{
+use pcrnet_train::geometry::{
     Mat3, pose_from_raw, pose_from_raw_backward, transform_points, transform_points_backward,
 };
-use pcrnet_train::train::loss::{chamfer, chamfer_value, pose_loss};
-use pcrnet_train::train::model::{self, Batch, ModelKind};
-use pcrnet_train::train::{Dataset, LossKind, PairConfig, initial_params, ops};
+use pcrnet_train::loss::{chamfer, chamfer_value, pose_loss};
+use pcrnet_train::model::{self, Batch, ModelKind};
+use pcrnet_train::{Dataset, LossKind, PairConfig, initial_params, ops};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -10,11 +10,11 @@ pub(super) use sweeps::{noise, partial, sparse};
 pub(super) use timing::{iterations, speed};
 
 use super::MethodScore;
-use super::experiments::{
+use super::methods::{Method, MethodKind};
+use crate::report::{
     Context, Recorder, Report, Run, SEEN, Table, UNSEEN, label, modelnet10, pair_set, success_chart,
 };
-use super::methods::{Method, MethodKind};
-use crate::train::data::PairConfig;
+use pcrnet_train::data::PairConfig;
 
 /// The summary table's header.
 fn summary_header(first: &str) -> Vec<String> {

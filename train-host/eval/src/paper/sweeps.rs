@@ -1,16 +1,14 @@
 //! The paper's sweeps: `noise`, `partial` and `sparse`, each one recipe of
 //! pair sets over a swept value, its charts and its summary table.
 
-use super::super::experiments::{
-    Context, Recorder, Report, Run, folder, label, modelnet10, pair_set,
-};
-use super::super::methods::Method;
-use super::super::metrics::Summary;
-use super::super::pairs::PairSetSpec;
-use super::super::plot::{Chart, Corner, Series};
-use super::super::recipes::{Model, NamedBlob, PARTIAL_RECIPE};
 use super::{icp, ipcrnet, lk, pcrnet, summary_table};
-use crate::train::data::PairConfig;
+use crate::methods::Method;
+use crate::pairs::PairSetSpec;
+use crate::plot::{Chart, Corner, Series};
+use crate::recipes::{Model, NamedBlob, PARTIAL_RECIPE};
+use crate::report::{Context, Recorder, Report, Run, folder, label, modelnet10, pair_set};
+use pcrnet_train::data::PairConfig;
+use pcrnet_train::metrics::Summary;
 
 /// A chart of one summary value against a swept parameter.
 fn sweep_chart(
@@ -137,7 +135,7 @@ const AUC_CHART: SweepChart = SweepChart {
     value: |s| s.auc,
 };
 
-pub(in crate::eval) fn noise(ctx: &Context) -> anyhow::Result<Report> {
+pub(crate) fn noise(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "noise");
     let pc = rec.model("mn10-pcrnet")?;
@@ -179,7 +177,7 @@ pub(in crate::eval) fn noise(ctx: &Context) -> anyhow::Result<Report> {
     sweep(rec, &sets, &methods, report, started)
 }
 
-pub(in crate::eval) fn partial(ctx: &Context) -> anyhow::Result<Report> {
+pub(crate) fn partial(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "partial");
     let full = rec.model("air-ipcrnet")?;
@@ -221,7 +219,7 @@ pub(in crate::eval) fn partial(ctx: &Context) -> anyhow::Result<Report> {
     sweep(rec, &sets, &methods, report, started)
 }
 
-pub(in crate::eval) fn sparse(ctx: &Context) -> anyhow::Result<Report> {
+pub(crate) fn sparse(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "sparse");
     let pc = rec.model("mn10-pcrnet")?;

@@ -2,19 +2,19 @@
 //! with the int8 / f32 precision gap) and `iterations` (error per pass or
 //! step).
 
-use super::super::experiments::{
+use super::{icp, ipcrnet, lk, pcrnet};
+use crate::methods::{Method, MethodError, run};
+use crate::pairs::Pair;
+use crate::plot::{Chart, Corner, Series};
+use crate::recipes::Model;
+use crate::report::{
     Context, Recorder, Report, Table, folder, label, machine, modelnet10, pair_set, success_chart,
 };
-use super::super::methods::{Method, MethodError, run};
-use super::super::metrics;
-use super::super::pairs::Pair;
-use super::super::plot::{Chart, Corner, Series};
-use super::super::recipes::Model;
-use super::super::{MethodScore, score};
-use super::{icp, ipcrnet, lk, pcrnet};
-use crate::train::data::PairConfig;
+use crate::{MethodScore, score};
+use pcrnet_train::data::PairConfig;
+use pcrnet_train::metrics;
 
-pub(in crate::eval) fn speed(ctx: &Context) -> anyhow::Result<Report> {
+pub(crate) fn speed(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "speed");
     let pc = rec.model("air-pcrnet")?;
@@ -192,7 +192,7 @@ fn trajectory_means(
         .collect())
 }
 
-pub(in crate::eval) fn iterations(ctx: &Context) -> anyhow::Result<Report> {
+pub(crate) fn iterations(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "iterations");
     let ipc = rec.model("mn10-ipcrnet")?;

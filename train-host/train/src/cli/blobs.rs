@@ -42,7 +42,7 @@ pub(super) fn load_template(
     stored: usize,
     seed: u64,
 ) -> anyhow::Result<Reference> {
-    let raw = crate::io::read_cloud(path)?;
+    let raw = pcrnet_io::read_cloud(path)?;
     let reduced = data::reduce(&raw, points, Sampling::Fps, seed)
         .with_context(|| format!("{}: no finite point", path.display()))?;
     Reference::new(&reduced, stored).with_context(|| format!("{}", path.display()))

@@ -179,7 +179,7 @@ pub struct TrainArgs {
 
 /// How sources are made from templates: the same flags, with the same
 /// meaning, in `pcrnet train` and `pcrnet pairs` (see
-/// [`crate::train::data`] for the order they apply in).
+/// [`crate::data`] for the order they apply in).
 #[derive(Debug, Clone, Args)]
 pub struct PairArgs {
     /// Largest Euler angle per axis (degrees).
@@ -416,7 +416,7 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
     let config = config_from(&args)?;
     std::fs::create_dir_all(&args.out)?;
     let ck_path = args.out.join(CHECKPOINT_FILE);
-    let log_path = args.out.join(crate::train::LOG_FILE);
+    let log_path = args.out.join(crate::LOG_FILE);
     let earlier = ck_path.exists() || log_path.exists();
     if earlier && !args.resume {
         anyhow::ensure!(
@@ -476,7 +476,7 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
     } else {
         Trainer::new(config, train, val)?
     };
-    crate::train::checkpoint::write_atomic(
+    crate::checkpoint::write_atomic(
         &args.out.join("config.json"),
         serde_json::to_string_pretty(&trainer.config)?.as_bytes(),
     )?;

@@ -8,8 +8,8 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use pcrnet_core::Degeneracy;
 
-use crate::eval::methods::self_degeneracy;
-use crate::io::{DEFAULT_MAX_POINTS, Format, read_cloud_local};
+use crate::degeneracy::self_degeneracy;
+use pcrnet_io::{DEFAULT_MAX_POINTS, Format, read_cloud_local};
 
 /// Reads the object as training will and refuses one that fixes no pose
 /// (no extent, its points on a line or in one spot); says how many points
