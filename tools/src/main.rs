@@ -6,6 +6,7 @@
 
 mod aarch64;
 mod fuzz;
+mod minimal;
 mod no_panic;
 mod ort_bench;
 mod profile;
@@ -24,8 +25,9 @@ cargo xtask <command>
   ci            everything CI checks: fmt, clippy -D warnings (host and
                 firmware crates), docs, core for thumbv7em-none-eabihf,
                 the no-panic proof, the C header, the QEMU harness on
-                every core, the C example, the aarch64 kernels, every
-                fuzz target for 30 s, then the host tests
+                every core, the C example, the minimal examples (Rust
+                and C), the aarch64 kernels, every fuzz target for
+                30 s, then the host tests
   demo          the main job: register the shipped source with the trained
                 embedded default (int8) through the device pipeline, and say
                 whether the pose is reliable; extra arguments go to
@@ -65,6 +67,10 @@ cargo xtask <command>
   c-example     build the C firmware example (firmware-c/, arm-none-eabi-gcc
                 linking libpcrnet.a), run it under QEMU and compare every
                 result with the host bit for bit
+  minimal       build the minimal firmware examples as a user would
+                (examples/minimal-firmware with cargo, examples/minimal-c
+                with make) and run each under QEMU (mps2-an386): each
+                must print a reliable pose
   c-header [--check]
                 write capi/include/pcrnet.h from the C API crate (cbindgen);
                 --check fails if the committed header differs
@@ -110,6 +116,7 @@ fn main() -> ExitCode {
             .and_then(|()| ensure_qemu())
             .and_then(|()| profile::run(&root())),
         Some("c-example") => c_example(),
+        Some("minimal") => minimal::run(&root()),
         Some("c-header") => c_header(args.get(1).map(String::as_str) == Some("--check")),
         Some("no-panic") => no_panic::run(&root()),
         Some("fuzz") => fuzz_seconds(&args[1..]).and_then(|s| fuzz::run(&root(), s)),
@@ -237,7 +244,12 @@ fn cores() -> Result<(), String> {
 const CI_FUZZ_SECONDS: u64 = 30;
 
 /// The crates built for the device, outside the host workspace.
-const FIRMWARE_CRATES: [&str; 3] = ["firmware-example", "tests/firmware", "tests/no-panic"];
+const FIRMWARE_CRATES: [&str; 4] = [
+    "firmware-example",
+    "examples/minimal-firmware",
+    "tests/firmware",
+    "tests/no-panic",
+];
 
 /// Installs Debian `packages` through apt-get unless `probe` runs.
 fn ensure_apt(probe: &str, packages: &[&str]) -> Result<(), String> {
@@ -258,15 +270,20 @@ fn ensure_qemu() -> Result<(), String> {
     ensure_apt("qemu-system-arm", &["qemu-system-arm"])
 }
 
-/// The C example's toolchain: GCC for Arm, newlib, make.
+/// The C example, compared with the host by the harness.
 fn c_example() -> Result<(), String> {
     ensure_target()?;
     ensure_qemu()?;
+    ensure_arm_gcc()?;
+    harness(&["c-example"])
+}
+
+/// The C examples' toolchain: GCC for Arm, newlib, make.
+fn ensure_arm_gcc() -> Result<(), String> {
     ensure_apt(
         "arm-none-eabi-gcc",
         &["gcc-arm-none-eabi", "libnewlib-arm-none-eabi", "make"],
-    )?;
-    harness(&["c-example"])
+    )
 }
 
 /// Runs the harness binary (tests/) in release mode.
@@ -366,6 +383,9 @@ fn ci() -> Result<(), String> {
     steps.time("QEMU harness, Cortex-M4F (qemu-test)", qemu_test)?;
     steps.time("QEMU harness, other cores (cores)", cores)?;
     steps.time("C example under QEMU", c_example)?;
+    steps.time("minimal firmware (Rust and C) under QEMU", || {
+        minimal::run(&root())
+    })?;
     steps.time("aarch64 kernels under qemu-aarch64", aarch64::test)?;
     steps.time("fuzzing", || {
         run_in(
