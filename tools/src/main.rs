@@ -23,7 +23,8 @@ const HELP: &str = "\
 cargo xtask <command>
 
   ci            everything CI checks: fmt, clippy -D warnings (host and
-                firmware crates), docs, core for thumbv7em-none-eabihf,
+                firmware crates), docs, the publish dry-run of pcrnet-core
+                and pcrnet-io, core for thumbv7em-none-eabihf,
                 the no-panic proof, the C header, the QEMU harness on
                 every core, the C example, the minimal examples (Rust
                 and C), the aarch64 kernels, every fuzz target for
@@ -379,6 +380,19 @@ fn ci() -> Result<(), String> {
             &["doc", "--workspace", "--no-deps"],
             &[("RUSTDOCFLAGS", "-D warnings")],
         )
+    })?;
+    steps.time("publish dry-run (pcrnet-core, pcrnet-io)", || {
+        // Both packages as crates.io would build them: pcrnet-io against
+        // the packaged pcrnet-core, each from its own file list.
+        cargo(&[
+            "publish",
+            "--dry-run",
+            "--allow-dirty",
+            "-p",
+            "pcrnet-core",
+            "-p",
+            "pcrnet-io",
+        ])
     })?;
     steps.time("QEMU harness, Cortex-M4F (qemu-test)", qemu_test)?;
     steps.time("QEMU harness, other cores (cores)", cores)?;

@@ -167,6 +167,7 @@ fn writers_round_trip_exactly() {
                 Format::Ply => ply::parse_f64_limited(bytes, 10).unwrap(),
                 Format::Xyz | Format::Csv => xyz::parse_f64_limited(bytes, 10).unwrap(),
                 Format::Off => off::parse_limited(bytes, 10).unwrap().vertices,
+                Format::F32 => pcrnet_io::raw::parse_f64_limited(bytes, 10).unwrap(),
             }
         };
         let back = read(&encode(format, &f64s));
@@ -177,6 +178,12 @@ fn writers_round_trip_exactly() {
         for (b, p) in back.iter().zip(&f32s) {
             assert_eq!(b.map(f32::to_bits), p.map(f32::to_bits), "{format}");
         }
+    }
+    // Raw .f32 holds f32 only: f32 clouds come back bit for bit.
+    let back = Format::F32.parse(&encode(Format::F32, &f32s)).unwrap();
+    assert_eq!(back.len(), f32s.len());
+    for (b, p) in back.iter().zip(&f32s) {
+        assert_eq!(b.map(f32::to_bits), p.map(f32::to_bits));
     }
 }
 

@@ -51,6 +51,7 @@ pub mod off;
 pub mod pcd;
 pub mod ply;
 pub mod progress;
+pub mod raw;
 pub mod reduce;
 pub mod sampling;
 pub mod write;
@@ -220,11 +221,14 @@ pub enum Format {
     /// Comma-separated text (`.csv`): read as [`Format::Xyz`] (a first
     /// line of column names is skipped), written with an `x,y,z` header.
     Csv,
+    /// Raw little-endian `f32` `x y z` triples (`.f32`, no header; see
+    /// [`raw`]): what firmware links.
+    F32,
 }
 
 impl Format {
     /// Format named by the extension of `path` (case-insensitive):
-    /// `.pcd`, `.ply`, `.off`, `.xyz`, `.txt` or `.csv`.
+    /// `.pcd`, `.ply`, `.off`, `.xyz`, `.txt`, `.csv` or `.f32`.
     pub fn from_path(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         match ext.as_str() {
@@ -233,6 +237,7 @@ impl Format {
             "off" => Some(Format::Off),
             "xyz" | "txt" => Some(Format::Xyz),
             "csv" => Some(Format::Csv),
+            "f32" => Some(Format::F32),
             _ => None,
         }
     }
@@ -267,11 +272,17 @@ impl Format {
         max_points: usize,
         origin: Option<[f64; 3]>,
     ) -> Result<LocalCloud, FormatError> {
-        let bytes = strip_bom(bytes);
+        // A BOM is text's; raw f32 bytes are taken as they are.
+        let bytes = if self == Format::F32 {
+            bytes
+        } else {
+            strip_bom(bytes)
+        };
         let points = match self {
             Format::Pcd => pcd::parse_f64_limited(bytes, max_points)?,
             Format::Ply => ply::parse_f64_limited(bytes, max_points)?,
             Format::Xyz | Format::Csv => xyz::parse_f64_limited(bytes, max_points)?,
+            Format::F32 => raw::parse_f64_limited(bytes, max_points)?,
             Format::Off => {
                 let mesh = off::parse_limited(bytes, max_points)?;
                 let origin = origin.unwrap_or_else(|| median(&mesh.vertices));
@@ -360,6 +371,7 @@ impl fmt::Display for Format {
             Format::Off => "OFF",
             Format::Xyz => "XYZ",
             Format::Csv => "CSV",
+            Format::F32 => "raw f32",
         })
     }
 }

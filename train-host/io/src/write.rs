@@ -14,6 +14,7 @@
 //! | `.xyz`, `.txt` | one `x y z` line per point |
 //! | `.csv` | an `x,y,z` header, then one `x,y,z` line per point |
 //! | `.off` | `OFF` with the points as vertices and no faces |
+//! | `.f32` | raw little-endian `f32` `x y z` triples, no header (f64 coordinates rounded to f32: the format has no other type) |
 
 use std::fmt::Debug;
 use std::path::{Path, PathBuf};
@@ -28,6 +29,8 @@ pub trait Coordinate: Copy + Debug {
     const PLY_TYPE: &'static str;
     /// Appends the little-endian bytes.
     fn put_le(self, out: &mut Vec<u8>);
+    /// The value as `f32` (rounded to nearest from `f64`), for `.f32`.
+    fn to_f32(self) -> f32;
 }
 
 impl Coordinate for f32 {
@@ -35,6 +38,9 @@ impl Coordinate for f32 {
     const PLY_TYPE: &'static str = "float";
     fn put_le(self, out: &mut Vec<u8>) {
         out.extend_from_slice(&self.to_le_bytes());
+    }
+    fn to_f32(self) -> f32 {
+        self
     }
 }
 
@@ -44,6 +50,9 @@ impl Coordinate for f64 {
     fn put_le(self, out: &mut Vec<u8>) {
         out.extend_from_slice(&self.to_le_bytes());
     }
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
 }
 
 /// Failure to write a cloud file.
@@ -52,7 +61,7 @@ impl Coordinate for f64 {
 pub enum WriteError {
     /// The extension names no supported format.
     #[error(
-        "{}: unknown point cloud format to write (use the extension .pcd, .ply, .xyz, .txt or .off)",
+        "{}: unknown point cloud format to write (use the extension .pcd, .ply, .xyz, .txt, .csv, .off or .f32)",
         path.display()
     )]
     UnknownFormat {
@@ -108,6 +117,11 @@ pub fn encode<C: Coordinate>(format: Format, points: &[[C; 3]]) -> Vec<u8> {
         Format::Xyz => text_lines(String::new(), points, ' ').into_bytes(),
         Format::Csv => text_lines("x,y,z\n".into(), points, ',').into_bytes(),
         Format::Off => text_lines(format!("OFF\n{n} 0 0\n"), points, ' ').into_bytes(),
+        Format::F32 => points
+            .iter()
+            .flatten()
+            .flat_map(|c| c.to_f32().to_le_bytes())
+            .collect(),
     }
 }
 
