@@ -575,6 +575,28 @@ mod tests {
         assert!(err(&["--avx2", "--avx2"]).contains("one of"));
     }
 
+    /// Each `<!-- SNIPPET: PATH -->` in the README is followed by a fenced
+    /// block holding exactly PATH's text, so the README's firmware code is
+    /// the code CI builds and runs (`cargo xtask minimal`).
+    #[test]
+    fn readme_snippets_are_the_examples() {
+        let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+        let mut found = 0;
+        for (at, _) in readme.match_indices("<!-- SNIPPET: ") {
+            let rest = &readme[at + "<!-- SNIPPET: ".len()..];
+            let (path, rest) = rest.split_once(" -->\n```").unwrap();
+            let (_lang, rest) = rest.split_once('\n').unwrap();
+            let (block, _) = rest.split_once("```").unwrap();
+            let file = std::fs::read_to_string(root().join(path)).unwrap();
+            assert_eq!(
+                block, file,
+                "README's copy of {path} differs: paste the file again"
+            );
+            found += 1;
+        }
+        assert_eq!(found, 2, "the README shows the Rust and the C example");
+    }
+
     /// Seconds per fuzz target: 60 by default, a number, or an error.
     #[test]
     fn fuzz_arguments() {
