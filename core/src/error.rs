@@ -2,7 +2,7 @@
 
 use core::fmt;
 
-use crate::format::ModelKind;
+use crate::header::ModelKind;
 
 /// Everything that can go wrong when loading a model or running inference.
 ///
@@ -106,7 +106,7 @@ impl fmt::Display for Error {
         match *self {
             Error::BadMagic => write!(f, "not a model blob: magic bytes `PCRN` missing"),
             Error::UnsupportedVersion { found } => {
-                let reads = crate::format::FORMAT_VERSION;
+                let reads = crate::header::FORMAT_VERSION;
                 if found > reads {
                     write!(
                         f,
@@ -121,8 +121,8 @@ impl fmt::Display for Error {
             }
             Error::WrongKind { expected, found } => {
                 let wanted = match expected {
-                    crate::format::ModelKind::Int8 => "an int8 model",
-                    crate::format::ModelKind::F32 => "an f32 model",
+                    crate::header::ModelKind::Int8 => "an int8 model",
+                    crate::header::ModelKind::F32 => "an f32 model",
                 };
                 match found {
                     0 => write!(f, "the blob holds an int8 model; this needs {wanted}")?,

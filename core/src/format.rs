@@ -26,11 +26,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::arch::{Arch, MAX_LAYERS};
 use crate::error::{Error, Result};
+pub use crate::header::{FORMAT_VERSION, ModelKind};
 
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"PCRN";
-/// Format version written and read by this build.
-pub const FORMAT_VERSION: u16 = 3;
 /// Most symmetry turns a blob may store (so at most `1 + MAX_TURNS` hypotheses).
 pub const MAX_TURNS: usize = 15;
 /// Bytes before the payload.
@@ -49,16 +48,6 @@ type CrcTable = crc::Table<1>;
 
 /// CRC-32 (ISO-HDLC, as zlib) over a blob's header and payload.
 static CRC32: crc::Crc<u32, CrcTable> = crc::Crc::<u32, CrcTable>::new(&crc::CRC_32_ISO_HDLC);
-
-/// What the payload holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum ModelKind {
-    /// Quantized int8 network for the device ([`Int8Payload`]).
-    Int8 = 0,
-    /// f32 reference network ([`F32Payload`]).
-    F32 = 1,
-}
 
 /// How the user's coordinates (the template file's and the sensor's units
 /// and axes) map to the frame the network works in:

@@ -90,6 +90,7 @@ mod error;
 pub mod fixed;
 pub mod float;
 pub mod format;
+mod header;
 pub mod int8;
 mod kernel;
 pub mod pose;

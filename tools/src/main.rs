@@ -5,6 +5,8 @@
 //! only a Rust toolchain.
 
 mod aarch64;
+#[cfg(test)]
+mod circles;
 mod fuzz;
 mod minimal;
 mod no_panic;

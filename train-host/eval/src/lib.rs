@@ -53,6 +53,9 @@ pub fn pose_from_matrix(r: &Matrix3<f64>, t: &Vector3<f64>) -> Pose {
     }
 }
 
+/// A model blob with its name.
+pub type NamedBlob<'a> = (&'a str, &'a [u8]);
+
 /// The errors of one registration.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PairScore {
@@ -124,7 +127,7 @@ pub struct ScoreError {
 /// [`MethodScore::failures`]. A missing model is an error.
 pub fn score(
     method: &Method,
-    model: Option<(&str, &[u8])>,
+    model: Option<NamedBlob<'_>>,
     pairs: &[Pair],
     parallel: bool,
 ) -> Result<MethodScore, ScoreError> {

@@ -6,7 +6,8 @@ use std::path::Path;
 use anyhow::Context as _;
 use clap::Parser;
 
-use crate::report::Context;
+use crate::NamedBlob;
+use crate::report::{Context, Recorder};
 use pcrnet_train::export::{F32_BLOB, INT8_BLOB};
 
 /// What a recipe trains on, below the data root.
@@ -253,9 +254,6 @@ impl Recipe {
     }
 }
 
-/// A model blob with its name.
-pub type NamedBlob<'a> = (&'a str, &'a [u8]);
-
 /// A trained model's two blobs.
 pub struct Model {
     pub(super) name: String,
@@ -298,6 +296,20 @@ pub(super) fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
         int8: read(&i8p)?,
         f32: read(&f32p)?,
     })
+}
+
+impl Recorder<'_> {
+    /// Loads model `name` ([`model`]) and records it with its training
+    /// command in the report's provenance.
+    pub(crate) fn model(&mut self, name: &str) -> anyhow::Result<Model> {
+        let m = model(self.ctx, name)?;
+        if let Some(r) = Recipe::named(name) {
+            let cmd = r.command(&self.ctx.data, &self.ctx.work.join("models").join(name));
+            self.models
+                .push((name.to_string(), format!("pcrnet train {}", cmd.join(" "))));
+        }
+        Ok(m)
+    }
 }
 
 #[cfg(test)]

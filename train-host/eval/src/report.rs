@@ -12,7 +12,6 @@ use serde::{Deserialize, Serialize};
 use super::methods::Method;
 use super::pairs::{Pair, PairSet, PairSetSpec, Shapes};
 use super::plot::{Chart, Corner, Series, draw};
-use super::recipes::{Model, NamedBlob, Recipe};
 use super::{MethodScore, score};
 use pcrnet_train::data::{PairConfig, Sampling};
 use pcrnet_train::metrics::{self, Summary};
@@ -182,7 +181,9 @@ pub(super) struct Recorder<'a> {
     pub(super) runs: Vec<Run>,
     pub(super) raw: Vec<(String, MethodScore)>,
     plots: Vec<String>,
-    models: Vec<(String, String)>,
+    /// The models used, with their training commands ([`Recorder::model`]
+    /// in `recipes`, which loads and records them).
+    pub(crate) models: Vec<(String, String)>,
 }
 
 impl<'a> Recorder<'a> {
@@ -202,22 +203,12 @@ impl<'a> Recorder<'a> {
         self.name
     }
 
-    pub(super) fn model(&mut self, name: &str) -> anyhow::Result<Model> {
-        let m = super::recipes::model(self.ctx, name)?;
-        if let Some(r) = Recipe::named(name) {
-            let cmd = r.command(&self.ctx.data, &self.ctx.work.join("models").join(name));
-            self.models
-                .push((name.to_string(), format!("pcrnet train {}", cmd.join(" "))));
-        }
-        Ok(m)
-    }
-
     /// Scores `method` on `pairs`, records it and returns its summary.
     pub(super) fn score(
         &mut self,
         set: &str,
         method: Method,
-        model: Option<NamedBlob<'_>>,
+        model: Option<crate::NamedBlob<'_>>,
         pairs: &[Pair],
         parallel: bool,
     ) -> anyhow::Result<Summary> {

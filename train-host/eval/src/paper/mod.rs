@@ -1,6 +1,6 @@
 //! The experiments that repeat the paper's (Sarode et al. 2020):
 //! `generalisation`, `noise`, `partial`, `sparse`, `speed` (its Table 1)
-//! and `iterations`. They run on [`super::experiments`]' framework (pair
+//! and `iterations`. They run on [`crate::report`]'s framework (pair
 //! sets, models, reports); this project's own questions are in
 //! [`super::trust`], [`super::resampled`] and [`super::heldout`].
 

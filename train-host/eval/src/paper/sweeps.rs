@@ -2,10 +2,11 @@
 //! pair sets over a swept value, its charts and its summary table.
 
 use super::{icp, ipcrnet, lk, pcrnet, summary_table};
+use crate::NamedBlob;
 use crate::methods::Method;
 use crate::pairs::PairSetSpec;
 use crate::plot::{Chart, Corner, Series};
-use crate::recipes::{Model, NamedBlob, PARTIAL_RECIPE};
+use crate::recipes::{Model, PARTIAL_RECIPE};
 use crate::report::{Context, Recorder, Report, Run, folder, label, modelnet10, pair_set};
 use pcrnet_train::data::PairConfig;
 use pcrnet_train::metrics::Summary;
