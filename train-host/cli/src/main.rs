@@ -5,10 +5,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+
+mod register;
 use pcrnet_core::{Arch, F32Model, Int8Model};
 use pcrnet_eval::cli::MethodOptions;
-use pcrnet_eval::methods::{self, MethodKind};
-use pcrnet_io::frame::FilePose;
+use pcrnet_eval::methods::MethodKind;
 use pcrnet_io::progress::Progress;
 use pcrnet_io::reduce::{Reduction, reduce_cloud};
 use pcrnet_io::write::Coordinate;
@@ -18,6 +19,7 @@ use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use pcrnet_train::{
     CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, TrainedFor, inspect, quantize,
 };
+use register::{Output, register};
 
 #[derive(Parser)]
 #[command(
@@ -321,17 +323,6 @@ fn run(command: Command) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Where `register` writes besides standard output.
-struct Output {
-    /// The source moved onto the template (format by extension).
-    aligned: Option<PathBuf>,
-    /// The result as JSON (`-`: standard output).
-    json: Option<PathBuf>,
-}
-
-/// Registers `source` onto `template` (the blob's own when `None`), both
-/// given about `origin` in the files' frame, and reports the pose in the
-/// files' frame.
 /// `pcrnet inspect MODEL --c-header` / `--rust`: the int8 blob's scratch
 /// length at tile `MAX_TILE` (what `register` needs, from
 /// `pcrnet_core::scratch_len_for`) and its length, for firmware to size
@@ -359,204 +350,6 @@ fn sizes_text(path: &Path, blob: &[u8], c: bool) -> anyhow::Result<String> {
              pub const BLOB_LEN: usize = {len};\n"
         )
     })
-}
-
-/// The shipped embedded default (`models/`), built into the binary so that
-/// `pcrnet register TEMPLATE SOURCE` runs anywhere without `--model`: the
-/// int8 blob for the network methods, the f32 blob for PointNetLK (which
-/// needs f32 features), none for ICP. With its file name, to say which.
-fn shipped_model(kind: MethodKind) -> Option<(&'static [u8], &'static str)> {
-    match kind {
-        MethodKind::Icp => None,
-        MethodKind::Pointnetlk => Some((
-            include_bytes!("../../../models/embedded-default-f32.pcrn"),
-            "models/embedded-default-f32.pcrn",
-        )),
-        MethodKind::Pcrnet | MethodKind::Ipcrnet | MethodKind::Device => Some((
-            include_bytes!("../../../models/embedded-default-int8.pcrn"),
-            "models/embedded-default-int8.pcrn",
-        )),
-    }
-}
-
-fn register(
-    template: Option<Vec<[f32; 3]>>,
-    source: &[[f32; 3]],
-    origin: [f64; 3],
-    kind: MethodKind,
-    options: &MethodOptions,
-    Output { aligned, json }: Output,
-) -> anyhow::Result<()> {
-    options.check()?;
-    let method = options.method(kind);
-    let (blob, model_note) = match options.read_model()? {
-        Some(blob) => (Some(blob), None),
-        None => match shipped_model(kind) {
-            Some((blob, name)) => (
-                Some(blob.to_vec()),
-                Some(format!(
-                    "model: the shipped embedded default ({name}, built into pcrnet; --model FILE to use another)"
-                )),
-            ),
-            None => (None, None),
-        },
-    };
-    options.check_hypotheses(kind, blob.as_deref(), template.is_some())?;
-    if let Some(warning) = options.mode_warning(kind, blob.as_deref()) {
-        eprintln!("warning: {warning}");
-    }
-    let registering = Progress::spinner(format!("registering with {}", method.name(None)));
-    let out = methods::run(&method, blob.as_deref(), template.as_deref(), source);
-    drop(registering);
-    let out = out.with_context(|| match &options.model {
-        Some(path) => format!("registering with {}", path.display()),
-        None => "registering".into(),
-    })?;
-    let pose = FilePose::from_local(&out.pose, origin);
-    // With --json -, standard output carries the JSON alone.
-    let to_stdout = json.as_deref() == Some(Path::new("-"));
-    let say = |line: String| {
-        if to_stdout {
-            eprintln!("{line}");
-        } else {
-            write_stdout(&format!("{line}\n"));
-        }
-    };
-    say(format!(
-        "method: {}, {} pass(es)/step(s){}",
-        method.name(out.precision),
-        out.iterations,
-        match (kind, &template) {
-            (MethodKind::Device, None) => " - the firmware's pipeline, the blob's own template",
-            (MethodKind::Device, Some(_)) =>
-                " - the firmware's pipeline, with the given template bound into the model",
-            _ => "",
-        }
-    ));
-    if let Some(note) = model_note {
-        say(note);
-    }
-    say(format!("time: {:.3} ms", out.seconds * 1e3));
-    say(format!("quaternion (w, x, y, z): {:?}", out.pose.rotation));
-    if origin == [0.0; 3] {
-        // The f32 values a device gives.
-        say(format!("translation: {:?}", out.pose.translation));
-    } else {
-        say(format!("translation: {:?}", pose.translation));
-        say(format!(
-            "local origin (the median of the template file's points, or of an OFF mesh's vertices; both clouds were moved by it before rounding to f32): {origin:?}; translation about it: {:?}",
-            pose.local_translation
-        ));
-    }
-    say("matrix (maps source onto template, in the files' frame):".into());
-    for row in pose.matrix() {
-        say(format!(
-            "  [{:>10.6} {:>10.6} {:>10.6} {:>10.6}]",
-            row[0], row[1], row[2], row[3]
-        ));
-    }
-    if let (None, Some(d)) = (&out.check, out.degenerate) {
-        say(format!(
-            "degenerate source: {d:?} - its points do not determine a rotation; do not act on this pose"
-        ));
-    }
-    if let Some(c) = &out.check {
-        say(format!(
-            "residual: {:.6} (source units), {:.4} of the template's size; plane residual {:.6}, {:.4} of the size; fitness {:.3}; inlier RMSE {:.6}",
-            c.residual,
-            c.relative_residual,
-            c.plane_residual,
-            c.relative_plane_residual,
-            c.fitness,
-            c.inlier_rmse
-        ));
-        say(format!(
-            "hypothesis {} won; {} ICP iteration(s); {} saturated int8 value(s){}",
-            c.hypothesis,
-            c.icp_iterations,
-            c.saturated,
-            match c.degenerate {
-                Some(d) => format!("; degenerate source: {d:?}"),
-                None => String::new(),
-            }
-        ));
-        if c.saturated > 0 {
-            say(format!(
-                "{} int8 value(s) clipped at the top of their range: the cloud is larger than the model was calibrated for (another scale or object?); the int8 pose can differ from the f32 model's",
-                c.saturated
-            ));
-        }
-        if c.out_of_range > 0 {
-            say(format!(
-                "{} point(s) outside the model's input range were left out of the network and the centring (stray points far from the object)",
-                c.out_of_range
-            ));
-        }
-        say(if c.reliable {
-            "trust: RELIABLE (relative plane residual within the threshold)".into()
-        } else {
-            "trust: NOT RELIABLE - do not act on this pose (plane residual above the threshold, or a degenerate source)".into()
-        });
-    }
-    if let Some(out_path) = aligned {
-        if origin == [0.0; 3] {
-            // In f32, exactly as a device moves the points.
-            let moved: Vec<[f32; 3]> = source
-                .iter()
-                .map(|&p| out.pose.transform_point(p))
-                .collect();
-            write_cloud(&out_path, &moved)?;
-        } else {
-            let moved: Vec<[f64; 3]> = source
-                .iter()
-                .map(|p| pose.transform_point([0, 1, 2].map(|k| origin[k] + f64::from(p[k]))))
-                .collect();
-            write_cloud(&out_path, &moved)?;
-        }
-        say(format!("aligned source written to {}", out_path.display()));
-    }
-    if let Some(path) = json {
-        let value = report_json(&method.name(out.precision), &out, &pose);
-        let text = serde_json::to_string_pretty(&value)? + "\n";
-        if to_stdout {
-            write_stdout(&text);
-        } else {
-            std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
-        }
-    }
-    Ok(())
-}
-
-/// The whole result of `register` as JSON: pose in the files' frame
-/// (quaternion w, x, y, z, translation, 4x4 row-major), the local origin
-/// and the translation about it, and, for the device pipeline, the check.
-fn report_json(method: &str, out: &methods::Outcome, pose: &FilePose) -> serde_json::Value {
-    let mut v = serde_json::json!({
-        "method": method,
-        "iterations": out.iterations,
-        "seconds": out.seconds,
-        "quaternion_wxyz": out.pose.rotation,
-        "translation": pose.translation,
-        "matrix": pose.matrix(),
-        "origin": pose.origin,
-        "local_translation": pose.local_translation,
-        "degenerate": out.degenerate.map(|d| format!("{d:?}")),
-    });
-    if let Some(c) = &out.check {
-        v["residual"] = c.residual.into();
-        v["relative_residual"] = c.relative_residual.into();
-        v["fitness"] = c.fitness.into();
-        v["inlier_rmse"] = c.inlier_rmse.into();
-        v["plane_residual"] = c.plane_residual.into();
-        v["relative_plane_residual"] = c.relative_plane_residual.into();
-        v["hypothesis"] = c.hypothesis.into();
-        v["passes"] = c.passes.into();
-        v["icp_iterations"] = c.icp_iterations.into();
-        v["saturated"] = c.saturated.into();
-        v["out_of_range"] = c.out_of_range.into();
-        v["reliable"] = c.reliable.into();
-    }
-    v
 }
 
 /// `println!` through [`write_stdout`].
