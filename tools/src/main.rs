@@ -5,6 +5,7 @@
 //! only a Rust toolchain.
 
 mod aarch64;
+mod ci;
 #[cfg(test)]
 mod circles;
 mod fuzz;
@@ -103,7 +104,7 @@ gcc-arm-none-eabi, libnewlib-arm-none-eabi and binutils-arm-none-eabi
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
-        Some("ci") => ci(),
+        Some("ci") => ci::ci(),
         Some("demo") => demo(&args[1..]),
         Some("bench") => cargo(&["bench", "-p", "pcrnet-core", "-p", "pcrnet-train"]),
         Some("ort-bench") => {
@@ -242,18 +243,6 @@ fn cores() -> Result<(), String> {
     Ok(())
 }
 
-/// Seconds each fuzz target runs in CI (a smoke run that also replays the
-/// corpora; campaigns: `cargo xtask fuzz 3600`).
-const CI_FUZZ_SECONDS: u64 = 30;
-
-/// The crates built for the device, outside the host workspace.
-const FIRMWARE_CRATES: [&str; 4] = [
-    "firmware-example",
-    "examples/minimal-firmware",
-    "tests/firmware",
-    "tests/no-panic",
-];
-
 /// Installs Debian `packages` through apt-get unless `probe` runs.
 fn ensure_apt(probe: &str, packages: &[&str]) -> Result<(), String> {
     let found = Command::new(probe)
@@ -319,132 +308,6 @@ fn firmware_run() -> Result<(), String> {
         env!("CARGO"),
         &["run", "--release"],
     )
-}
-
-fn ci() -> Result<(), String> {
-    let mut steps = Steps::default();
-    steps.time("host lints (fmt, clippy)", || {
-        ensure_target()?;
-        cargo(&["fmt", "--all", "--", "--check"])?;
-        cargo(&[
-            "clippy",
-            "--workspace",
-            "--all-targets",
-            "--",
-            "-D",
-            "warnings",
-        ])
-    })?;
-    steps.time("firmware crates (fmt, clippy, defmt build)", || {
-        for dir in FIRMWARE_CRATES {
-            let dir = root().join(dir);
-            run_in(&dir, env!("CARGO"), &["fmt", "--", "--check"])?;
-            run_in(
-                &dir,
-                env!("CARGO"),
-                &["clippy", "--release", "--", "-D", "warnings"],
-            )?;
-        }
-        run_in(
-            &root().join("firmware-example"),
-            env!("CARGO"),
-            &["build", "--release", "--features", "defmt"],
-        )
-    })?;
-    steps.time("no_std build and no-panic proof", || {
-        cargo(&["build", "-p", "pcrnet-core", "--target", TARGET])?;
-        no_panic::run(&root())
-    })?;
-    steps.time("C header, C API and device clippy", || {
-        c_header(true)?;
-        cargo(&[
-            "build",
-            "-p",
-            "pcrnet-capi",
-            "--release",
-            "--target",
-            TARGET,
-        ])?;
-        cargo(&[
-            "clippy",
-            "-p",
-            "pcrnet-core",
-            "--target",
-            TARGET,
-            "--",
-            "-D",
-            "warnings",
-        ])
-    })?;
-    steps.time("docs", || {
-        run_with_env(
-            env!("CARGO"),
-            &["doc", "--workspace", "--no-deps"],
-            &[("RUSTDOCFLAGS", "-D warnings")],
-        )
-    })?;
-    steps.time("publish dry-run (pcrnet-core, pcrnet-io)", || {
-        // Both packages as crates.io would build them: pcrnet-io against
-        // the packaged pcrnet-core, each from its own file list.
-        cargo(&[
-            "publish",
-            "--dry-run",
-            "--allow-dirty",
-            "-p",
-            "pcrnet-core",
-            "-p",
-            "pcrnet-io",
-        ])
-    })?;
-    steps.time("QEMU harness, Cortex-M4F (qemu-test)", qemu_test)?;
-    steps.time("QEMU harness, other cores (cores)", cores)?;
-    steps.time("C example under QEMU", c_example)?;
-    steps.time("minimal firmware (Rust and C) under QEMU", || {
-        minimal::run(&root())
-    })?;
-    steps.time("aarch64 kernels under qemu-aarch64", aarch64::test)?;
-    steps.time("fuzzing", || {
-        run_in(
-            &root().join("fuzz"),
-            env!("CARGO"),
-            &["fmt", "--", "--check"],
-        )?;
-        fuzz::run(&root(), CI_FUZZ_SECONDS)
-    })?;
-    steps.time("host tests (cargo test --workspace)", || {
-        cargo(&["test", "--workspace"])
-    })?;
-    steps.report();
-    Ok(())
-}
-
-/// The wall-clock time of each of `ci`'s steps, printed at the end: where
-/// a run's minutes go.
-#[derive(Default)]
-struct Steps(Vec<(&'static str, std::time::Duration)>);
-
-impl Steps {
-    /// Runs `step`, recording its time under `name`.
-    fn time(
-        &mut self,
-        name: &'static str,
-        step: impl FnOnce() -> Result<(), String>,
-    ) -> Result<(), String> {
-        let started = std::time::Instant::now();
-        let result = step();
-        self.0.push((name, started.elapsed()));
-        result
-    }
-
-    /// The table of steps and their minutes.
-    fn report(&self) {
-        println!("\n| CI step | minutes |\n|---|---|");
-        for (name, t) in &self.0 {
-            println!("| {name} | {:.1} |", t.as_secs_f64() / 60.0);
-        }
-        let total: std::time::Duration = self.0.iter().map(|(_, t)| *t).sum();
-        println!("| total | {:.1} |", total.as_secs_f64() / 60.0);
-    }
 }
 
 /// Runs a command in the workspace root with extra environment variables.

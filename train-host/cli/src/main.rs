@@ -133,8 +133,20 @@ enum Command {
     Register {
         /// `[TEMPLATE] SOURCE`: the template cloud (the known object;
         /// optional with a model) and the source cloud (what the sensor sees).
-        #[arg(num_args = 1..=2, required = true, value_name = "[TEMPLATE] SOURCE")]
+        /// Or name them with --template and --source.
+        #[arg(
+            num_args = 0..=2,
+            value_name = "[TEMPLATE] SOURCE",
+            required_unless_present = "source",
+            conflicts_with_all = ["template", "source"]
+        )]
         clouds: Vec<PathBuf>,
+        /// The template cloud, named (in place of the positional TEMPLATE).
+        #[arg(long, requires = "source")]
+        template: Option<PathBuf>,
+        /// The source cloud, named (in place of the positional SOURCE).
+        #[arg(long)]
+        source: Option<PathBuf>,
         /// Method: device (the firmware's pipeline: network, flip
         /// hypotheses, ICP against the template's points, residual), pcrnet
         /// (one pass), ipcrnet (iterative), pointnetlk (f32 blob) or icp.
@@ -258,6 +270,8 @@ fn run(command: Command) -> anyhow::Result<()> {
         }
         Command::Register {
             clouds,
+            template,
+            source,
             method,
             options,
             aligned,
@@ -272,10 +286,13 @@ fn run(command: Command) -> anyhow::Result<()> {
                     "--reduce voxel needs --voxel SIZE: the cube side in the clouds' units, e.g. a tenth of the object's size"
                 );
             }
-            let (template, source) = match clouds.as_slice() {
-                [t, s] => (Some(t.as_path()), s.as_path()),
-                [s] => (None, s.as_path()),
-                _ => anyhow::bail!("register takes [TEMPLATE] SOURCE"),
+            let (template, source) = match (clouds.as_slice(), &template, &source) {
+                ([t, s], None, None) => (Some(t.as_path()), s.as_path()),
+                ([s], None, None) => (None, s.as_path()),
+                ([], t, Some(s)) => (t.as_deref(), s.as_path()),
+                _ => anyhow::bail!(
+                    "register takes [TEMPLATE] SOURCE, or --source FILE with an optional --template FILE"
+                ),
             };
             anyhow::ensure!(
                 template.is_some() || options.template_points.is_none(),
