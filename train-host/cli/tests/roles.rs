@@ -3,16 +3,13 @@
 //! the positional `S` (the blob's own template), and a mix of the two forms
 //! or a template without a source is an error naming the flag.
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
-fn models() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
-}
+use common::{models, pcrnet};
 
 /// The JSON result of `pcrnet register ARGS --json -`, or the error text.
 fn register(args: &[&str]) -> Result<serde_json::Value, String> {
-    let out = Command::new(env!("CARGO_BIN_EXE_pcrnet"))
+    let out = pcrnet()
         .arg("register")
         .args(args)
         .args(["--json", "-"])
