@@ -99,6 +99,9 @@ pub enum Error {
         /// Which option.
         what: &'static str,
     },
+    /// A pose given as input (the previous pose of a tracking step) is not
+    /// finite or its rotation is not a unit quaternion.
+    InvalidPose,
 }
 
 impl fmt::Display for Error {
@@ -173,6 +176,10 @@ impl fmt::Display for Error {
                 "the pose or residual is not finite: the cloud's coordinates are too large for f32 once moved into the model's frame"
             ),
             Error::InvalidOption { what } => write!(f, "invalid registration option: {what}"),
+            Error::InvalidPose => write!(
+                f,
+                "the previous pose is not finite or its rotation is not a unit quaternion: pass the pose a registration or tracking step returned, or register afresh"
+            ),
         }
     }
 }

@@ -100,6 +100,7 @@ mod sizes;
 pub mod template;
 #[doc(hidden)]
 pub mod testing;
+pub mod track;
 
 pub use arch::{Arch, F32_TILE, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch_len};
 pub use error::{Error, Result};
@@ -110,3 +111,4 @@ pub use pose::Pose;
 pub use refine::{Degeneracy, Metric};
 pub use registration::{Options, Registration};
 pub use sizes::scratch_len_for;
+pub use track::{TrackOutcome, Tracking};

@@ -109,6 +109,21 @@ impl Pose {
         }
     }
 
+    /// The inverse transform, `p -> R^T (p - t)`: `self.then(&self.inverse())`
+    /// is the identity up to rounding.
+    pub fn inverse(&self) -> Pose {
+        let [w, x, y, z] = self.rotation;
+        let back = Pose {
+            rotation: [w, -x, -y, -z],
+            translation: [0.0; 3],
+        };
+        let [tx, ty, tz] = back.transform_point(self.translation);
+        Pose {
+            rotation: back.rotation,
+            translation: [-tx, -ty, -tz],
+        }
+    }
+
     /// Whether every component is finite.
     pub fn is_finite(&self) -> bool {
         self.rotation
@@ -183,6 +198,35 @@ impl Frame {
             translation: [tx / s + cx - rx, ty / s + cy - ry, tz / s + cz - rz],
         }
     }
+}
+
+impl Frame {
+    /// A pose between user-unit clouds as a pose between model-frame
+    /// clouds, the inverse of [`Frame::pose_to_user`]: `R` kept,
+    /// `t_model = s (t - c + R c)`.
+    pub fn pose_to_model(&self, pose: &Pose) -> Pose {
+        let r = Pose {
+            rotation: pose.rotation,
+            translation: [0.0; 3],
+        };
+        let [rx, ry, rz] = r.transform_point(self.centre);
+        let ([tx, ty, tz], [cx, cy, cz], s) = (pose.translation, self.centre, self.scale);
+        Pose {
+            rotation: pose.rotation,
+            translation: [(tx - cx + rx) * s, (ty - cy + ry) * s, (tz - cz + rz) * s],
+        }
+    }
+}
+
+/// The pose one frame on at constant velocity: with `before` and `last`
+/// the poses of the two previous frames (each mapping that frame's source
+/// onto the template), the motion between them, `V = last . before^-1`
+/// in the template's frame, applied once more: `V . last`. Exact for an
+/// object moving (or a sensor moving about it) at a constant rigid velocity
+/// between frames taken at a constant rate.
+pub fn predict(before: &Pose, last: &Pose) -> Pose {
+    let velocity = before.inverse().then(last);
+    last.then(&velocity)
 }
 
 /// How a source point is moved before the network or the template search:

@@ -20,7 +20,7 @@
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::refine::{self, Degeneracy, IcpSettings, Metric, Subset};
+use crate::refine::{self, Degeneracy, IcpSettings, Metric, Resolved, Subset};
 use crate::template::Template;
 
 /// How to register. Distances are in **model units**: the template spans
@@ -87,7 +87,17 @@ impl Options {
         }
     }
 
-    fn validate(&self) -> Result<()> {
+    /// The ICP settings these options give.
+    pub(crate) fn icp_settings(&self) -> IcpSettings {
+        IcpSettings {
+            metric: self.metric,
+            iterations: self.icp_iterations,
+            tolerance: self.icp_tolerance,
+            max_distance: self.icp_distance,
+        }
+    }
+
+    pub(crate) fn validate(&self) -> Result<()> {
         let bad = |what| Err(Error::InvalidOption { what });
         if self.passes == 0 {
             return bad("passes must be at least 1");
@@ -205,21 +215,33 @@ pub(crate) fn run(
     )?;
     let subset = Subset::new(source, *frame, options.max_points);
     let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
-    let icp = IcpSettings {
-        metric: options.metric,
-        iterations: options.icp_iterations,
-        tolerance: options.icp_tolerance,
-        max_distance: options.icp_distance,
-    };
     let r = refine::resolve(
         template,
         &subset,
         network,
         options.hypotheses,
         options.screen_iterations,
-        &icp,
+        &options.icp_settings(),
         options.inlier_distance,
     )?;
+    let counts = PassCounts {
+        saturated,
+        out_of_range,
+    };
+    conclude(frame, &r, passes, counts, degenerate, options)
+}
+
+/// The [`Registration`] of a refined and scored pose (model frame): the
+/// pose and distances in user units, the verdict. A non-finite pose or
+/// distance is an error.
+pub(crate) fn conclude(
+    frame: &Frame,
+    r: &Resolved,
+    passes: usize,
+    counts: PassCounts,
+    degenerate: Option<Degeneracy>,
+    options: &Options,
+) -> Result<Registration> {
     let pose = frame.pose_to_user(&r.pose);
     let residual = r.fit.residual / frame.scale;
     let inlier_rmse = r.fit.inlier_rmse / frame.scale;
@@ -239,8 +261,8 @@ pub(crate) fn run(
         hypothesis: r.hypothesis,
         passes,
         icp_iterations: r.icp_iterations,
-        saturated,
-        out_of_range,
+        saturated: counts.saturated,
+        out_of_range: counts.out_of_range,
         degenerate,
         reliable: degenerate.is_none() && r.fit.plane_residual <= options.max_residual,
     })

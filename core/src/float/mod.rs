@@ -14,6 +14,7 @@ use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, expect_len};
 use crate::pose::{self, Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
+use crate::track::{self, Tracking};
 
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
 mod x86;
@@ -194,6 +195,27 @@ impl<'a> F32Model<'a> {
             net.centring(),
             &self.template,
             source,
+            options,
+            |map| Ok((net.pass(source, map, scratch)?, PassCounts::default())),
+        )
+    }
+
+    /// One tracking step, as [`crate::Int8Model::track`], with the f32
+    /// network for the fallback.
+    pub fn track(
+        &self,
+        source: &[[f32; 3]],
+        previous: &Pose,
+        options: &Options,
+        scratch: &mut [f32],
+    ) -> Result<Tracking> {
+        let net = &self.network;
+        track::step(
+            &self.frame,
+            net.centring(),
+            &self.template,
+            source,
+            previous,
             options,
             |map| Ok((net.pass(source, map, scratch)?, PassCounts::default())),
         )

@@ -41,6 +41,7 @@ use crate::kernel::{Requant, bytes_of};
 use crate::pose::{self, Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
+use crate::track::{self, Tracking};
 
 /// A validated int8 model borrowing its weights from a blob.
 #[derive(Debug, Clone)]
@@ -187,6 +188,34 @@ impl<'a> Int8Model<'a> {
             source,
             options,
             |map| self.pass(source, map, tile, scratch, ready),
+        )
+    }
+
+    /// One tracking step (see [`crate::track`]): refines `previous`, the
+    /// pose of the last frame (user units, as a registration or tracking
+    /// step returned it; a constant-velocity [`crate::pose::predict`] of the
+    /// last two is a better start for a fast object) by ICP on `source`,
+    /// and keeps it if reliable; else registers `source` afresh, as
+    /// [`Self::register`] does, in the same call. The scratch is the
+    /// registration's. A non-finite `previous` or one whose rotation is not
+    /// a unit quaternion is [`crate::Error::InvalidPose`].
+    #[inline(never)]
+    pub fn track(
+        &self,
+        source: &[[f32; 3]],
+        previous: &Pose,
+        options: &Options,
+        scratch: &mut [i8],
+    ) -> Result<Tracking> {
+        let tile = self.tile_for(scratch.len())?;
+        track::step(
+            &self.p.frame,
+            self.centring(),
+            &self.template,
+            source,
+            previous,
+            options,
+            |map| self.pass(source, map, tile, scratch, Ready::default()),
         )
     }
 
