@@ -45,6 +45,24 @@
 #define PCRNET_PREPARED_SIZE 64
 
 /*
+ `pcrnet_track`'s outcome: refined from the previous pose, reliable: the
+ track is kept (the network did not run).
+ */
+#define PCRNET_TRACK_KEPT 0
+
+/*
+ `pcrnet_track`'s outcome: the previous pose did not hold; the full
+ registration in the same call found a reliable pose.
+ */
+#define PCRNET_TRACK_RECOVERED 1
+
+/*
+ `pcrnet_track`'s outcome: no reliable pose either way (the result is
+ the registration's, `reliable` false): register the next frame afresh.
+ */
+#define PCRNET_TRACK_LOST 2
+
+/*
  `PcrnetOptions::metric`: point-to-point ICP.
  */
 #define PCRNET_METRIC_POINT_TO_POINT 0
@@ -167,6 +185,11 @@ enum PcrnetStatus
    A registration option is out of range.
    */
   PCRNET_ERROR_INVALID_OPTION = -40,
+  /*
+   The previous pose of `pcrnet_track` is not finite or its quaternion
+   is not of unit length.
+   */
+  PCRNET_ERROR_INVALID_POSE = -41,
   /*
    An error this version of the C API has no code for (a newer core).
    */
@@ -481,6 +504,29 @@ PcrnetStatus pcrnet_prepared_network_pose(PcrnetPrepared *prepared,
                                           float tolerance,
                                           float *pose,
                                           uint32_t *passes_run);
+
+/*
+ One tracking step: refines `previous`, the last frame's pose
+ `[qw, qx, qy, qz, tx, ty, tz]` (source units, as `PcrnetRegistration`
+ gives it), by ICP on the points, and keeps it when reliable and within
+ one step; else registers the points afresh, as `pcrnet_register` does.
+ Writes the result to `out` and `PCRNET_TRACK_KEPT`, `_RECOVERED` or
+ `_LOST` to `outcome` on success. A `previous` that is not finite or
+ whose quaternion is not of unit length is `PCRNET_ERROR_INVALID_POSE`.
+
+ # Safety
+ As `pcrnet_register`; `previous` must point to 7 readable floats and
+ `outcome` to a writable `uint32_t` (or be null).
+ */
+PcrnetStatus pcrnet_track(const PcrnetModel *model,
+                          const float *points,
+                          size_t n_points,
+                          const float *previous,
+                          const PcrnetOptions *options,
+                          int8_t *scratch,
+                          size_t scratch_len,
+                          PcrnetRegistration *out,
+                          uint32_t *outcome);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -50,11 +50,13 @@ use core::ffi::c_char;
 use core::mem::{align_of, size_of};
 
 mod prepared;
+mod track;
 mod types;
 pub use prepared::{
     PCRNET_PREPARED_SIZE, PCRNET_PREPARED_WORDS, PcrnetPrepared, pcrnet_prepare,
     pcrnet_prepared_network_pose, pcrnet_prepared_register,
 };
+pub use track::{PCRNET_TRACK_KEPT, PCRNET_TRACK_LOST, PCRNET_TRACK_RECOVERED, pcrnet_track};
 pub use types::{
     PCRNET_DEGENERATE_LINE, PCRNET_DEGENERATE_NONE, PCRNET_DEGENERATE_POINT,
     PCRNET_METRIC_POINT_TO_PLANE, PCRNET_METRIC_POINT_TO_POINT, PcrnetOptions, PcrnetRegistration,
@@ -448,6 +450,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -1 => c"a required pointer is null",
         -2 => c"the point array is not 4-byte aligned",
         -3 => c"the model handle is not loaded: call pcrnet_model_load and check its status",
+        -41 => c"the previous pose is not finite or its quaternion is not of unit length: pass the pose a registration or tracking step wrote, or call pcrnet_register",
         -4 => c"the prepared handle is not prepared: call pcrnet_prepare (again after loading its model handle again) and check its status",
         -10 => c"not a model blob: magic bytes PCRN missing",
         -11 => c"unsupported model format version: re-export the model with `pcrnet export` (or `pcrnet upgrade` a version-2 f32 blob); a blob newer than this library needs a later library",

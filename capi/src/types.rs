@@ -56,6 +56,9 @@ pub enum PcrnetStatus {
     PCRNET_ERROR_NON_FINITE_RESULT = -34,
     /// A registration option is out of range.
     PCRNET_ERROR_INVALID_OPTION = -40,
+    /// The previous pose of `pcrnet_track` is not finite or its quaternion
+    /// is not of unit length.
+    PCRNET_ERROR_INVALID_POSE = -41,
     /// An error this version of the C API has no code for (a newer core).
     PCRNET_ERROR_OTHER = -99,
 }
@@ -80,6 +83,7 @@ impl From<Error> for PcrnetStatus {
             Error::DegeneratePose => PCRNET_ERROR_DEGENERATE_POSE,
             Error::NonFiniteResult => PCRNET_ERROR_NON_FINITE_RESULT,
             Error::InvalidOption { .. } => PCRNET_ERROR_INVALID_OPTION,
+            Error::InvalidPose => PCRNET_ERROR_INVALID_POSE,
             _ => PCRNET_ERROR_OTHER,
         }
     }

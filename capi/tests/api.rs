@@ -5,69 +5,15 @@
 
 use core::ffi::CStr;
 use std::mem::MaybeUninit;
-use std::path::PathBuf;
 
+mod common;
+
+use common::{loaded, models, options_default, sentinel, shipped_blob, shipped_source};
 use pcrnet::*;
 use pcrnet_core::{Int8Model, Options};
 
-fn models() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models")
-}
-
-fn shipped_blob() -> Vec<u8> {
-    std::fs::read(models().join("embedded-default-int8.pcrn")).expect("shipped int8 model")
-}
-
-fn shipped_source() -> Vec<[f32; 3]> {
-    let text = std::fs::read_to_string(models().join("embedded-default-source.xyz"))
-        .expect("shipped source");
-    text.lines()
-        .map(|l| {
-            let v: Vec<f32> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
-}
-
-/// A handle in a box (the C caller's static storage), loaded from `blob`.
-fn loaded(blob: &[u8]) -> Box<PcrnetModel> {
-    let mut model: Box<MaybeUninit<PcrnetModel>> = Box::new(MaybeUninit::zeroed());
-    let status = unsafe { pcrnet_model_load(blob.as_ptr(), blob.len(), model.as_mut_ptr()) };
-    assert_eq!(status, PcrnetStatus::PCRNET_OK);
-    unsafe { model.assume_init() }
-}
-
 fn zeroed_model() -> Box<PcrnetModel> {
     unsafe { Box::<MaybeUninit<PcrnetModel>>::new(MaybeUninit::zeroed()).assume_init() }
-}
-
-fn options_default() -> PcrnetOptions {
-    let mut o = MaybeUninit::uninit();
-    unsafe {
-        pcrnet_options_default(o.as_mut_ptr());
-        o.assume_init()
-    }
-}
-
-/// A registration filled with a pattern, to see whether a call wrote it.
-fn sentinel() -> PcrnetRegistration {
-    PcrnetRegistration {
-        rotation: [7.0; 4],
-        translation: [7.0; 3],
-        residual: 7.0,
-        relative_residual: 7.0,
-        plane_residual: 7.0,
-        relative_plane_residual: 7.0,
-        fitness: 7.0,
-        inlier_rmse: 7.0,
-        hypothesis: 7,
-        passes: 7,
-        icp_iterations: 7,
-        saturated: 7,
-        out_of_range: 7,
-        degenerate: 7,
-        reliable: true,
-    }
 }
 
 fn register(
@@ -348,6 +294,7 @@ fn every_status_has_a_message_naming_what_to_do() {
         PCRNET_ERROR_DEGENERATE_POSE,
         PCRNET_ERROR_NON_FINITE_RESULT,
         PCRNET_ERROR_INVALID_OPTION,
+        PCRNET_ERROR_INVALID_POSE,
         PCRNET_ERROR_OTHER,
     ];
     let message = |s: i32| unsafe { CStr::from_ptr(pcrnet_status_message(s)) }.to_str();
