@@ -1,7 +1,7 @@
 //! Link-time proof that no panic is reachable from the device entry points.
 //!
 //! This image calls every public inference entry point of `pcrnet-core`
-//! (load and parse, `register`, the network alone, `infer`, `encode`,
+//! (load and parse, `register`, `track`, the network alone, `infer`, `encode`,
 //! `head`, `pose`, the f32 reference) and every function of the C API, on
 //! a blob, a cloud, options, tiles and scratch lengths the optimiser cannot
 //! see (they pass through [`black_box`]), so every branch that some input
@@ -21,7 +21,7 @@ use core::hint::black_box;
 
 use cortex_m_rt::entry;
 use pcrnet as capi;
-use pcrnet_core::{F32Model, Int8Model, Options};
+use pcrnet_core::{F32Model, Int8Model, Options, Pose};
 
 /// Bytes that stand for a blob, a cloud and C handles: zeros the optimiser
 /// cannot see through once they pass through `black_box`.
@@ -54,6 +54,8 @@ fn rust_api(scratch: &mut [i8], f32_scratch: &mut [f32], feature: &mut [f32]) {
     let _ = black_box(Int8Model::from_bytes(blob).is_ok());
     if let Ok(model) = Int8Model::load(blob, scratch) {
         let _ = black_box(model.register(source, &options, scratch));
+        let previous: Pose = black_box(Pose::IDENTITY);
+        let _ = black_box(model.track(source, &previous, &options, scratch));
         let _ = black_box(model.network_pose(source, passes, tolerance, scratch));
         if let Ok(inference) = model.infer_tiled(source, tile, scratch) {
             let (head, centring) = (inference.head, inference.centring);
@@ -70,6 +72,8 @@ fn rust_api(scratch: &mut [i8], f32_scratch: &mut [f32], feature: &mut [f32]) {
     if let Ok(model) = F32Model::from_bytes(blob) {
         let f32_scratch = black_box(f32_scratch);
         let _ = black_box(model.register(source, &options, f32_scratch));
+        let previous: Pose = black_box(Pose::IDENTITY);
+        let _ = black_box(model.track(source, &previous, &options, f32_scratch));
         let _ = black_box(model.network_pose(source, passes, tolerance, f32_scratch));
         let network = model.network();
         let _ = black_box(network.infer(source, f32_scratch));
@@ -121,6 +125,18 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
             scratch_len,
             black_box(pose.as_mut_ptr()),
             black_box(&mut passes_run),
+        ));
+        let mut outcome = 0u32;
+        black_box(capi::pcrnet_track(
+            model,
+            points,
+            n_points,
+            black_box(pose.as_ptr()),
+            black_box(options.as_ptr()),
+            scratch,
+            scratch_len,
+            black_box(out.as_mut_ptr()),
+            black_box(&mut outcome),
         ));
         let prepared: *mut capi::PcrnetPrepared = black_box(&mut prepared);
         black_box(capi::pcrnet_prepare(model, scratch, scratch_len, prepared));
