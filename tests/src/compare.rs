@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use pcrnet_core::POSE_DIM;
 
+use crate::tracking::{self, DeviceTrack};
 use crate::vectors::{Expected, Iterative, RegistrationBits, RegistrationOutcome};
 
 /// What the device printed for one case.
@@ -43,6 +44,8 @@ pub struct DeviceRun {
     pub iterative: BTreeMap<usize, Iterative>,
     /// `register` calls, per (case index, option set index).
     pub registrations: BTreeMap<(usize, usize), DeviceRegistration>,
+    /// Tracking steps, per (case index, option set index, start name).
+    pub tracks: BTreeMap<(usize, usize, String), DeviceTrack>,
     /// Load verdict per model (`ok int8`, `ok f32`, `error ...`; see
     /// [`crate::hostile::load_verdict`]).
     pub loads: BTreeMap<usize, String>,
@@ -101,7 +104,7 @@ fn hex_bits(s: &str) -> Option<u32> {
 
 /// `instructions stack qw qx qy qz tx ty tz residual relative fitness rmse
 /// hypothesis passes icp_iterations saturated out_of_range degenerate reliable`.
-fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
+pub fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
     let [
         instructions,
         stack,
@@ -196,6 +199,9 @@ pub fn parse(stdout: &str) -> DeviceRun {
             }
             ["case", c, "iter", "error", error @ ..] => c.parse().ok().map(|c| {
                 run.iterative.insert(c, Err(error.join(" ")));
+            }),
+            ["case", c, "track", rest @ ..] => tracking::parse_line(c, rest).map(|(key, step)| {
+                run.tracks.insert(key, step);
             }),
             ["case", c, "reg", k, "ok", rest @ ..] => c
                 .parse()

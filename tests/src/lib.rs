@@ -15,7 +15,9 @@
 //!    C API;
 //! 6. [`layers`] measures instructions per MAC layer by layer;
 //! 7. [`plan`] says what a run covers: the models of each case set, their
-//!    clouds and option sets, and the cases built from them.
+//!    clouds and option sets, and the cases built from them;
+//! 8. [`tracking`] adds the tracking steps after each registration: their
+//!    starts, the host's results, the device's lines and their comparison.
 
 pub mod c_example;
 pub mod compare;
@@ -24,4 +26,5 @@ pub mod hostile;
 pub mod layers;
 pub mod plan;
 pub mod qemu;
+pub mod tracking;
 pub mod vectors;

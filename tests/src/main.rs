@@ -10,7 +10,8 @@
 //! Every case compares the inference (int8 feature, head, pose), and as
 //! the case asks, the iterative network pass and `Int8Model::register`
 //! with its option sets (every `Registration` field bit for bit, or the
-//! same error). `run` ends with `N passed, N failed`. With
+//! same error), then `Int8Model::track` after each registration (see
+//! `tracking`). `run` ends with `N passed, N failed`. With
 //! `--mutate-device-rounding` the device is built with ties rounded the
 //! other way, and the command succeeds only if the comparison catches it,
 //! in the inference and in the registrations.
@@ -28,7 +29,7 @@ use pcrnet_qemu_tests::plan::{Plan, build_cases, models};
 use pcrnet_qemu_tests::vectors::{
     Case, TestModel, container, describe, expected, expected_iterative, expected_registrations,
 };
-use pcrnet_qemu_tests::{c_example, elf, layers, qemu};
+use pcrnet_qemu_tests::{c_example, elf, layers, qemu, tracking};
 
 struct Args {
     mutate: bool,
@@ -84,10 +85,13 @@ fn run_plans(
         .iter()
         .map(|c| {
             let blob = &models[c.model].blob;
+            let registrations = expected_registrations(blob, c);
+            let tracks = tracking::expected(blob, c, &registrations);
             (
                 expected(blob, c),
                 expected_iterative(blob, c),
-                expected_registrations(blob, c),
+                registrations,
+                tracks,
             )
         })
         .collect();
@@ -130,9 +134,22 @@ fn run_plans(
 
     let (mut passed, mut failed) = (0usize, 0usize);
     let (mut registrations, mut registrations_differ) = (0usize, 0usize);
-    for (i, (case, (host, host_iterative, host_registrations))) in
+    let (mut tracks, mut tracks_differ) = (0usize, 0usize);
+    for (i, (case, (host, host_iterative, host_registrations, host_tracks))) in
         cases.iter().zip(&expect).enumerate()
     {
+        let track_verdicts: Vec<String> = host_tracks
+            .iter()
+            .filter_map(|((k, start), h)| {
+                let d = device
+                    .tracks
+                    .get(&(i, *k, start.clone()))
+                    .map(|d| &d.result);
+                tracking::difference(h, d).map(|why| format!("track #{k} from {start}: {why}"))
+            })
+            .collect();
+        tracks += host_tracks.len();
+        tracks_differ += track_verdicts.len();
         let register_verdicts: Vec<Option<String>> = host_registrations
             .iter()
             .zip(&case.registrations)
@@ -154,7 +171,8 @@ fn run_plans(
                 .as_ref()
                 .and_then(|h| iterative_difference(h, device.iterative.get(&i)))
         })
-        .or_else(|| register_verdicts.into_iter().flatten().next());
+        .or_else(|| register_verdicts.into_iter().flatten().next())
+        .or_else(|| track_verdicts.into_iter().next());
         match verdict {
             None => passed += 1,
             Some(why) => {
@@ -210,8 +228,9 @@ fn run_plans(
         println!("device run incomplete (no `done`, or unparsed lines)");
     }
     println!(
-        "{registrations} registrations, {} identical",
-        registrations - registrations_differ
+        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical",
+        registrations - registrations_differ,
+        tracks - tracks_differ
     );
     println!(
         "{} ({}): {passed} passed, {failed} failed",
@@ -291,7 +310,45 @@ fn report(
     }
     println!();
     report_registrations(models, cases, device);
+    report_figures(models, cases, device);
     Ok(())
+}
+
+/// The two figures CI's log carries, on their own lines: the shipped
+/// model's default registration of its 512-point demo source, and a
+/// tracking step on it from the registered pose (the pose held; 256 of the
+/// 512 points scored and refined, `Options::default().max_points`).
+fn report_figures(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
+    let demo = cases.iter().enumerate().find(|(_, c)| {
+        models[c.model].name == "embedded-default-int8.pcrn"
+            && c.label.starts_with("demo")
+            && c.cloud.len() == 512
+    });
+    let Some((i, c)) = demo else {
+        return;
+    };
+    let Some(k) = c
+        .registrations
+        .iter()
+        .position(|o| *o == pcrnet_core::Options::default())
+    else {
+        return;
+    };
+    if let Some(d) = device.registrations.get(&(i, k)) {
+        println!(
+            "default registration, 512 points: {} instructions",
+            d.instructions
+        );
+    }
+    if let Some(d) = device.tracks.get(&(i, k, "held".to_string())) {
+        let outcome = d.result.as_ref().map_or("error", |(_, o)| o.as_str());
+        println!("tracking step, 256 points: {} instructions", d.instructions);
+        println!(
+            "(the tracking step: {outcome}, {} ICP iteration(s), peak stack {} B)",
+            d.result.as_ref().map_or(0, |(r, _)| r.icp_iterations),
+            d.stack
+        );
+    }
 }
 
 /// Instructions and stack per `register` call: every option set on each

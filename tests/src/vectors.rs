@@ -97,7 +97,7 @@ impl From<&Registration> for RegistrationBits {
 pub type RegistrationOutcome = Result<RegistrationBits, String>;
 
 /// An error's Debug text as the device's line carries it (words separated by one space).
-fn error_text(e: &pcrnet_core::Error) -> String {
+pub fn error_text(e: &pcrnet_core::Error) -> String {
     format!("{e:?}")
         .split_whitespace()
         .collect::<Vec<_>>()

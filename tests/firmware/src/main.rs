@@ -35,7 +35,13 @@
 //! - `case C reg K ok INSTR STACK QW QX QY QZ TX TY TZ RESIDUAL RELATIVE
 //!   FITNESS RMSE PLANE RELATIVE_PLANE HYPOTHESIS PASSES ICP_ITERATIONS
 //!   SATURATED OUT_OF_RANGE none|Point|Line true|false`, or `case C reg K error INSTR
-//!   STACK E`.
+//!   STACK E`;
+//! - after each successful `register`, `case C track K START ok INSTR STACK`
+//!   and the same fields, then `Kept|Recovered|Lost`, or `case C track K
+//!   START error INSTR STACK E`: a tracking step with the same options from
+//!   START, `held` (the registered pose) and, with `Options::default()`,
+//!   `predicted` (`pose::predict(IDENTITY, pose)`; the host's
+//!   `vectors::track_starts` is the same rule).
 #![no_std]
 #![no_main]
 
@@ -44,7 +50,8 @@ use core::fmt::Write;
 use heapless::String;
 #[cfg(target_arch = "arm")]
 use panic_semihosting as _;
-use pcrnet_core::{Error, F32Model, Int8Model, Metric, Options};
+use pcrnet_core::pose::{self, Pose};
+use pcrnet_core::{Error, F32Model, Int8Model, Metric, Options, Registration};
 use pcrnet_firmware_example::board::{exit, print};
 use pcrnet_firmware_example::{icount, stack};
 
@@ -122,6 +129,35 @@ macro_rules! say {
         let _ = write!(l, $($t)*);
         emit(&l);
     }};
+}
+
+/// Appends a registration's fields: the pose, the six distances (hex bits),
+/// `hypothesis passes icp_iterations saturated out_of_range`, the
+/// degeneracy and the verdict.
+fn write_registration(line: &mut String<LINE>, r: &Registration) {
+    for v in r.pose.rotation.iter().chain(&r.pose.translation) {
+        let _ = write!(line, " {:08x}", v.to_bits());
+    }
+    for v in [
+        r.residual,
+        r.relative_residual,
+        r.fitness,
+        r.inlier_rmse,
+        r.plane_residual,
+        r.relative_plane_residual,
+    ] {
+        let _ = write!(line, " {:08x}", v.to_bits());
+    }
+    let _ = write!(
+        line,
+        " {} {} {} {} {} ",
+        r.hypothesis, r.passes, r.icp_iterations, r.saturated, r.out_of_range
+    );
+    let _ = match r.degenerate {
+        None => write!(line, "none"),
+        Some(d) => write!(line, "{d:?}"),
+    };
+    let _ = write!(line, " {}", r.reliable);
 }
 
 /// Working memory of every call; only `main` names it.
@@ -247,38 +283,45 @@ fn main() -> ! {
                 let r1 = counter.instructions();
                 let peak = stack::used_below(baseline);
                 line.clear();
-                match result {
+                match &result {
                     Ok(r) => {
                         let _ = write!(line, "case {c} reg {k} ok {} {peak}", r1 - r0);
-                        for v in r.pose.rotation.iter().chain(&r.pose.translation) {
-                            let _ = write!(line, " {:08x}", v.to_bits());
-                        }
-                        for v in [
-                            r.residual,
-                            r.relative_residual,
-                            r.fitness,
-                            r.inlier_rmse,
-                            r.plane_residual,
-                            r.relative_plane_residual,
-                        ] {
-                            let _ = write!(line, " {:08x}", v.to_bits());
-                        }
-                        let _ = write!(
-                            line,
-                            " {} {} {} {} {} ",
-                            r.hypothesis, r.passes, r.icp_iterations, r.saturated, r.out_of_range
-                        );
-                        let _ = match r.degenerate {
-                            None => write!(line, "none"),
-                            Some(d) => write!(line, "{d:?}"),
-                        };
-                        let _ = write!(line, " {}", r.reliable);
+                        write_registration(&mut line, r);
                     }
                     Err(e) => {
                         let _ = write!(line, "case {c} reg {k} error {} {peak} {e:?}", r1 - r0);
                     }
                 }
                 emit(&line);
+                let Ok(r) = result else {
+                    continue;
+                };
+                // Tracking from the registered pose (held), and with the
+                // default options also from its constant-velocity
+                // prediction after the identity (mostly a fallback).
+                let predicted = pose::predict(&Pose::IDENTITY, &r.pose);
+                let starts = [("held", r.pose), ("predicted", predicted)];
+                let n_starts = if options == Options::default() { 2 } else { 1 };
+                for (name, start) in starts.iter().take(n_starts) {
+                    let baseline = stack::paint();
+                    let t0 = counter.instructions();
+                    let tracked = model.track(cloud, start, &options, scratch);
+                    let t1 = counter.instructions();
+                    let peak = stack::used_below(baseline);
+                    line.clear();
+                    let _ = write!(line, "case {c} track {k} {name} ");
+                    match tracked {
+                        Ok(t) => {
+                            let _ = write!(line, "ok {} {peak}", t1 - t0);
+                            write_registration(&mut line, &t.registration);
+                            let _ = write!(line, " {:?}", t.outcome);
+                        }
+                        Err(e) => {
+                            let _ = write!(line, "error {} {peak} {e:?}", t1 - t0);
+                        }
+                    }
+                    emit(&line);
+                }
             }
         }
     }
