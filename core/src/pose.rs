@@ -124,6 +124,23 @@ impl Pose {
         }
     }
 
+    /// The same pose with its quaternion scaled to unit length (by
+    /// `libm::sqrtf`, `w >= 0`): compositions drift from unit length by a
+    /// few ulp each, and a pose carried from frame to frame composes
+    /// without end. A zero or non-finite quaternion is returned as is.
+    pub fn normalised(&self) -> Pose {
+        let [w, x, y, z] = self.rotation;
+        let n = libm::sqrtf(w * w + x * x + y * y + z * z);
+        if !(n.is_finite() && n > 0.0) {
+            return *self;
+        }
+        let s = if w < 0.0 { -1.0 / n } else { 1.0 / n };
+        Pose {
+            rotation: [w * s, x * s, y * s, z * s],
+            translation: self.translation,
+        }
+    }
+
     /// Whether every component is finite.
     pub fn is_finite(&self) -> bool {
         self.rotation
@@ -224,9 +241,12 @@ impl Frame {
 /// in the template's frame, applied once more: `V . last`. Exact for an
 /// object moving (or a sensor moving about it) at a constant rigid velocity
 /// between frames taken at a constant rate.
+///
+/// The quaternion is renormalised ([`Pose::normalised`]): the prediction
+/// composes three poses, and a stream predicts from its own predictions.
 pub fn predict(before: &Pose, last: &Pose) -> Pose {
     let velocity = before.inverse().then(last);
-    last.then(&velocity)
+    last.then(&velocity).normalised()
 }
 
 /// How a source point is moved before the network or the template search:

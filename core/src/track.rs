@@ -114,7 +114,8 @@ pub(crate) fn step(
     }
     let subset = Subset::new(source, *frame, options.max_points);
     let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
-    let start = frame.pose_to_model(previous);
+    // Unit length again: a pose carried through a stream composes without end.
+    let start = frame.pose_to_model(&previous.normalised());
     let (pose, icp_iterations) = refine::icp(template, &subset, start, &options.icp_settings());
     let fit = refine::score(template, &subset, &pose, options.inlier_distance);
     let refined = Resolved {

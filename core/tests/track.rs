@@ -201,6 +201,14 @@ fn prediction_continues_a_constant_motion() {
     assert!(close(&pose::predict(&p0, &p1), &p2));
     // No motion predicts the last pose.
     assert!(close(&pose::predict(&p1, &p1), &p1));
+    // A stream predicting from its own predictions keeps unit quaternions
+    // (unnormalised, their norm error would triple each step).
+    let (mut a, mut b) = (p0, p1);
+    for _ in 0..1000 {
+        (a, b) = (b, pose::predict(&a, &b));
+    }
+    let norm: f32 = b.rotation.iter().map(|v| v * v).sum();
+    assert!((norm - 1.0).abs() < 1e-5, "{norm}");
     // The inverse undoes a pose.
     assert!(close(&p0.then(&p0.inverse()), &Pose::IDENTITY));
 }
