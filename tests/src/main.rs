@@ -317,38 +317,69 @@ fn report(
 /// The two figures CI's log carries, on their own lines: the shipped
 /// model's default registration of its 512-point demo source, and a
 /// tracking step on it from the registered pose (the pose held; 256 of the
-/// 512 points scored and refined, `Options::default().max_points`).
+/// 512 points scored and refined, `Options::default().max_points`); then
+/// the latency table of the shipped model's demo sources (256, 512 and
+/// 1,024 points).
 fn report_figures(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
-    let demo = cases.iter().enumerate().find(|(_, c)| {
-        models[c.model].name == "embedded-default-int8.pcrn"
-            && c.label.starts_with("demo")
-            && c.cloud.len() == 512
-    });
-    let Some((i, c)) = demo else {
-        return;
+    let default = pcrnet_core::Options::default();
+    let demo = |n: usize| {
+        cases.iter().enumerate().find(|(_, c)| {
+            models[c.model].name == "embedded-default-int8.pcrn"
+                && c.label.starts_with("demo")
+                && c.cloud.len() == n
+        })
     };
-    let Some(k) = c
-        .registrations
-        .iter()
-        .position(|o| *o == pcrnet_core::Options::default())
-    else {
-        return;
+    // (instructions of: network only, K = 1, default, tracking step held)
+    let figures = |n: usize| -> Option<[u64; 4]> {
+        let (i, c) = demo(n)?;
+        let at = |o: &pcrnet_core::Options| c.registrations.iter().position(|r| r == o);
+        let k1 = pcrnet_core::Options {
+            hypotheses: 1,
+            ..default
+        };
+        let reg =
+            |o: &pcrnet_core::Options| Some(device.registrations.get(&(i, at(o)?))?.instructions);
+        let track = device
+            .tracks
+            .get(&(i, at(&default)?, "held".to_string()))?
+            .instructions;
+        Some([
+            reg(&pcrnet_core::Options::network_only())?,
+            reg(&k1)?,
+            reg(&default)?,
+            track,
+        ])
     };
-    if let Some(d) = device.registrations.get(&(i, k)) {
+    if let Some([_, _, registration, track]) = figures(512) {
+        println!("default registration, 512 points: {registration} instructions");
+        println!("tracking step, 256 points: {track} instructions");
+    }
+    println!(
+        "\nlatency of the shipped model on its demo source (instructions, and ms at 168 MHz (M4) / 480 MHz (M7) \
+         assuming one cycle per instruction: flash wait states make the M4 slower, dual issue the M7 faster)\n\
+         | points | network only | K = 1 | default (K = 10) | tracking step (pose held) |\n|---|---|---|---|---|"
+    );
+    for n in [256, 512, 1024] {
+        let Some(f) = figures(n) else {
+            continue;
+        };
+        let cell = |v: u64| {
+            format!(
+                "{:.1} M ({:.0} / {:.0} ms)",
+                v as f64 / 1e6,
+                v as f64 / 168e3,
+                v as f64 / 480e3
+            )
+        };
         println!(
-            "default registration, 512 points: {} instructions",
-            d.instructions
+            "| {n} | {} | {} | {} | {} |",
+            cell(f[0]),
+            cell(f[1]),
+            cell(f[2]),
+            cell(f[3])
         );
     }
-    if let Some(d) = device.tracks.get(&(i, k, "held".to_string())) {
-        let outcome = d.result.as_ref().map_or("error", |(_, o)| o.as_str());
-        println!("tracking step, 256 points: {} instructions", d.instructions);
-        println!(
-            "(the tracking step: {outcome}, {} ICP iteration(s), peak stack {} B)",
-            d.result.as_ref().map_or(0, |(r, _)| r.icp_iterations),
-            d.stack
-        );
-    }
+    println!();
 }
 
 /// Instructions and stack per `register` call: every option set on each

@@ -150,6 +150,11 @@ pub fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
         if name == SHIPPED_DEFAULT {
             let demo = read_cloud(&dir.join("embedded-default-source.f32"))?;
             let dense = doubled(&demo, 1024, 0.005);
+            let half: Vec<[f32; 3]> = demo.iter().step_by(2).copied().collect();
+            sources.push((
+                format!("demo source {} (every other point)", half.len()),
+                half,
+            ));
             sources.push((format!("demo source {}", demo.len()), demo));
             sources.push((
                 format!("demo source {} (twice, jitter 0.005)", dense.len()),
