@@ -11,6 +11,7 @@
 //! | `trust` | the shipped model's device pipeline: flips, refinement, and how well its residual flags bad poses |
 //! | `heldout` | five-class training with and without more varied shapes added, on the five classes held out |
 //! | `resampled` | the paper's protocol beside sources sampled apart from the template, clean, noisy and single-view, generic and object-specific |
+//! | `tracking` | the device pipeline following moving objects through noisy single-view sensor streams, frame by frame |
 //!
 //! This module is their framework; the paper's six are in
 //! [`super::paper`], and `trust`, `resampled` and `heldout` have their own
@@ -34,7 +35,7 @@ use anyhow::Context as _;
 use crate::report::{Context, Report};
 
 /// The experiment names, in order.
-pub const EXPERIMENTS: [&str; 9] = [
+pub const EXPERIMENTS: [&str; 10] = [
     "generalisation",
     "noise",
     "partial",
@@ -44,6 +45,7 @@ pub const EXPERIMENTS: [&str; 9] = [
     "trust",
     "resampled",
     "heldout",
+    "tracking",
 ];
 
 /// Runs experiment `name` (one of [`EXPERIMENTS`]).
@@ -58,6 +60,7 @@ pub fn run_experiment(ctx: &Context, name: &str) -> anyhow::Result<Report> {
         "trust" => crate::trust::trust(ctx),
         "resampled" => crate::resampled::resampled(ctx),
         "heldout" => crate::heldout::heldout(ctx),
+        "tracking" => crate::tracking::tracking(ctx),
         other => anyhow::bail!(
             "unknown experiment {other} (one of {})",
             EXPERIMENTS.join(", ")

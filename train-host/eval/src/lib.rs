@@ -25,6 +25,7 @@ pub mod recipes;
 pub mod register;
 pub mod report;
 pub mod resampled;
+pub mod tracking;
 pub mod trust;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};

@@ -255,7 +255,7 @@ fn pad(pts: &mut Vec<[f32; 3]>, points: usize, rng: &mut ChaCha8Rng) {
 }
 
 /// Standard normal sample (Box-Muller).
-fn gaussian(rng: &mut ChaCha8Rng) -> f32 {
+pub fn gaussian(rng: &mut ChaCha8Rng) -> f32 {
     let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
     let u2: f64 = rng.random::<f64>();
     ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
