@@ -1,5 +1,5 @@
 //! `pcrnet`: the host command line (train, export, inspect, register,
-//! pairs, eval, experiment, results, shape, untrained).
+//! track, pairs, eval, experiment, results, shape, untrained).
 
 use std::path::{Path, PathBuf};
 
@@ -7,19 +7,17 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 mod register;
+mod track;
 use pcrnet_core::{Arch, F32Model, Int8Model};
 use pcrnet_eval::cli::MethodOptions;
 use pcrnet_eval::methods::MethodKind;
-use pcrnet_io::progress::Progress;
-use pcrnet_io::reduce::{Reduction, reduce_cloud};
 use pcrnet_io::write::Coordinate;
-use pcrnet_io::{LocalCloud, read_cloud_local};
 use pcrnet_train::shapes::{Shape, random_transform, sample};
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference};
 use pcrnet_train::{
     CalibrationRule, EMBEDDED_ENCODER, EMBEDDED_HEAD, F32Params, TrainedFor, inspect, quantize,
 };
-use register::{Output, register};
+use register::{Output, Reading, register};
 
 #[derive(Parser)]
 #[command(
@@ -162,23 +160,25 @@ enum Command {
         /// Write the whole result as JSON to this file (`-`: standard output).
         #[arg(long)]
         json: Option<PathBuf>,
-        /// Refuse cloud files that declare or hold more points than this
-        /// (before allocating: a small hostile file can declare billions).
-        #[arg(long, default_value_t = pcrnet_io::DEFAULT_MAX_POINTS, allow_negative_numbers = true)]
-        max_cloud_points: usize,
-        /// Keep at most this many points of each cloud (0: all): a large
-        /// scan registers as well from a few thousand, much faster.
-        #[arg(long, default_value_t = pcrnet_io::reduce::DEFAULT_SOURCE_POINTS, allow_negative_numbers = true)]
-        reduce_to: usize,
-        /// How to keep them: random (seeded; keeps the density), fps
-        /// (farthest points: even coverage, slow on millions), voxel (the
-        /// mean per cube of --voxel units, then random).
-        #[arg(long, value_enum, default_value_t = Reduction::Random)]
-        reduce: Reduction,
-        /// Cube side for --reduce voxel, in the clouds' units.
-        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-        voxel: f32,
+        /// How the clouds are read.
+        #[command(flatten)]
+        reading: Reading,
     },
+    /// Follow the object of TEMPLATE through a sequence of frames: the
+    /// first registered, each next one refined from the last pose.
+    ///
+    /// Convention: p_template = R p_source + t (the template is the known
+    /// object, each frame a source: what the sensor sees); the template
+    /// comes first. TEMPLATE is bound into the model (--template-points of
+    /// it stored), both are read about its median, and poses are given in
+    /// the files' frame. Frame 1 is registered with the device pipeline;
+    /// each next frame takes one tracking step from the last pose (or, with
+    /// --predict, its constant-velocity prediction): device ICP, kept when
+    /// reliable and within a step, else a full registration in the same
+    /// call (recovered, or lost: the next frame is registered afresh).
+    /// Without --model, the shipped embedded default int8 model (built into
+    /// pcrnet) is used, and the output says so.
+    Track(track::TrackArgs),
 }
 
 /// Errors print as one chain of messages (no backtrace, whatever
@@ -276,16 +276,9 @@ fn run(command: Command) -> anyhow::Result<()> {
             options,
             aligned,
             json,
-            max_cloud_points,
-            reduce_to,
-            reduce,
-            voxel,
+            reading,
         } => {
-            if reduce == Reduction::Voxel && !(voxel.is_finite() && voxel > 0.0) {
-                anyhow::bail!(
-                    "--reduce voxel needs --voxel SIZE: the cube side in the clouds' units, e.g. a tenth of the object's size"
-                );
-            }
+            reading.check()?;
             let (template, source) = match (clouds.as_slice(), &template, &source) {
                 ([t, s], None, None) => (Some(t.as_path()), s.as_path()),
                 ([s], None, None) => (None, s.as_path()),
@@ -298,44 +291,17 @@ fn run(command: Command) -> anyhow::Result<()> {
                 template.is_some() || options.template_points.is_none(),
                 "--template-points applies to a TEMPLATE file bound in place of the blob's own; the blob's own template keeps the points it was exported with (`pcrnet export --template-points`, `pcrnet inspect` shows them)"
             );
-            // Both clouds are read in f64 and moved by the template's
-            // median before rounding to f32 (map coordinates keep their
-            // shape); without a template file the source stays in the
-            // blob's frame, exactly as a device receives it.
-            let load = |path: &Path, origin: Option<[f64; 3]>| -> anyhow::Result<LocalCloud> {
-                let reading = Progress::spinner(format!("reading {}", path.display()));
-                let mut cloud = read_cloud_local(path, max_cloud_points, origin)?;
-                drop(reading);
-                anyhow::ensure!(
-                    !cloud.points.is_empty(),
-                    "{}: no point with three finite coordinates ({} read)",
-                    path.display(),
-                    cloud.left_out
-                );
-                if let Some(note) = cloud.left_out_note(path) {
-                    eprintln!("{note}");
-                }
-                warn_if_coarse(path, &cloud.points);
-                let kept = reduce_cloud(&cloud.points, reduce, reduce_to, voxel, 0);
-                if kept.len() < cloud.points.len() {
-                    eprintln!(
-                        "{}: {} points, {} kept ({reduce:?}; --reduce-to {reduce_to}, 0 keeps all)",
-                        path.display(),
-                        cloud.points.len(),
-                        kept.len()
-                    );
-                }
-                anyhow::ensure!(!kept.is_empty(), "{}: no finite point", path.display());
-                cloud.points = kept;
-                Ok(cloud)
-            };
-            let template = template.map(|t| load(t, None)).transpose()?;
+            // Both clouds are read about the template's median; without a
+            // template file the source stays in the blob's frame, exactly
+            // as a device receives it.
+            let template = template.map(|t| reading.load(t, None)).transpose()?;
             let origin = template.as_ref().map_or([0.0; 3], |t| t.origin);
-            let source = load(source, Some(origin))?.points;
+            let source = reading.load(source, Some(origin))?.points;
             let template = template.map(|t| t.points);
             let out = Output { aligned, json };
             register(template, &source, origin, method, &options, out)?
         }
+        Command::Track(args) => track::track(args)?,
     }
     Ok(())
 }

@@ -1,6 +1,8 @@
 //! `pcrnet register`: one registration of the source onto the template
 //! with any method, on the shipped model unless told otherwise, printed
-//! for a person (pose, matrix, residual, verdict) and as JSON.
+//! for a person (pose, matrix, residual, verdict) and as JSON. The pieces
+//! `pcrnet track` shares with it: the shipped model, how clouds are read
+//! ([`Reading`]), and where lines and JSON go ([`say`], [`write_json`]).
 
 use std::path::{Path, PathBuf};
 
@@ -9,8 +11,109 @@ use pcrnet_eval::cli::MethodOptions;
 use pcrnet_eval::methods::{self, MethodKind};
 use pcrnet_io::frame::FilePose;
 use pcrnet_io::progress::Progress;
+use pcrnet_io::reduce::{Reduction, reduce_cloud};
+use pcrnet_io::{LocalCloud, read_cloud_local};
 
-use crate::{write_cloud, write_stdout};
+use crate::{warn_if_coarse, write_cloud, write_stdout};
+
+/// How cloud files are read: the size limit and the reduction of large
+/// clouds (the flags `register` and `track` share).
+#[derive(clap::Args)]
+pub(crate) struct Reading {
+    /// Refuse cloud files that declare or hold more points than this
+    /// (before allocating: a small hostile file can declare billions).
+    #[arg(long, default_value_t = pcrnet_io::DEFAULT_MAX_POINTS, allow_negative_numbers = true)]
+    max_cloud_points: usize,
+    /// Keep at most this many points of each cloud (0: all): a large
+    /// scan registers as well from a few thousand, much faster.
+    #[arg(long, default_value_t = pcrnet_io::reduce::DEFAULT_SOURCE_POINTS, allow_negative_numbers = true)]
+    reduce_to: usize,
+    /// How to keep them: random (seeded; keeps the density), fps
+    /// (farthest points: even coverage, slow on millions), voxel (the
+    /// mean per cube of --voxel units, then random).
+    #[arg(long, value_enum, default_value_t = Reduction::Random)]
+    reduce: Reduction,
+    /// Cube side for --reduce voxel, in the clouds' units.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    voxel: f32,
+}
+
+impl Reading {
+    /// Refuses `--reduce voxel` without a cube side.
+    pub(crate) fn check(&self) -> anyhow::Result<()> {
+        if self.reduce == Reduction::Voxel && !(self.voxel.is_finite() && self.voxel > 0.0) {
+            anyhow::bail!(
+                "--reduce voxel needs --voxel SIZE: the cube side in the clouds' units, e.g. a tenth of the object's size"
+            );
+        }
+        Ok(())
+    }
+
+    /// Reads `path` in f64 and moves it by `origin` (`None`: its own
+    /// median, as for a template file) before rounding to f32, so map
+    /// coordinates keep their shape; then reduces it as the flags say. A
+    /// cloud with no finite point is an error naming the file.
+    pub(crate) fn load(&self, path: &Path, origin: Option<[f64; 3]>) -> anyhow::Result<LocalCloud> {
+        let Reading {
+            max_cloud_points,
+            reduce_to,
+            reduce,
+            voxel,
+        } = *self;
+        let reading = Progress::spinner(format!("reading {}", path.display()));
+        let mut cloud = read_cloud_local(path, max_cloud_points, origin)?;
+        drop(reading);
+        anyhow::ensure!(
+            !cloud.points.is_empty(),
+            "{}: no point with three finite coordinates ({} read)",
+            path.display(),
+            cloud.left_out
+        );
+        if let Some(note) = cloud.left_out_note(path) {
+            eprintln!("{note}");
+        }
+        warn_if_coarse(path, &cloud.points);
+        let kept = reduce_cloud(&cloud.points, reduce, reduce_to, voxel, 0);
+        if kept.len() < cloud.points.len() {
+            eprintln!(
+                "{}: {} points, {} kept ({reduce:?}; --reduce-to {reduce_to}, 0 keeps all)",
+                path.display(),
+                cloud.points.len(),
+                kept.len()
+            );
+        }
+        anyhow::ensure!(!kept.is_empty(), "{}: no finite point", path.display());
+        cloud.points = kept;
+        Ok(cloud)
+    }
+}
+
+/// Whether `--json` sends the JSON to standard output (`-`): the lines for
+/// a person then go to standard error, so that it carries the JSON alone.
+pub(crate) fn json_on_stdout(json: Option<&Path>) -> bool {
+    json == Some(Path::new("-"))
+}
+
+/// Prints a line for a person: on standard output, or on standard error
+/// when standard output carries the JSON (see [`json_on_stdout`]).
+pub(crate) fn say(json_on_stdout: bool, line: &str) {
+    if json_on_stdout {
+        eprintln!("{line}");
+    } else {
+        write_stdout(&format!("{line}\n"));
+    }
+}
+
+/// Writes `value` as pretty JSON to `path` (`-`: standard output).
+pub(crate) fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(value)? + "\n";
+    if json_on_stdout(Some(path)) {
+        write_stdout(&text);
+    } else {
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
 
 /// Where `register` writes besides standard output.
 pub(crate) struct Output {
@@ -24,7 +127,7 @@ pub(crate) struct Output {
 /// `pcrnet register TEMPLATE SOURCE` runs anywhere without `--model`: the
 /// int8 blob for the network methods, the f32 blob for PointNetLK (which
 /// needs f32 features), none for ICP. With its file name, to say which.
-fn shipped_model(kind: MethodKind) -> Option<(&'static [u8], &'static str)> {
+pub(crate) fn shipped_model(kind: MethodKind) -> Option<(&'static [u8], &'static str)> {
     match kind {
         MethodKind::Icp => None,
         MethodKind::Pointnetlk => Some((
@@ -75,15 +178,8 @@ pub(crate) fn register(
         None => "registering".into(),
     })?;
     let pose = FilePose::from_local(&out.pose, origin);
-    // With --json -, standard output carries the JSON alone.
-    let to_stdout = json.as_deref() == Some(Path::new("-"));
-    let say = |line: String| {
-        if to_stdout {
-            eprintln!("{line}");
-        } else {
-            write_stdout(&format!("{line}\n"));
-        }
-    };
+    let to_stdout = json_on_stdout(json.as_deref());
+    let say = |line: String| say(to_stdout, &line);
     say(format!(
         "method: {}, {} pass(es)/step(s){}",
         method.name(out.precision),
@@ -178,13 +274,10 @@ pub(crate) fn register(
         say(format!("aligned source written to {}", out_path.display()));
     }
     if let Some(path) = json {
-        let value = report_json(&method.name(out.precision), &out, &pose);
-        let text = serde_json::to_string_pretty(&value)? + "\n";
-        if to_stdout {
-            write_stdout(&text);
-        } else {
-            std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
-        }
+        write_json(
+            &path,
+            &report_json(&method.name(out.precision), &out, &pose),
+        )?;
     }
     Ok(())
 }
