@@ -330,12 +330,30 @@ pub enum Degeneracy {
 /// Classifies the spread of the used points (model frame): `Point` when
 /// the largest standard deviation along a principal axis is below
 /// `min_extent`, `Line` when the second is below 1% of the largest.
+///
+/// The points are moved by minus their mean (f32, summed in order) before
+/// they are rounded onto the template's int16 grid: the grid spans about
+/// 32767 steps either side of the template, and a source far from the
+/// template's frame would otherwise clamp to its edge and look like one point.
 pub fn degeneracy(
     template: &Template<'_>,
     subset: &Subset<'_>,
     min_extent: f32,
 ) -> Option<Degeneracy> {
-    let map = PointMap::new(subset.frame, &Pose::IDENTITY);
+    let (mut sum, mut count) = ([0f32; 3], 0u32);
+    for p in subset.points() {
+        let q = subset.frame.to_model(*p);
+        for k in 0..3 {
+            sum[k] += q[k];
+        }
+        count += 1;
+    }
+    let n = count.max(1) as f32;
+    let centre = Pose {
+        rotation: Pose::IDENTITY.rotation,
+        translation: sum.map(|v| -v / n),
+    };
+    let map = PointMap::new(subset.frame, &centre);
     let (mut n, mut s, mut ss) = (0i64, [0i64; 3], [[0i64; 3]; 3]);
     for p in subset.points() {
         let p = template.quantize(map.apply(*p));

@@ -184,10 +184,16 @@ fn degenerate_sources_are_flagged() {
     let t = template_of(&cloud, &[]);
     let point = vec![[0.1f32, 0.2, 0.3]; 40];
     let line: Vec<[f32; 3]> = (0..40).map(|i| [i as f32 * 0.01, 0.2, 0.3]).collect();
+    // Far from the template's frame (beyond its int16 grid): still judged
+    // by its own spread, not clamped onto the grid's edge.
+    let far: Vec<[f32; 3]> = cloud.iter().map(|p| [p[0] + 1000.0, p[1], p[2]]).collect();
+    let far_line: Vec<[f32; 3]> = line.iter().map(|p| [p[0] - 700.0, p[1], p[2]]).collect();
     for (cloud, expected) in [
         (&point, Some(Degeneracy::Point)),
         (&line, Some(Degeneracy::Line)),
         (&cloud, None),
+        (&far, None),
+        (&far_line, Some(Degeneracy::Line)),
     ] {
         let subset = Subset::new(cloud, Frame::IDENTITY, 256);
         assert_eq!(refine::degeneracy(&t, &subset, 1e-3), expected);
