@@ -438,7 +438,7 @@ pub const FLIP_MARGIN: f32 = 0.7;
 /// followed by each of the first `hypotheses - 1` template turns. The
 /// network's start gets `screen` ICP iterations on every used point; each
 /// turned start gets them on half the points ([`Subset::thinned`]). The
-/// network's start and the two best-scoring turned starts then continue
+/// network's start and the best-scoring turned start then continue
 /// ICP on every used point up to `icp.iterations` in all and are scored
 /// again (a turned start whose screening converged is only scored again).
 /// The best turned pose wins only if its residual is below
@@ -446,14 +446,15 @@ pub const FLIP_MARGIN: f32 = 0.7;
 /// the template's points clearly favour a turn. With
 /// `screen >= icp.iterations` every start gets the full ICP.
 ///
-/// Screening on half the points: measured with the shipped model under
-/// the `trust` experiment's pairs, the default registration on the
-/// Cortex-M4F takes 56.0 M instructions instead of 80.7 M (the firmware
-/// example), with ModelNet10 AUC 0.9973 (0.9967 before), resampled 0.9889
-/// (0.9889) and unseen airplanes 0.9974 (0.9975), the same verdict rates.
-/// A quarter of the points (43 M) misranked a desk's right turn (AUC
-/// 0.9952, one pose 55 deg off); one finalist turn instead of two saves
-/// 0.3 M and gives 0.9967.
+/// Screening on half the points: measured with the shipped model on the
+/// `trust` experiment's pairs, the default registration on the Cortex-M4F
+/// takes 55.7 M instructions instead of 80.7 M (the firmware example),
+/// with ModelNet10 AUC 0.9967 (0.9967 before), resampled 0.9889 (0.9889)
+/// and unseen airplanes 0.9974 (0.9975), the same verdict rates. A quarter
+/// of the points (43 M) misranked a desk's right turn (AUC 0.9952, one
+/// pose 55 deg off). Two finalist turns gave 0.9973, but a second
+/// finalist that does not converge grinds through the whole ICP budget
+/// (K = 4: 64 M instead of 46 M), so one it is.
 pub fn resolve(
     template: &Template<'_>,
     subset: &Subset<'_>,
@@ -518,29 +519,18 @@ pub fn resolve(
     let network = finish(refine(start, 0, &first, subset)?, true)?;
     let thin = subset.thinned();
     let all = thin.stride == subset.stride;
-    // The two best screened turns (on fewer points, one alone can be
-    // misranked), best first.
-    let mut best: [Option<Resolved>; 2] = [None, None];
+    let mut best_turn: Option<Resolved> = None;
     for (k, &rotation) in turns.iter().enumerate().take(count - 1) {
         let from = start.then(&Pose {
             rotation,
             translation: [0.0; 3],
         });
         let r = refine(from, k + 1, &first, &thin)?;
-        if best[0].is_none_or(|b| r.fit.residual < b.fit.residual) {
-            best = [Some(r), best[0]];
-        } else if best[1].is_none_or(|b| r.fit.residual < b.fit.residual) {
-            best[1] = Some(r);
+        if best_turn.is_none_or(|b| r.fit.residual < b.fit.residual) {
+            best_turn = Some(r);
         }
     }
-    let finalists = if all { 1 } else { 2 };
-    let mut best_turn: Option<Resolved> = None;
-    for r in best.into_iter().take(finalists).flatten() {
-        let t = finish(r, all)?;
-        if best_turn.is_none_or(|b| t.fit.residual < b.fit.residual) {
-            best_turn = Some(t);
-        }
-    }
+    let best_turn = best_turn.map(|t| finish(t, all)).transpose()?;
     match best_turn {
         Some(t) if t.fit.residual < FLIP_MARGIN * network.fit.residual => Ok(t),
         _ => Ok(network),
