@@ -58,7 +58,8 @@
 
 /*
  `pcrnet_track`'s outcome: no reliable pose either way (the result is
- the registration's, `reliable` false): register the next frame afresh.
+ the registration's, `reliable` false): track the next frame from the
+ last reliable pose (its step falls back to a registration again).
  */
 #define PCRNET_TRACK_LOST 2
 

@@ -15,7 +15,8 @@ pub const PCRNET_TRACK_KEPT: u32 = 0;
 /// registration in the same call found a reliable pose.
 pub const PCRNET_TRACK_RECOVERED: u32 = 1;
 /// `pcrnet_track`'s outcome: no reliable pose either way (the result is
-/// the registration's, `reliable` false): register the next frame afresh.
+/// the registration's, `reliable` false): track the next frame from the
+/// last reliable pose (its step falls back to a registration again).
 pub const PCRNET_TRACK_LOST: u32 = 2;
 
 /// One tracking step: refines `previous`, the last frame's pose

@@ -175,7 +175,8 @@ enum Command {
     /// each next frame takes one tracking step from the last pose (or, with
     /// --predict, its constant-velocity prediction): device ICP, kept when
     /// reliable and within a step, else a full registration in the same
-    /// call (recovered, or lost: the next frame is registered afresh).
+    /// call (recovered, or lost: the next frame is tracked from the last
+    /// reliable pose, its step falling back to a registration again).
     /// Without --model, the shipped embedded default int8 model (built into
     /// pcrnet) is used, and the output says so.
     Track(track::TrackArgs),

@@ -46,8 +46,7 @@ pub(crate) struct TrackArgs {
 /// What was done with one frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Step {
-    /// Registered afresh: the first frame, or the last one's pose was not
-    /// reliable.
+    /// Registered afresh: frames until the first reliable pose.
     Registered,
     /// A tracking step from the last pose.
     Tracked(TrackOutcome),
@@ -170,8 +169,8 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
         }
     ));
 
-    // The poses of the last two frames while the track holds (each
-    // reliable), the older first.
+    // The last two reliable poses while the track holds, the older first;
+    // after a frame without one, the last reliable pose alone.
     let (mut before, mut last): (Option<Pose>, Option<Pose>) = (None, None);
     let mut tally = Tally::default();
     let mut results = Vec::with_capacity(frames.len());
@@ -200,10 +199,15 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
             .with_context(|| format!("frame {index} of {} ({})", frames.len(), path.display()))?;
         let reliable = registration.reliable;
         tally.add(step, reliable, ms);
-        (before, last) = if reliable {
-            (last, Some(registration.pose))
-        } else {
-            (None, None)
+        (before, last) = match (reliable, step) {
+            (true, Step::Tracked(pcrnet_core::TrackOutcome::Kept)) => {
+                (last, Some(registration.pose))
+            }
+            // A fresh pose: no velocity across it.
+            (true, _) => (None, Some(registration.pose)),
+            // Coast: the next frame is tracked from the last reliable pose
+            // (the step falls back to a registration if it does not hold).
+            (false, _) => (None, last),
         };
         let pose = FilePose::from_local(&registration.pose, origin);
         let name = path

@@ -134,10 +134,12 @@ pub struct FrameResult {
 }
 
 /// Follows a sequence of `frames` frames at `rate` frames a second with
-/// `model` (the template bound in): the first frame, and every frame after
-/// one without a reliable pose, registered afresh; every other frame a
-/// tracking step from the constant-velocity prediction of the last two
-/// poses (the last pose alone after a registration).
+/// `model` (the template bound in): frames registered afresh until one is
+/// reliable; then every frame a tracking step from the constant-velocity
+/// prediction of the last two poses (the last pose alone after a
+/// registration or a lost frame). After a lost frame the next is tracked
+/// from the last reliable pose: the step's ICP from there, then its
+/// registration, so the fresh registration is still tried.
 #[allow(clippy::too_many_arguments, reason = "the simulation's knobs")]
 pub fn follow(
     model: &Int8Model<'_>,
@@ -187,7 +189,9 @@ pub fn follow(
         };
         let micros = started.elapsed().as_secs_f64() * 1e6;
         (before, last) = match (step, last) {
-            (Step::Lost, _) => (None, None),
+            // Coast: the next frame is tracked from the last reliable pose
+            // (a step falls back to the registration anyway), no velocity.
+            (Step::Lost, last) => (None, last),
             // A fresh pose: no velocity across it.
             (Step::Registered | Step::Recovered, _) | (Step::Kept, None) => (None, Some(r.pose)),
             (Step::Kept, Some(previous)) => (Some(previous), Some(r.pose)),
