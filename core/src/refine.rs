@@ -10,6 +10,8 @@
 //! eigenproblem of Horn's method and the final scores are f32, through
 //! `libm`. Memory is O(1): nothing depends on the number of points.
 
+use core::num::NonZeroUsize;
+
 use crate::eigen;
 use crate::error::{Error, Result};
 use crate::format::Frame;
@@ -46,11 +48,11 @@ impl<'s> Subset<'s> {
     /// Every point if the cloud has at most `max_points`, else a stride
     /// that keeps at most `max_points` (1..=[`MAX_SUBSET`]) of them.
     pub fn new(source: &'s [[f32; 3]], frame: Frame, max_points: usize) -> Self {
-        let max = max_points.clamp(1, MAX_SUBSET);
+        let max = NonZeroUsize::new(max_points.clamp(1, MAX_SUBSET)).unwrap_or(NonZeroUsize::MIN);
         Subset {
             source,
             frame,
-            stride: source.len().div_ceil(max).max(1),
+            stride: div_ceil(source.len(), max).max(1),
         }
     }
 
@@ -58,11 +60,11 @@ impl<'s> Subset<'s> {
     /// of these points, or fewer thinned so that at least
     /// [`MIN_SCREEN_POINTS`] remain (all of them when there are fewer).
     pub fn thinned(&self) -> Self {
-        let stride = self.stride.max(1);
-        let used = self.source.len().div_ceil(stride);
+        let stride = NonZeroUsize::new(self.stride).unwrap_or(NonZeroUsize::MIN);
+        let used = div_ceil(self.source.len(), stride);
         let thin = (used / MIN_SCREEN_POINTS).clamp(1, SCREEN_THIN);
         Subset {
-            stride: stride.saturating_mul(thin),
+            stride: stride.get().saturating_mul(thin),
             ..*self
         }
     }
@@ -70,6 +72,13 @@ impl<'s> Subset<'s> {
     fn points(&self) -> impl Iterator<Item = &'s [f32; 3]> + 's {
         self.source.iter().step_by(self.stride.max(1))
     }
+}
+
+/// `a / b` rounded up, with a divisor the compiler sees is not zero (the
+/// link-time no-panic proof: `usize::div_ceil` by a clamped value kept a
+/// division-by-zero panic at opt-level `s` on the M0 and M3).
+fn div_ceil(a: usize, b: NonZeroUsize) -> usize {
+    a / b + usize::from(a % b != 0)
 }
 
 /// What ICP minimises. (Scoring is the same for both: [`Fit`] carries the
