@@ -204,34 +204,33 @@ impl Frame {
     /// clouds: with `N(p) = s (p - c)`, `N^-1 . P . N` keeps `R` and has
     /// `t = t_model / s + c - R c`.
     pub fn pose_to_user(&self, pose: &Pose) -> Pose {
-        let r = Pose {
-            rotation: pose.rotation,
-            translation: [0.0; 3],
-        };
-        let [rx, ry, rz] = r.transform_point(self.centre);
+        let [rx, ry, rz] = self.turned_centre(pose);
         let ([tx, ty, tz], [cx, cy, cz], s) = (pose.translation, self.centre, self.scale);
         Pose {
             rotation: pose.rotation,
             translation: [tx / s + cx - rx, ty / s + cy - ry, tz / s + cz - rz],
         }
     }
-}
 
-impl Frame {
     /// A pose between user-unit clouds as a pose between model-frame
     /// clouds, the inverse of [`Frame::pose_to_user`]: `R` kept,
     /// `t_model = s (t - c + R c)`.
     pub fn pose_to_model(&self, pose: &Pose) -> Pose {
-        let r = Pose {
-            rotation: pose.rotation,
-            translation: [0.0; 3],
-        };
-        let [rx, ry, rz] = r.transform_point(self.centre);
+        let [rx, ry, rz] = self.turned_centre(pose);
         let ([tx, ty, tz], [cx, cy, cz], s) = (pose.translation, self.centre, self.scale);
         Pose {
             rotation: pose.rotation,
             translation: [(tx - cx + rx) * s, (ty - cy + ry) * s, (tz - cz + rz) * s],
         }
+    }
+
+    /// `R c`: the frame's centre turned by `pose`'s rotation.
+    fn turned_centre(&self, pose: &Pose) -> [f32; 3] {
+        let r = Pose {
+            rotation: pose.rotation,
+            translation: [0.0; 3],
+        };
+        r.transform_point(self.centre)
     }
 }
 

@@ -185,6 +185,32 @@ pub(crate) struct PassCounts {
 /// point (see [`refine::degeneracy`]).
 pub const MIN_EXTENT: f32 = 1e-3;
 
+/// What a registration and a tracking step check and derive first: valid
+/// options, a non-empty source, the points refinement and scoring use, and
+/// whether their shape determines a pose.
+pub(crate) struct Checked<'s> {
+    /// The used points ([`Options::max_points`] of them at most).
+    pub subset: Subset<'s>,
+    /// The degeneracy of those points ([`refine::degeneracy`]).
+    pub degenerate: Option<Degeneracy>,
+}
+
+/// Checks `options` and `source` and derives the [`Checked`] parts.
+pub(crate) fn check<'s>(
+    frame: &Frame,
+    template: &Template<'_>,
+    source: &'s [[f32; 3]],
+    options: &Options,
+) -> Result<Checked<'s>> {
+    options.validate()?;
+    if source.is_empty() {
+        return Err(Error::EmptyCloud);
+    }
+    let subset = Subset::new(source, *frame, options.max_points);
+    let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
+    Ok(Checked { subset, degenerate })
+}
+
 /// Runs the pipeline with `pass`, one network pass on the source moved by a
 /// [`PointMap`], returning the pass's pose (model frame) and its saturation count.
 pub(crate) fn run(
@@ -193,17 +219,26 @@ pub(crate) fn run(
     template: &Template<'_>,
     source: &[[f32; 3]],
     options: &Options,
+    pass: impl FnMut(&PointMap) -> Result<(Pose, PassCounts)>,
+) -> Result<Registration> {
+    let checked = check(frame, template, source, options)?;
+    run_checked(frame, centring, template, &checked, options, pass)
+}
+
+/// [`run`] on a source [`check`] has passed (its subset's cloud).
+pub(crate) fn run_checked(
+    frame: &Frame,
+    centring: Centring,
+    template: &Template<'_>,
+    checked: &Checked<'_>,
+    options: &Options,
     mut pass: impl FnMut(&PointMap) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
-    options.validate()?;
-    if source.is_empty() {
-        return Err(Error::EmptyCloud);
-    }
     let (mut saturated, mut out_of_range) = (0u32, 0u32);
     let (network, passes) = network_passes(
         frame,
         centring,
-        source,
+        checked.subset.source,
         options.passes,
         options.tolerance,
         |map| {
@@ -213,11 +248,9 @@ pub(crate) fn run(
             Ok(delta)
         },
     )?;
-    let subset = Subset::new(source, *frame, options.max_points);
-    let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
     let r = refine::resolve(
         template,
-        &subset,
+        &checked.subset,
         network,
         options.hypotheses,
         options.screen_iterations,
@@ -228,7 +261,7 @@ pub(crate) fn run(
         saturated,
         out_of_range,
     };
-    conclude(frame, &r, passes, counts, degenerate, options)
+    conclude(frame, &r, passes, counts, checked.degenerate, options)
 }
 
 /// The [`Registration`] of a refined and scored pose (model frame): the

@@ -22,8 +22,8 @@
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{Centring, PointMap, Pose};
-use crate::refine::{self, Resolved, Subset};
-use crate::registration::{self, MIN_EXTENT, Options, PassCounts, Registration};
+use crate::refine::{self, Resolved};
+use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
 
 /// What a tracking step did.
@@ -103,10 +103,7 @@ pub(crate) fn step(
     options: &Options,
     pass: impl FnMut(&PointMap) -> Result<(Pose, PassCounts)>,
 ) -> Result<Tracking> {
-    options.validate()?;
-    if source.is_empty() {
-        return Err(Error::EmptyCloud);
-    }
+    let checked = registration::check(frame, template, source, options)?;
     if let Some(index) = source.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
         return Err(Error::NonFiniteCoordinate { index });
     }
@@ -115,12 +112,11 @@ pub(crate) fn step(
     if !(previous.is_finite() && libm::fabsf(norm - 1.0) <= UNIT_TOLERANCE) {
         return Err(Error::InvalidPose);
     }
-    let subset = Subset::new(source, *frame, options.max_points);
-    let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
     // Unit length again: a pose carried through a stream composes without end.
     let start = frame.pose_to_model(&previous.normalised());
-    let (pose, icp_iterations) = refine::icp(template, &subset, start, &options.icp_settings());
-    let fit = refine::score(template, &subset, &pose, options.inlier_distance);
+    let (pose, icp_iterations) =
+        refine::icp(template, &checked.subset, start, &options.icp_settings());
+    let fit = refine::score(template, &checked.subset, &pose, options.inlier_distance);
     let refined = Resolved {
         pose,
         fit,
@@ -134,7 +130,7 @@ pub(crate) fn step(
         &refined,
         0,
         PassCounts::default(),
-        degenerate,
+        checked.degenerate,
         options,
     );
     if let Ok(held) = held
@@ -146,7 +142,8 @@ pub(crate) fn step(
             outcome: TrackOutcome::Kept,
         });
     }
-    let registration = registration::run(frame, centring, template, source, options, pass)?;
+    let registration =
+        registration::run_checked(frame, centring, template, &checked, options, pass)?;
     let outcome = if registration.reliable {
         TrackOutcome::Recovered
     } else {

@@ -2,6 +2,9 @@
 //! known transforms, flip resolution picks the right turn, the residual
 //! tells good poses from bad ones, and the frame round-trips user units.
 
+mod common;
+
+use common::{angle_deg, rotation};
 use pcrnet_core::format::Frame;
 use pcrnet_core::pose::Pose;
 use pcrnet_core::refine::{self, Degeneracy, IcpSettings, Metric, Subset};
@@ -73,25 +76,6 @@ fn template_of(cloud: &[[f32; 3]], turns: &[[f32; 4]]) -> Template<'static> {
     };
     let cloud = template::build(&q, &normals(cloud), STEP, 6, turns, out).unwrap();
     Template::new(cloud).unwrap()
-}
-
-fn rotation(axis: [f32; 3], deg: f32) -> Pose {
-    let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-    let h = deg.to_radians() / 2.0;
-    Pose {
-        rotation: [
-            h.cos(),
-            h.sin() * axis[0] / n,
-            h.sin() * axis[1] / n,
-            h.sin() * axis[2] / n,
-        ],
-        translation: [0.0; 3],
-    }
-}
-
-fn angle_deg(a: &Pose, b: &Pose) -> f32 {
-    let d: f32 = a.rotation.iter().zip(b.rotation).map(|(x, y)| x * y).sum();
-    2.0 * d.abs().min(1.0).acos().to_degrees()
 }
 
 #[test]

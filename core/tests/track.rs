@@ -3,6 +3,9 @@
 //! and recovers, and a previous pose that is not a pose is an error, one
 //! that is far off never gives a wrong pose marked reliable.
 
+mod common;
+
+use common::{angle_deg, rotation};
 use pcrnet_core::pose::{self, Pose};
 use pcrnet_core::testing::SplitMix64;
 use pcrnet_core::{Error, Int8Model, Options, TrackOutcome};
@@ -20,23 +23,12 @@ fn template() -> Vec<[f32; 3]> {
         .collect()
 }
 
-fn rotation(axis: [f32; 3], deg: f32, translation: [f32; 3]) -> Pose {
-    let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-    let h = deg.to_radians() / 2.0;
+/// A rotation of `deg` degrees about `axis`, then `translation`.
+fn posed(axis: [f32; 3], deg: f32, translation: [f32; 3]) -> Pose {
     Pose {
-        rotation: [
-            h.cos(),
-            h.sin() * axis[0] / n,
-            h.sin() * axis[1] / n,
-            h.sin() * axis[2] / n,
-        ],
         translation,
+        ..rotation(axis, deg)
     }
-}
-
-fn angle_deg(a: &Pose, b: &Pose) -> f32 {
-    let d: f32 = a.rotation.iter().zip(b.rotation).map(|(x, y)| x * y).sum();
-    2.0 * d.abs().min(1.0).acos().to_degrees()
 }
 
 /// What a sensor sees when `truth` maps its points onto the template: a
@@ -72,7 +64,7 @@ fn a_smooth_motion_is_kept_without_the_network() {
     // a drift of a quarter of the template's size a second.
     let truth = |k: usize| {
         let k = k as f32;
-        rotation(
+        posed(
             [0.3, 1.0, 0.5],
             -20.0 + 2.0 * k,
             [0.008 * k, -0.004 * k, 0.002 * k],
@@ -101,8 +93,8 @@ fn a_smooth_motion_is_kept_without_the_network() {
 fn a_jump_falls_back_and_recovers() {
     let (model, mut scratch) = model_and_scratch();
     let options = Options::default();
-    let before = rotation([0.0, 0.0, 1.0], -40.0, [0.0; 3]);
-    let after = rotation([0.0, 0.0, 1.0], 50.0, [0.05, 0.0, 0.0]);
+    let before = posed([0.0, 0.0, 1.0], -40.0, [0.0; 3]);
+    let after = posed([0.0, 0.0, 1.0], 50.0, [0.05, 0.0, 0.0]);
     let last = model
         .register(&frame(&before, 1), &options, &mut scratch)
         .unwrap();
@@ -154,11 +146,11 @@ fn a_previous_pose_that_is_not_a_pose_is_an_error() {
 fn a_far_off_previous_pose_is_never_kept_wrongly() {
     let (model, mut scratch) = model_and_scratch();
     let options = Options::default();
-    let truth = rotation([1.0, 0.2, 0.0], 25.0, [0.1, 0.0, -0.1]);
+    let truth = posed([1.0, 0.2, 0.0], 25.0, [0.1, 0.0, -0.1]);
     let source = frame(&truth, 4);
     let wrong = [
-        rotation([0.0, 1.0, 0.0], 180.0, [0.0; 3]).then(&truth),
-        rotation([1.0, 1.0, 1.0], 100.0, [0.0; 3]).then(&truth),
+        rotation([0.0, 1.0, 0.0], 180.0).then(&truth),
+        rotation([1.0, 1.0, 1.0], 100.0).then(&truth),
         Pose {
             translation: [400.0, -250.0, 1e4],
             ..truth
@@ -179,8 +171,8 @@ fn a_far_off_previous_pose_is_never_kept_wrongly() {
 /// The constant-velocity prediction is exact for a constant motion.
 #[test]
 fn prediction_continues_a_constant_motion() {
-    let step = rotation([0.2, -0.5, 1.0], 7.0, [0.01, 0.02, -0.03]);
-    let p0 = rotation([1.0, 0.0, 0.3], 30.0, [0.3, -0.1, 0.2]);
+    let step = posed([0.2, -0.5, 1.0], 7.0, [0.01, 0.02, -0.03]);
+    let p0 = posed([1.0, 0.0, 0.3], 30.0, [0.3, -0.1, 0.2]);
     // Each frame's pose: the last one after one more step of the motion
     // (in the template's frame).
     let p1 = p0.then(&step);
