@@ -102,6 +102,13 @@ pub enum Error {
     /// A pose given as input (the previous pose of a tracking step) is not
     /// finite or its rotation is not a unit quaternion.
     InvalidPose,
+    /// A sensor frame or a scene setting cannot be used: a zero size, a
+    /// slice shorter than the frame, intrinsics or a depth scale that are
+    /// not finite and positive, a sampling grid too large for its labels.
+    InvalidFrame {
+        /// What is wrong, and what to change.
+        what: &'static str,
+    },
 }
 
 impl fmt::Display for Error {
@@ -180,6 +187,7 @@ impl fmt::Display for Error {
                 f,
                 "the previous pose is not finite or its rotation is not a unit quaternion: pass the pose a registration or tracking step returned, or register afresh"
             ),
+            Error::InvalidFrame { what } => write!(f, "invalid sensor frame: {what}"),
         }
     }
 }

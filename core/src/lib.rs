@@ -94,8 +94,10 @@ mod header;
 pub mod int8;
 mod kernel;
 pub mod pose;
+pub mod random;
 pub mod refine;
 pub mod registration;
+pub mod scene;
 mod sizes;
 pub mod template;
 #[doc(hidden)]
