@@ -93,6 +93,7 @@ pub mod format;
 mod header;
 pub mod int8;
 mod kernel;
+pub mod locate;
 pub mod pose;
 pub mod random;
 pub mod refine;

@@ -35,6 +35,7 @@ fn tabletop(blocks: &[Block], noise: f32) -> Tabletop<'_> {
         distance: 0.9,
         pitch: 0.7,
         blocks,
+        clouds: &[],
         noise,
         seed: 5,
     }

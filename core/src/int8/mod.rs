@@ -219,6 +219,38 @@ impl<'a> Int8Model<'a> {
         )
     }
 
+    /// Finds the template's object in a sensor frame and registers it
+    /// (see [`crate::locate`]): the scene stages over `frame` with `scene`
+    /// (start from [`crate::scene::SceneOptions::for_object`] with
+    /// [`Self::object_radius`]), then up to `candidates` of the largest kept
+    /// clusters registered as [`Self::register`] does, each from at most
+    /// `points.len()` of its points. `labels` needs
+    /// [`crate::scene::labels_len`] elements; the scratch is the registration's.
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn locate<F: crate::scene::Organised>(
+        &self,
+        frame: &F,
+        scene: &crate::scene::SceneOptions,
+        candidates: usize,
+        options: &Options,
+        labels: &mut [u16],
+        points: &mut [[f32; 3]],
+        scratch: &mut [i8],
+    ) -> Result<crate::locate::Located> {
+        let tile = self.tile_for(scratch.len())?;
+        crate::locate::locate(frame, scene, candidates, labels, points, |source| {
+            self.register_ready(source, options, tile, scratch, Ready::default())
+        })
+    }
+
+    /// The largest distance of the template's stored points from the
+    /// template's centre, user units: the radius the scene stages expect of
+    /// the object ([`crate::scene::SceneOptions::for_object`]).
+    pub fn object_radius(&self) -> f32 {
+        self.template.radius() / self.p.frame.scale
+    }
+
     /// Whether the network sees the source centred on its centroid.
     pub fn centres_source(&self) -> bool {
         self.p.centre_source

@@ -122,6 +122,19 @@ impl<'a> Template<'a> {
         self.cloud.step
     }
 
+    /// The largest distance of a stored point from the model frame's
+    /// origin (the template's centre), model units.
+    pub fn radius(&self) -> f32 {
+        let largest = (0..self.len)
+            .map(|i| {
+                let q = self.point(i).map(i64::from);
+                (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]) as u64
+            })
+            .max()
+            .unwrap_or(0);
+        libm::sqrtf(largest as f32) * self.cloud.step
+    }
+
     /// The symmetry turns stored by the exporter.
     pub fn turns(&self) -> &[[f32; 4]] {
         &self.cloud.turns

@@ -4,8 +4,9 @@
 //! QEMU harness on a device make the same frame.
 
 use crate::error::{Error, Result};
+use crate::pose::Pose;
 use crate::random::SplitMix64;
-use crate::scene::depth::Intrinsics;
+use crate::scene::depth::{Intrinsics, project};
 use crate::scene::plane::{Plane, dot, sub};
 
 /// A box standing on the table.
@@ -21,7 +22,19 @@ pub struct Block {
     pub yaw: f32,
 }
 
-/// A camera over a table with blocks on it.
+/// A point cloud placed in the camera's frame, drawn as discs (splats)
+/// of `splat` radius with a z-buffer, as the host's z-buffer views are.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placed<'a> {
+    /// The cloud in its own frame.
+    pub points: &'a [[f32; 3]],
+    /// Its pose: camera-frame point = `pose.transform_point(p)`.
+    pub pose: Pose,
+    /// Disc radius, the cloud's units (about its points' spacing).
+    pub splat: f32,
+}
+
+/// A camera over a table with blocks and point clouds on it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tabletop<'a> {
     /// The camera's intrinsics.
@@ -32,6 +45,8 @@ pub struct Tabletop<'a> {
     pub pitch: f32,
     /// The blocks.
     pub blocks: &'a [Block],
+    /// Point clouds, drawn over the table and the blocks.
+    pub clouds: &'a [Placed<'a>],
     /// Depth noise: uniform in +- this share of the depth squared (metres;
     /// 0.003 is about a consumer time-of-flight camera's at 1 m).
     pub noise: f32,
@@ -119,16 +134,41 @@ impl Tabletop<'_> {
                         nearest = nearest.min(t);
                     }
                 }
-                let noise = self.noise * nearest * nearest * (2.0 * random.unit() - 1.0);
-                let z = nearest + noise;
-                depth[v * width + u] = if z.is_finite() && z > 0.0 && z < 10.0 {
-                    libm::roundf(z / DEPTH_SCALE) as u16
-                } else {
-                    0
-                };
+                depth[v * width + u] = to_raw(nearest);
             }
         }
+        for cloud in self.clouds {
+            self.splat(cloud, width, height, depth);
+        }
+        for d in depth[..needed].iter_mut() {
+            let z = *d as f32 * DEPTH_SCALE;
+            let noise = self.noise * z * z * (2.0 * random.unit() - 1.0);
+            *d = if *d == 0 { 0 } else { to_raw(z + noise) };
+        }
         Ok(())
+    }
+
+    /// Draws `cloud` into `depth` where it is nearer than what is there.
+    fn splat(&self, cloud: &Placed, width: usize, height: usize, depth: &mut [u16]) {
+        let k = &self.intrinsics;
+        for &p in cloud.points {
+            let Some(([pu, pv], z)) = project(k, cloud.pose.transform_point(p)) else {
+                continue;
+            };
+            let raw = to_raw(z);
+            let r = cloud.splat * k.fx / z;
+            let (u0, u1) = (libm::floorf(pu - r), libm::ceilf(pu + r));
+            let (v0, v1) = (libm::floorf(pv - r), libm::ceilf(pv + r));
+            for v in (v0.max(0.0) as usize)..=(v1.max(0.0) as usize).min(height - 1) {
+                for u in (u0.max(0.0) as usize)..=(u1.max(0.0) as usize).min(width - 1) {
+                    let (du, dv) = (u as f32 - pu, v as f32 - pv);
+                    let d = &mut depth[v * width + u];
+                    if du * du + dv * dv <= r * r && (*d == 0 || raw < *d) {
+                        *d = raw;
+                    }
+                }
+            }
+        }
     }
 
     /// Where the ray `t * ray` first enters `block` (its `t`, which is the
@@ -155,5 +195,15 @@ impl Tabletop<'_> {
             leave = leave.min(t0.max(t1));
         }
         (enter <= leave && enter > 0.0).then_some(enter)
+    }
+}
+
+/// Millimetres of a depth in metres (0, no point, beyond 10 m or for a
+/// non-finite depth).
+fn to_raw(z: f32) -> u16 {
+    if z.is_finite() && z > 0.0 && z < 10.0 {
+        libm::roundf(z / DEPTH_SCALE) as u16
+    } else {
+        0
     }
 }

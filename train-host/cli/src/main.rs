@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
+mod device;
 mod register;
+mod scene;
 mod track;
 use pcrnet_core::{Arch, F32Model, Int8Model};
 use pcrnet_eval::cli::MethodOptions;
@@ -160,6 +162,21 @@ enum Command {
         /// Write the whole result as JSON to this file (`-`: standard output).
         #[arg(long)]
         json: Option<PathBuf>,
+        /// SOURCE is a sensor frame holding the object among other things:
+        /// a 16-bit depth PNG (with --intrinsics) or an organised PCD. The
+        /// device's scene stages find the plane and the clusters of the
+        /// object's size, and the best registered candidate wins
+        /// (--method device only).
+        #[arg(long)]
+        scene: bool,
+        /// With --scene and a depth PNG: the camera's intrinsics as JSON,
+        /// {"fx", "fy", "cx", "cy" (pixels), "depth_scale" (user units per
+        /// raw value: 0.001 reads millimetres as metres), "invalid" (optional)}.
+        #[arg(long, requires = "scene")]
+        intrinsics: Option<PathBuf>,
+        /// With --scene: register at most this many of the largest clusters (1 to 8).
+        #[arg(long, default_value_t = 3, requires = "scene")]
+        candidates: usize,
         /// How the clouds are read.
         #[command(flatten)]
         reading: Reading,
@@ -277,6 +294,9 @@ fn run(command: Command) -> anyhow::Result<()> {
             options,
             aligned,
             json,
+            scene,
+            intrinsics,
+            candidates,
             reading,
         } => {
             reading.check()?;
@@ -288,6 +308,19 @@ fn run(command: Command) -> anyhow::Result<()> {
                     "register takes [TEMPLATE] SOURCE, or --source FILE with an optional --template FILE"
                 ),
             };
+            if scene {
+                anyhow::ensure!(
+                    method == MethodKind::Device,
+                    "--scene runs the device pipeline: leave out --method or give --method device"
+                );
+                let args = scene::SceneArgs {
+                    template,
+                    frame: source,
+                    intrinsics: intrinsics.as_deref(),
+                    candidates,
+                };
+                return scene::run(args, &options, &reading, Output { aligned, json });
+            }
             anyhow::ensure!(
                 template.is_some() || options.template_points.is_none(),
                 "--template-points applies to a TEMPLATE file bound in place of the blob's own; the blob's own template keeps the points it was exported with (`pcrnet export --template-points`, `pcrnet inspect` shows them)"

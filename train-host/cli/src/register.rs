@@ -39,6 +39,11 @@ pub(crate) struct Reading {
 }
 
 impl Reading {
+    /// The most points a cloud file may hold.
+    pub(crate) fn max_cloud_points(&self) -> usize {
+        self.max_cloud_points
+    }
+
     /// Refuses `--reduce voxel` without a cube side.
     pub(crate) fn check(&self) -> anyhow::Result<()> {
         if self.reduce == Reduction::Voxel && !(self.voxel.is_finite() && self.voxel > 0.0) {

@@ -10,11 +10,11 @@ use std::time::Instant;
 use anyhow::Context;
 use pcrnet_core::{Int8Model, Pose, Registration, TrackOutcome};
 use pcrnet_eval::cli::MethodOptions;
-use pcrnet_eval::methods::MethodKind;
 use pcrnet_io::Format;
 use pcrnet_io::frame::FilePose;
 
-use crate::register::{Reading, json_on_stdout, say, shipped_model, write_json};
+use crate::device::DeviceModel;
+use crate::register::{Reading, json_on_stdout, say, write_json};
 
 /// The arguments of `pcrnet track`.
 #[derive(clap::Args)]
@@ -110,54 +110,21 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
     );
     check_file(&template, "the template")?;
     let frames = frame_files(&frames)?;
-    let (blob, model_name, shipped) = match options.read_model()? {
-        Some(blob) => (blob, options.model.clone().unwrap_or_default(), false),
-        None => {
-            let (blob, name) =
-                shipped_model(MethodKind::Device).context("no shipped int8 model in pcrnet")?;
-            (blob.to_vec(), PathBuf::from(name), true)
-        }
-    };
-    let model_label = model_name.display().to_string();
-    if let Err(e) = Int8Model::from_bytes(&blob) {
-        return Err(match e {
-            pcrnet_core::Error::WrongKind { .. } => anyhow::anyhow!(
-                "{model_label}: not an int8 model blob; track runs the device's int8 model: give --model the int8 blob (`pcrnet export` writes both; the shipped one is models/embedded-default-int8.pcrn)"
-            ),
-            e => anyhow::Error::new(e).context(model_label),
-        });
-    }
-    options.check_hypotheses(MethodKind::Device, Some(&blob), true)?;
-    if let Some(warning) = options.mode_warning(MethodKind::Device, Some(&blob)) {
-        eprintln!("warning: {warning}");
-    }
-    let method = options.method(MethodKind::Device);
-
-    let template_cloud = reading.load(&template, None)?;
-    let origin = template_cloud.origin;
-    let bound = pcrnet_train::template::bind(&blob, &template_cloud.points, method.template_points)
-        .with_context(|| format!("binding {} into {model_label}", template.display()))?;
-    let model = Int8Model::from_bytes(&bound)
+    let loaded = DeviceModel::load(&options, Some(&template), &reading, "track")?;
+    let origin = loaded.origin;
+    let model_label = loaded.label.clone();
+    let model = Int8Model::from_bytes(&loaded.blob)
         .with_context(|| format!("{model_label} with {} bound in", template.display()))?;
-    let mut device = method.device_options();
-    if device.passes == 0 {
-        device.passes = model.trained_passes();
-    }
+    let device = loaded.options;
     let mut scratch = vec![0i8; model.host_scratch_len()];
 
     let to_stdout = json_on_stdout(json.as_deref());
     let say = |line: String| say(to_stdout, &line);
-    say(if shipped {
-        format!(
-            "model: the shipped embedded default ({model_label}, built into pcrnet; --model FILE to use another)"
-        )
-    } else {
-        format!("model: {model_label}")
-    });
+    say(loaded.model_line());
     say(format!(
         "template: {} bound into the model ({} of its points stored for the check and ICP); local origin (its median; every frame is moved by it before rounding to f32): {origin:?}",
         template.display(),
-        method.template_points.min(template_cloud.points.len()),
+        loaded.method.template_points.min(loaded.template_points),
     ));
     say(format!(
         "{} frame(s); each step starts from {}; time: the registration or tracking call alone",

@@ -46,6 +46,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+pub mod depth;
 pub mod frame;
 pub mod off;
 pub mod pcd;

@@ -59,6 +59,10 @@ struct Coord {
 #[derive(Debug)]
 struct Header {
     points: usize,
+    /// `WIDTH` (the point count when absent).
+    width: usize,
+    /// `HEIGHT` (1 when absent).
+    height: usize,
     data: DataKind,
     /// Bytes per point in binary layouts.
     record_size: usize,
@@ -94,6 +98,56 @@ pub fn parse_f64_limited(bytes: &[u8], max_points: usize) -> Result<Vec<[f64; 3]
         DataKind::Binary => parse_binary(&h, body),
         DataKind::BinaryCompressed => parse_compressed(&h, body),
     }
+}
+
+/// An organised PCD cloud: `width x height` points in row order, NaN
+/// where the sensor saw nothing, as [`pcrnet_core::scene::OrganisedPoints`]
+/// reads them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrganisedCloud {
+    /// Points in row order; every coordinate NaN where there is no point.
+    pub points: Vec<[f32; 3]>,
+    /// Points per row (`WIDTH`).
+    pub width: usize,
+    /// Rows (`HEIGHT`).
+    pub height: usize,
+}
+
+/// Parses an organised PCD file (`HEIGHT > 1`) keeping its grid: a point
+/// with any non-finite coordinate becomes all NaN. An unorganised file
+/// (`HEIGHT 1` or none) is an error saying so.
+pub fn parse_organised(bytes: &[u8], max_points: usize) -> Result<OrganisedCloud, FormatError> {
+    let h = parse_header(bytes)?;
+    if h.height <= 1 {
+        return Err(err(
+            "HEIGHT is 1: not an organised cloud (a sensor frame has HEIGHT > 1); give a depth image with --intrinsics instead",
+        ));
+    }
+    let points = parse_f64_limited(bytes, max_points)?;
+    if points.len() != h.width * h.height {
+        return Err(err(format!(
+            "{} points read for WIDTH {} x HEIGHT {}",
+            points.len(),
+            h.width,
+            h.height
+        )));
+    }
+    let points = points
+        .into_iter()
+        .map(|p| {
+            let q = p.map(|c| c as f32);
+            if q.iter().all(|c| c.is_finite()) {
+                q
+            } else {
+                [f32::NAN; 3]
+            }
+        })
+        .collect();
+    Ok(OrganisedCloud {
+        points,
+        width: h.width,
+        height: h.height,
+    })
 }
 
 fn err(message: impl Into<String>) -> FormatError {
@@ -307,8 +361,14 @@ fn parse_header(bytes: &[u8]) -> Result<Header, FormatError> {
         (None, None) => return Err(err("neither POINTS nor WIDTH is given")),
     };
 
+    let (width, height) = match (width, height) {
+        (Some(w), h) => (w, h.unwrap_or(1)),
+        (None, _) => (points, 1),
+    };
     Ok(Header {
         points,
+        width,
+        height,
         data,
         record_size: offset,
         values_per_point: value_index,

@@ -1,0 +1,111 @@
+//! From a sensor frame to the object's pose: the scene stages
+//! ([`crate::scene`]) find candidate clusters, the best few are registered
+//! to the template, and the best registration wins.
+//!
+//! **frame -> grid -> plane -> clusters -> points -> registration**, in
+//! caller-owned buffers: the label slice of [`crate::scene::labels_len`],
+//! a point buffer that bounds each candidate's points, and the model's
+//! scratch. The winner is the reliable candidate with the lowest relative
+//! plane residual; without a reliable one, the lowest residual, reported
+//! not reliable. A frame without a kept cluster has no registration.
+
+use crate::error::Result;
+use crate::registration::Registration;
+use crate::scene::{self, Organised, SceneOptions, Segmentation};
+
+/// Most candidates registered per frame.
+pub const MAX_CANDIDATES: usize = 8;
+
+/// What happened to one registered candidate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Candidate {
+    /// Its place in [`Segmentation::clusters`]' kept list.
+    pub cluster: usize,
+    /// Points gathered and registered.
+    pub points: usize,
+    /// Its registration (source = its points, sensor frame).
+    pub registration: Registration,
+}
+
+/// What [`locate`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Located {
+    /// The winning candidate, if any cluster was kept.
+    pub best: Option<Candidate>,
+    /// Every registered candidate, in the clusters' order (largest first).
+    pub tried: heapless::Vec<Candidate, MAX_CANDIDATES>,
+    /// The plane, the clusters and why others were dropped.
+    pub segmentation: Segmentation,
+}
+
+impl Located {
+    /// The winner's registration, if any.
+    pub fn registration(&self) -> Option<&Registration> {
+        self.best.as_ref().map(|c| &c.registration)
+    }
+}
+
+/// Segments `frame` and registers up to `candidates` (at most
+/// [`MAX_CANDIDATES`]) of the largest kept clusters with `register`, each
+/// from at most `points.len()` of its points.
+///
+/// # Errors
+/// What [`scene::segment`] or `register` returns; a candidate whose
+/// registration fails with an error is not a reason to give up on the
+/// others: only when every tried candidate fails is the first error returned.
+pub fn locate<F: Organised>(
+    frame: &F,
+    scene: &SceneOptions,
+    candidates: usize,
+    labels: &mut [u16],
+    points: &mut [[f32; 3]],
+    mut register: impl FnMut(&[[f32; 3]]) -> Result<Registration>,
+) -> Result<Located> {
+    let segmentation = scene::segment(frame, scene, labels)?;
+    let mut tried = heapless::Vec::new();
+    let mut first_error = None;
+    let kept = &segmentation.clusters.kept;
+    for (index, cluster) in kept.iter().enumerate().take(candidates.min(MAX_CANDIDATES)) {
+        let n = segmentation.gather(frame, scene, labels, cluster, points);
+        let Some(source) = points.get(..n) else {
+            continue;
+        };
+        match register(source) {
+            Ok(registration) => {
+                let _ = tried.push(Candidate {
+                    cluster: index,
+                    points: n,
+                    registration,
+                });
+            }
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    if tried.is_empty()
+        && let Some(e) = first_error
+    {
+        return Err(e);
+    }
+    let best = tried
+        .iter()
+        .copied()
+        .reduce(|a, b| if better(&b, &a) { b } else { a });
+    Ok(Located {
+        best,
+        tried,
+        segmentation,
+    })
+}
+
+/// Whether `a` beats `b`: reliable first, then the lower relative plane
+/// residual (the earlier, larger cluster on a tie).
+fn better(a: &Candidate, b: &Candidate) -> bool {
+    let (ra, rb) = (&a.registration, &b.registration);
+    if ra.reliable != rb.reliable {
+        return ra.reliable;
+    }
+    ra.relative_plane_residual < rb.relative_plane_residual
+}

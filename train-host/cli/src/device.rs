@@ -1,0 +1,110 @@
+//! The device's int8 model as `track` and `register --scene` load it: the
+//! given blob or the shipped one, checked to be int8, with the template
+//! file bound in place of its own, and the device options from the flags.
+
+use std::path::Path;
+
+use anyhow::Context;
+use pcrnet_core::{Int8Model, Options};
+use pcrnet_eval::cli::MethodOptions;
+use pcrnet_eval::methods::{Method, MethodKind};
+
+use crate::register::{Reading, shipped_model};
+
+/// A loaded device model.
+pub(crate) struct DeviceModel {
+    /// The blob, the template file bound in when one was given.
+    pub(crate) blob: Vec<u8>,
+    /// Which model, for messages.
+    pub(crate) label: String,
+    /// Whether it is the shipped embedded default.
+    pub(crate) shipped: bool,
+    /// The template file's local origin (its median; zero without a file).
+    pub(crate) origin: [f64; 3],
+    /// Template points given (zero without a file).
+    pub(crate) template_points: usize,
+    /// The method the flags describe.
+    pub(crate) method: Method,
+    /// The device options, passes as the blob was trained when not given.
+    pub(crate) options: Options,
+}
+
+impl DeviceModel {
+    /// Reads the model and binds `template` (read as `reading` says, about
+    /// its own median) into it. `command` names the subcommand in messages.
+    pub(crate) fn load(
+        options: &MethodOptions,
+        template: Option<&Path>,
+        reading: &Reading,
+        command: &str,
+    ) -> anyhow::Result<Self> {
+        let (blob, label, shipped) = match options.read_model()? {
+            Some(blob) => (
+                blob,
+                options
+                    .model
+                    .clone()
+                    .unwrap_or_default()
+                    .display()
+                    .to_string(),
+                false,
+            ),
+            None => {
+                let (blob, name) =
+                    shipped_model(MethodKind::Device).context("no shipped int8 model in pcrnet")?;
+                (blob.to_vec(), name.to_string(), true)
+            }
+        };
+        if let Err(e) = Int8Model::from_bytes(&blob) {
+            return Err(match e {
+                pcrnet_core::Error::WrongKind { .. } => anyhow::anyhow!(
+                    "{label}: not an int8 model blob; {command} runs the device's int8 model: give --model the int8 blob (`pcrnet export` writes both; the shipped one is models/embedded-default-int8.pcrn)"
+                ),
+                e => anyhow::Error::new(e).context(label),
+            });
+        }
+        options.check_hypotheses(MethodKind::Device, Some(&blob), template.is_some())?;
+        if let Some(warning) = options.mode_warning(MethodKind::Device, Some(&blob)) {
+            eprintln!("warning: {warning}");
+        }
+        let method = options.method(MethodKind::Device);
+        let (blob, origin, template_points) = match template {
+            Some(path) => {
+                let cloud = reading.load(path, None)?;
+                let bound =
+                    pcrnet_train::template::bind(&blob, &cloud.points, method.template_points)
+                        .with_context(|| format!("binding {} into {label}", path.display()))?;
+                (bound, cloud.origin, cloud.points.len())
+            }
+            None => (blob, [0.0; 3], 0),
+        };
+        let trained = Int8Model::from_bytes(&blob)
+            .with_context(|| label.clone())?
+            .trained_passes();
+        let mut device = method.device_options();
+        if device.passes == 0 {
+            device.passes = trained;
+        }
+        Ok(DeviceModel {
+            blob,
+            label,
+            shipped,
+            origin,
+            template_points,
+            method,
+            options: device,
+        })
+    }
+
+    /// The line saying which model runs.
+    pub(crate) fn model_line(&self) -> String {
+        if self.shipped {
+            format!(
+                "model: the shipped embedded default ({}, built into pcrnet; --model FILE to use another)",
+                self.label
+            )
+        } else {
+            format!("model: {}", self.label)
+        }
+    }
+}
