@@ -5,13 +5,16 @@
 //! **frame -> grid -> plane -> clusters -> points -> registration**, in
 //! caller-owned buffers: the label slice of [`crate::scene::labels_len`],
 //! a point buffer that bounds each candidate's points, and the model's
-//! scratch. The winner is the reliable candidate with the lowest relative
-//! plane residual; without a reliable one, the lowest residual, reported
-//! not reliable. A frame without a kept cluster has no registration.
+//! scratch. Each registration is checked against the frame
+//! ([`crate::scene::verify`]) when its intrinsics are known: a candidate is
+//! reliable when its registration is and its pose explains the frame. The
+//! winner is the reliable candidate with the lowest relative plane
+//! residual; without a reliable one, the lowest residual, reported not
+//! reliable. A frame without a kept cluster has no registration.
 
 use crate::error::Result;
 use crate::registration::Registration;
-use crate::scene::{self, Organised, SceneOptions, Segmentation};
+use crate::scene::{self, Organised, SceneOptions, Segmentation, Verification};
 
 /// Most candidates registered per frame.
 pub const MAX_CANDIDATES: usize = 8;
@@ -26,6 +29,12 @@ pub struct Candidate {
     pub points: usize,
     /// Its registration (source = its points, sensor frame).
     pub registration: Registration,
+    /// Its pose checked against the frame ([`crate::scene::verify`]), when
+    /// the frame's intrinsics are known and the options ask for it.
+    pub verification: Option<Verification>,
+    /// The verdict: the registration reliable and, when verified, its
+    /// verification passed.
+    pub reliable: bool,
 }
 
 /// What [`locate`] found.
@@ -48,7 +57,8 @@ impl Located {
 
 /// Segments `frame` and registers up to `candidates` (at most
 /// [`MAX_CANDIDATES`]) of the largest kept clusters with `register`, each
-/// from at most `points.len()` of its points.
+/// from at most `points.len()` of its points, and checks each registration
+/// with `verify` (`None`: not verified).
 ///
 /// # Errors
 /// What [`scene::segment`] or `register` returns; a candidate whose
@@ -61,6 +71,7 @@ pub fn locate<F: Organised>(
     labels: &mut [u16],
     points: &mut [[f32; 3]],
     mut register: impl FnMut(&[[f32; 3]]) -> Result<Registration>,
+    mut verify: impl FnMut(&F, &Registration) -> Option<Verification>,
 ) -> Result<Located> {
     let segmentation = scene::segment(frame, scene, labels)?;
     let mut tried = heapless::Vec::new();
@@ -73,10 +84,13 @@ pub fn locate<F: Organised>(
         };
         match register(source) {
             Ok(registration) => {
+                let verification = verify(frame, &registration);
                 let _ = tried.push(Candidate {
                     cluster: index,
                     points: n,
                     registration,
+                    verification,
+                    reliable: registration.reliable && verification.is_none_or(|v| v.passed),
                 });
             }
             Err(e) => {
@@ -103,9 +117,8 @@ pub fn locate<F: Organised>(
 /// Whether `a` beats `b`: reliable first, then the lower relative plane
 /// residual (the earlier, larger cluster on a tie).
 fn better(a: &Candidate, b: &Candidate) -> bool {
-    let (ra, rb) = (&a.registration, &b.registration);
-    if ra.reliable != rb.reliable {
-        return ra.reliable;
+    if a.reliable != b.reliable {
+        return a.reliable;
     }
-    ra.relative_plane_residual < rb.relative_plane_residual
+    a.registration.relative_plane_residual < b.registration.relative_plane_residual
 }

@@ -239,9 +239,23 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
     ) -> Result<crate::locate::Located> {
         let tile = self.tile_for(scratch.len())?;
-        crate::locate::locate(frame, scene, candidates, labels, points, |source| {
-            self.register_ready(source, options, tile, scratch, Ready::default())
-        })
+        let verify = |frame: &F, r: &Registration| {
+            let settings = scene.verify?;
+            let k = frame.intrinsics()?;
+            let (template, model) = (&self.template, &self.p.frame);
+            Some(crate::scene::verify::verify(
+                frame, &k, template, model, &r.pose, &settings,
+            ))
+        };
+        crate::locate::locate(
+            frame,
+            scene,
+            candidates,
+            labels,
+            points,
+            |source| self.register_ready(source, options, tile, scratch, Ready::default()),
+            verify,
+        )
     }
 
     /// The largest distance of the template's stored points from the

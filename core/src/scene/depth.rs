@@ -27,6 +27,9 @@ pub trait Organised {
     /// The point seen at column `u`, row `v` (sensor frame, user units),
     /// or `None` where the sensor saw nothing or `(u, v)` is outside the frame.
     fn point(&self, u: usize, v: usize) -> Option<[f32; 3]>;
+    /// How sensor-frame points project to pixels, when known: what
+    /// verification against the frame ([`super::verify`]) needs.
+    fn intrinsics(&self) -> Option<Intrinsics>;
 }
 
 /// Pinhole intrinsics in pixels: focal lengths `fx`, `fy` and the
@@ -161,6 +164,9 @@ impl Organised for DepthImage<'_> {
     fn height(&self) -> usize {
         self.height
     }
+    fn intrinsics(&self) -> Option<Intrinsics> {
+        Some(self.intrinsics)
+    }
     fn point(&self, u: usize, v: usize) -> Option<[f32; 3]> {
         let z = self.depth_of(self.raw(u, v)?)?;
         let k = &self.intrinsics;
@@ -177,6 +183,7 @@ pub struct OrganisedPoints<'a> {
     points: &'a [[f32; 3]],
     width: usize,
     height: usize,
+    intrinsics: Option<Intrinsics>,
 }
 
 impl<'a> OrganisedPoints<'a> {
@@ -195,7 +202,58 @@ impl<'a> OrganisedPoints<'a> {
             points,
             width,
             height: points.len() / width,
+            intrinsics: None,
         })
+    }
+
+    /// The same cloud, its projection known (for verification).
+    pub fn with_intrinsics(self, intrinsics: Intrinsics) -> Self {
+        OrganisedPoints {
+            intrinsics: Some(intrinsics),
+            ..self
+        }
+    }
+
+    /// The pinhole intrinsics that best explain where the points lie: for
+    /// a pinhole, `u = fx x / z + cx` and `v = fy y / z + cy`, so each is a
+    /// least-squares line fit (f64 sums in row order) over every 4th
+    /// pixel of every 4th row holding a point in front of the sensor.
+    /// `None` when fewer than 16 such points or a fit is degenerate.
+    pub fn estimate_intrinsics(&self) -> Option<Intrinsics> {
+        let mut n = 0f64;
+        let mut sums = [[0f64; 4]; 2]; // per axis: a, pixel, a^2, a * pixel
+        for v in (0..self.height).step_by(4) {
+            for u in (0..self.width).step_by(4) {
+                let Some(p) = self.point(u, v) else {
+                    continue;
+                };
+                if p[2] <= 0.0 {
+                    continue;
+                }
+                n += 1.0;
+                for (axis, pixel) in [(0usize, u), (1, v)] {
+                    let a = f64::from(p[axis]) / f64::from(p[2]);
+                    let pixel = pixel as f64;
+                    let s = &mut sums[axis];
+                    s[0] += a;
+                    s[1] += pixel;
+                    s[2] += a * a;
+                    s[3] += a * pixel;
+                }
+            }
+        }
+        if n < 16.0 {
+            return None;
+        }
+        let fit = |s: [f64; 4]| {
+            let variance = n * s[2] - s[0] * s[0];
+            let f = (n * s[3] - s[0] * s[1]) / variance;
+            let c = (s[1] - f * s[0]) / n;
+            (f.is_finite() && f > 0.0 && c.is_finite()).then_some((f as f32, c as f32))
+        };
+        let (fx, cx) = fit(sums[0])?;
+        let (fy, cy) = fit(sums[1])?;
+        Some(Intrinsics { fx, fy, cx, cy })
     }
 }
 
@@ -205,6 +263,9 @@ impl Organised for OrganisedPoints<'_> {
     }
     fn height(&self) -> usize {
         self.height
+    }
+    fn intrinsics(&self) -> Option<Intrinsics> {
+        self.intrinsics
     }
     fn point(&self, u: usize, v: usize) -> Option<[f32; 3]> {
         if u >= self.width || v >= self.height {

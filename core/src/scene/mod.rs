@@ -10,6 +10,7 @@
 //! | plane | [`plane`] | the dominant plane by seeded RANSAC and a refit, or one the caller gives |
 //! | clusters | [`cluster`] | connected components of what is off the plane, kept when their extent fits the object |
 //! | points | [`cluster::gather`] | one cluster's points at full resolution, for registration |
+//! | verify | [`verify`] | a pose against the frame: the template's points seen where they should be, none in free space |
 //!
 //! Working memory is one caller-owned `u16` slice of [`labels_len`]
 //! elements (4 bytes a grid cell: 9.6 KB for a 224 x 172 frame at step 4).
@@ -18,11 +19,13 @@ pub mod cluster;
 pub mod depth;
 pub mod grid;
 pub mod plane;
+pub mod verify;
 
 pub use cluster::{Cluster, ClusterSearch, Clusters};
 pub use depth::{DepthImage, Intrinsics, Organised, OrganisedPoints};
 pub use grid::{Grid, Region};
 pub use plane::{FoundPlane, Plane, PlaneSearch};
+pub use verify::{Verification, VerifySettings};
 
 use crate::error::Result;
 
@@ -59,6 +62,9 @@ pub struct SceneOptions {
     pub plane: PlaneChoice,
     /// How clusters form and which are kept.
     pub clusters: ClusterSearch,
+    /// How a candidate's pose is checked against the frame (`None`: not
+    /// checked; also unchecked when the frame's intrinsics are unknown).
+    pub verify: Option<VerifySettings>,
 }
 
 impl SceneOptions {
@@ -68,7 +74,8 @@ impl SceneOptions {
     /// valid cells, seed 0); neighbouring cells join within 5% of the
     /// diameter (plus the pixels' own spacing, [`cluster`]); clusters of at
     /// least 8 cells whose radius is 35% to 160% of the object's (a view
-    /// from one side sees part of it, around a centre of its own).
+    /// from one side sees part of it, around a centre of its own); poses
+    /// verified against the frame ([`VerifySettings::for_object`]).
     pub fn for_object(radius: f32) -> Self {
         let size = 2.0 * radius;
         let plane_distance = 0.02 * size;
@@ -87,6 +94,7 @@ impl SceneOptions {
                 min_cells: 8,
                 radius: [0.35 * radius, 1.6 * radius],
             },
+            verify: Some(VerifySettings::for_object(radius)),
         }
     }
 }

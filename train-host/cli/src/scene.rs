@@ -94,6 +94,11 @@ pub(crate) fn run(
                 .with_context(|| args.frame.display().to_string())?;
             let organised = OrganisedPoints::new(&cloud.points, cloud.width)
                 .with_context(|| args.frame.display().to_string())?;
+            // Verification needs the projection: fitted to the points.
+            let organised = match organised.estimate_intrinsics() {
+                Some(k) => organised.with_intrinsics(k),
+                None => organised,
+            };
             find(
                 &organised,
                 &args,
@@ -160,10 +165,10 @@ fn find<F: Organised>(
             r.pose.rotation,
             file_translation(r.pose.translation)
         ));
-        say(if r.reliable {
-            "trust: RELIABLE (relative plane residual within the threshold); not yet checked against the frame's free space".into()
-        } else {
-            "trust: NOT RELIABLE - do not act on this pose (no candidate's plane residual is within the threshold)".into()
+        say(match (best.reliable, best.verification) {
+            (true, Some(_)) => "trust: RELIABLE (plane residual within the threshold, and the pose explains the frame)".into(),
+            (true, None) => "trust: RELIABLE (plane residual within the threshold; not checked against the frame)".into(),
+            (false, _) => "trust: NOT RELIABLE - do not act on this pose (no candidate both fits the template and explains the frame)".into(),
         });
         if let Some(path) = aligned {
             let cluster = located.segmentation.clusters.kept.get(best.cluster);
@@ -234,13 +239,24 @@ fn report_lines(located: &Located) -> Vec<String> {
         ));
     }
     for (i, t) in located.tried.iter().enumerate() {
+        let check = match t.verification {
+            Some(v) => format!(
+                "against the frame: {} template points supported, {} in free space, {} occluded, {} unobserved ({})",
+                v.supported,
+                v.violations,
+                v.occluded,
+                v.unobserved,
+                if v.passed { "passed" } else { "failed" }
+            ),
+            None => "not checked against the frame (its intrinsics are unknown)".into(),
+        };
         lines.push(format!(
-            "  candidate {i}: cluster {}, {} points, relative plane residual {:.4}, fitness {:.3}, {}",
+            "  candidate {i}: cluster {}, {} points, relative plane residual {:.4}, fitness {:.3}; {check}: {}",
             t.cluster,
             t.points,
             t.registration.relative_plane_residual,
             t.registration.fitness,
-            if t.registration.reliable { "reliable" } else { "not reliable" }
+            if t.reliable { "reliable" } else { "not reliable" }
         ));
     }
     lines
@@ -257,7 +273,12 @@ fn candidate_json(c: &Candidate) -> serde_json::Value {
         "fitness": r.fitness,
         "hypothesis": r.hypothesis,
         "icp_iterations": r.icp_iterations,
-        "reliable": r.reliable,
+        "registration_reliable": r.reliable,
+        "verification": c.verification.map(|v| serde_json::json!({
+            "supported": v.supported, "violations": v.violations, "occluded": v.occluded,
+            "unobserved": v.unobserved, "passed": v.passed,
+        })),
+        "reliable": c.reliable,
     })
 }
 
@@ -279,6 +300,6 @@ fn located_json(located: &Located) -> serde_json::Value {
         "candidates": located.tried.iter().map(candidate_json).collect::<Vec<_>>(),
         "winner": located.best.as_ref().and_then(|b| located.tried.iter().position(|c| c == b)),
         "quaternion_wxyz": located.best.as_ref().map(|b| b.registration.pose.rotation),
-        "reliable": located.best.as_ref().is_some_and(|b| b.registration.reliable),
+        "reliable": located.best.as_ref().is_some_and(|b| b.reliable),
     })
 }
