@@ -46,6 +46,8 @@ pub struct DeviceRun {
     pub registrations: BTreeMap<(usize, usize), DeviceRegistration>,
     /// Tracking steps, per (case index, option set index, start name).
     pub tracks: BTreeMap<(usize, usize, String), DeviceTrack>,
+    /// The scene path, per model index.
+    pub scenes: crate::scene::Scenes,
     /// Load verdict per model (`ok int8`, `ok f32`, `error ...`; see
     /// [`crate::hostile::load_verdict`]).
     pub loads: BTreeMap<usize, String>,
@@ -173,6 +175,9 @@ pub fn parse(stdout: &str) -> DeviceRun {
             ["done"] => {
                 run.done = true;
                 Some(())
+            }
+            ["model", m, "scene", rest @ ..] => {
+                crate::scene::parse_line(m, rest, &mut run.scenes).then_some(())
             }
             ["model", m, "load_stack", n] => m.parse().ok().zip(n.parse().ok()).map(|(m, n)| {
                 run.load_stacks.insert(m, n);

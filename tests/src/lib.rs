@@ -17,7 +17,9 @@
 //! 7. [`plan`] says what a run covers: the models of each case set, their
 //!    clouds and option sets, and the cases built from them;
 //! 8. [`tracking`] adds the tracking steps after each registration: their
-//!    starts, the host's results, the device's lines and their comparison.
+//!    starts, the host's results, the device's lines and their comparison;
+//! 9. [`scene`] adds the scene path: a generated depth frame, the scene
+//!    stages and `locate`, per model.
 
 pub mod c_example;
 pub mod compare;
@@ -26,5 +28,6 @@ pub mod hostile;
 pub mod layers;
 pub mod plan;
 pub mod qemu;
+pub mod scene;
 pub mod tracking;
 pub mod vectors;

@@ -29,7 +29,7 @@ use pcrnet_qemu_tests::plan::{Plan, build_cases, models};
 use pcrnet_qemu_tests::vectors::{
     Case, TestModel, container, describe, expected, expected_iterative, expected_registrations,
 };
-use pcrnet_qemu_tests::{c_example, elf, layers, qemu, tracking};
+use pcrnet_qemu_tests::{c_example, elf, layers, qemu, scene, tracking};
 
 struct Args {
     mutate: bool,
@@ -95,6 +95,12 @@ fn run_plans(
             )
         })
         .collect();
+    // The scene path per int8 model (not on the micro:bit: see `scene`).
+    let host_scenes: Vec<Option<scene::SceneResult>> = if board.machine == "microbit" {
+        vec![None; models.len()]
+    } else {
+        models.iter().map(|m| scene::expected(&m.blob)).collect()
+    };
     let dir = root.join("target/qemu");
     std::fs::create_dir_all(&dir)?;
     let vectors = dir.join("vectors.bin");
@@ -204,6 +210,20 @@ fn run_plans(
             println!("model {m} ({}): refused alike: {host}", model.name);
         }
     }
+    let (mut scenes, mut scenes_differ) = (0usize, 0usize);
+    for (m, host) in host_scenes.iter().enumerate() {
+        let Some(host) = host else {
+            continue;
+        };
+        scenes += 1;
+        if let Some(why) = scene::difference(host, device.scenes.get(&m)) {
+            scenes_differ += 1;
+            failed += 1;
+            if !args.mutate || scenes_differ <= 2 {
+                println!("FAIL model {m} ({}) scene: {why}", models[m].name);
+            }
+        }
+    }
     for line in &device.unparsed {
         println!("unparsed device output: {line}");
     }
@@ -211,9 +231,9 @@ fn run_plans(
 
     if args.mutate {
         println!(
-            "mutation check: with device rounding changed, {failed} of {} cases differ from the host, \
-             and {registrations_differ} of {registrations} registrations (they must)",
-            cases.len()
+            "mutation check: with device rounding changed, {failed} of {} cases and scenes differ from the host, \
+             {registrations_differ} of {registrations} registrations and {scenes_differ} of {scenes} scenes (they must)",
+            cases.len() + scenes
         );
         return Ok((failed > 0 && registrations_differ > 0, Vec::new()));
     }
@@ -228,9 +248,10 @@ fn run_plans(
         println!("device run incomplete (no `done`, or unparsed lines)");
     }
     println!(
-        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical",
+        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical; {scenes} scenes, {} identical",
         registrations - registrations_differ,
-        tracks - tracks_differ
+        tracks - tracks_differ,
+        scenes - scenes_differ
     );
     println!(
         "{} ({}): {passed} passed, {failed} failed",
@@ -353,6 +374,24 @@ fn report_figures(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
     if let Some([_, _, registration, track]) = figures(512) {
         println!("default registration, 512 points: {registration} instructions");
         println!("tracking step, 256 points: {track} instructions");
+    }
+    let shipped = models
+        .iter()
+        .position(|m| m.name == "embedded-default-int8.pcrn");
+    if let Some(s) = shipped.and_then(|m| device.scenes.get(&m)) {
+        let (w, h) = (
+            pcrnet_core::testing::scene::HARNESS_WIDTH,
+            pcrnet_core::testing::scene::HARNESS_HEIGHT,
+        );
+        if let (Some(segment), Some(locate), Some(stack)) = (s.segment, s.locate, s.stack) {
+            println!("scene stages, {w} x {h} frame: {segment} instructions");
+            println!(
+                "locate (scene stages, {} candidates registered and verified), {w} x {h} frame: {locate} instructions, peak stack {stack} B",
+                s.result
+                    .as_ref()
+                    .map_or(0, |words| words.matches(" t ").count())
+            );
+        }
     }
     println!(
         "\nlatency of the shipped model on its demo source (instructions, and ms at 168 MHz (M4) / 480 MHz (M7) \

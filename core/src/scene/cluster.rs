@@ -101,7 +101,8 @@ pub fn label<F: Organised>(
             available: labels.len() * 2,
         });
     }
-    let (roots, sizes) = labels[..needed].split_at_mut(cells);
+    let (roots, rest) = labels.split_at_mut(cells.min(labels.len()));
+    let sizes = rest.get_mut(..cells).unwrap_or_default();
     let foreground = |p: [f32; 3]| plane.is_none_or(|pl| pl.distance(p) > search.plane_distance);
     let columns = grid.columns();
     let cell_point = |gx: usize, gy: usize| grid.point(frame, gx, gy).filter(|&p| foreground(p));
@@ -172,15 +173,29 @@ pub fn label<F: Organised>(
         if largest.push(entry).is_err() {
             clusters.unmeasured += 1;
             // Replace the smallest (the last of equal sizes) if this one is larger.
-            if let Some(at) = smallest(&largest)
-                && largest[at].0 < size
+            if let Some(slot) = smallest(&largest).and_then(|at| largest.get_mut(at))
+                && slot.0 < size
             {
-                largest[at] = entry;
+                *slot = entry;
             }
         }
     }
-    // Largest first, then by label.
-    largest.sort_unstable_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    // Largest first, then by label: an insertion sort of at most
+    // MAX_CLUSTERS entries (the slice sorts keep a panic path for
+    // inconsistent orders, which the no-panic proof refuses).
+    for i in 1..largest.len() {
+        let mut j = i;
+        while j > 0 {
+            let (Some(&a), Some(&b)) = (largest.get(j - 1), largest.get(j)) else {
+                break;
+            };
+            if (b.0, core::cmp::Reverse(b.1)) <= (a.0, core::cmp::Reverse(a.1)) {
+                break;
+            }
+            largest.swap(j - 1, j);
+            j -= 1;
+        }
+    }
 
     // Measure them.
     let mut measured: Vec<Cluster, MAX_CLUSTERS> = Vec::new();
@@ -283,7 +298,12 @@ fn find(roots: &mut [u16], mut index: usize) -> usize {
 
 /// Where the smallest entry is (the last of equal sizes).
 fn smallest(entries: &[(u16, u16)]) -> Option<usize> {
-    (0..entries.len()).rev().min_by_key(|&i| entries[i].0)
+    entries
+        .iter()
+        .enumerate()
+        .rev()
+        .min_by_key(|(_, e)| e.0)
+        .map(|(i, _)| i)
 }
 
 /// Writes the points of `cluster` at full resolution into `out`: every

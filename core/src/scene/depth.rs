@@ -231,10 +231,11 @@ impl<'a> OrganisedPoints<'a> {
                     continue;
                 }
                 n += 1.0;
-                for (axis, pixel) in [(0usize, u), (1, v)] {
-                    let a = f64::from(p[axis]) / f64::from(p[2]);
+                let z = f64::from(p[2]);
+                let [x, y] = &mut sums;
+                for (s, a, pixel) in [(x, p[0], u), (y, p[1], v)] {
+                    let a = f64::from(a) / z;
                     let pixel = pixel as f64;
-                    let s = &mut sums[axis];
                     s[0] += a;
                     s[1] += pixel;
                     s[2] += a * a;
@@ -251,8 +252,9 @@ impl<'a> OrganisedPoints<'a> {
             let c = (s[1] - f * s[0]) / n;
             (f.is_finite() && f > 0.0 && c.is_finite()).then_some((f as f32, c as f32))
         };
-        let (fx, cx) = fit(sums[0])?;
-        let (fy, cy) = fit(sums[1])?;
+        let [x, y] = sums;
+        let (fx, cx) = fit(x)?;
+        let (fy, cy) = fit(y)?;
         Some(Intrinsics { fx, fy, cx, cy })
     }
 }

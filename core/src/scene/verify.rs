@@ -83,7 +83,6 @@ pub fn verify<F: Organised>(
     settings: &VerifySettings,
 ) -> Verification {
     let back = pose.inverse();
-    let step = template.step() / model.scale;
     let mut v = Verification {
         supported: 0,
         violations: 0,
@@ -92,13 +91,7 @@ pub fn verify<F: Organised>(
         passed: false,
     };
     for i in 0..template.len() {
-        let q = template.point(i);
-        let user = [
-            q[0] as f32 * step + model.centre[0],
-            q[1] as f32 * step + model.centre[1],
-            q[2] as f32 * step + model.centre[2],
-        ];
-        let p = back.transform_point(user);
+        let p = back.transform_point(template.user_point(i, model));
         let observed = project(intrinsics, p).and_then(|([u, v], _)| {
             let (u, v) = (libm::roundf(u), libm::roundf(v));
             if u < 0.0 || v < 0.0 {

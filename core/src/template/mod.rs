@@ -13,7 +13,7 @@
 //! fixed visiting order.
 
 use crate::error::{Error, Result};
-use crate::format::TemplateCloud;
+use crate::format::{Frame, TemplateCloud};
 
 mod layout;
 pub use layout::{BuildOut, build, build_len};
@@ -133,6 +133,18 @@ impl<'a> Template<'a> {
             .max()
             .unwrap_or(0);
         libm::sqrtf(largest as f32) * self.cloud.step
+    }
+
+    /// Point `i` in user units: `q * step / scale + centre` with the blob's
+    /// `frame`, each axis a product and a sum in f32.
+    pub fn user_point(&self, i: usize, frame: &Frame) -> [f32; 3] {
+        let step = self.cloud.step / frame.scale;
+        let q = self.point(i);
+        [
+            q[0] as f32 * step + frame.centre[0],
+            q[1] as f32 * step + frame.centre[1],
+            q[2] as f32 * step + frame.centre[2],
+        ]
     }
 
     /// The symmetry turns stored by the exporter.

@@ -207,3 +207,161 @@ fn to_raw(z: f32) -> u16 {
         0
     }
 }
+
+/// The QEMU harness's frame: 224 x 172 pixels (the time-of-flight camera).
+pub const HARNESS_WIDTH: usize = 224;
+/// Rows of the harness's frame.
+pub const HARNESS_HEIGHT: usize = 172;
+/// Candidates the harness registers.
+pub const HARNESS_CANDIDATES: usize = 3;
+
+/// Renders the harness's frame for `model` into `depth` (at least
+/// [`HARNESS_WIDTH`] x [`HARNESS_HEIGHT`]): the model's stored template
+/// points (user units, as many as `template` holds) lying on a table 4.3
+/// object radii below a camera looking straight down, turned 20 degrees,
+/// beside two blocks of about the object's size; noise 0.2% of depth
+/// squared. The same frame on every target: single f32 operations and `libm`.
+///
+/// # Errors
+/// [`Error::BufferTooSmall`] when `depth` is too short.
+pub fn harness_frame(
+    model: &crate::Int8Model,
+    template: &mut [[f32; 3]],
+    depth: &mut [u16],
+) -> Result<()> {
+    let t = model.template();
+    let n = t.len().min(template.len());
+    for (i, p) in template.iter_mut().enumerate().take(n) {
+        *p = t.user_point(i, model.frame());
+    }
+    let points = &template[..n];
+    let r = model.object_radius();
+    let distance = 4.3 * r;
+    // Turned 20 degrees about a tilted axis, its far side on the table.
+    let half = 10f32.to_radians();
+    let axis = [0.2f32, -0.3, 1.0];
+    let norm = libm::sqrtf(dot(axis, axis));
+    let s = libm::sinf(half) / norm;
+    let turn = Pose {
+        rotation: [libm::cosf(half), s * axis[0], s * axis[1], s * axis[2]],
+        translation: [0.0; 3],
+    };
+    let back = points
+        .iter()
+        .map(|&p| turn.transform_point(p)[2])
+        .fold(f32::NEG_INFINITY, f32::max);
+    let pose = Pose {
+        translation: [0.1 * r, -0.05 * r, distance - back],
+        ..turn
+    };
+    let blocks = [
+        Block {
+            at: [1.55 * r, 0.5 * r],
+            size: [0.5 * r, 0.85 * r, 0.7 * r],
+            yaw: 0.4,
+        },
+        Block {
+            at: [1.05 * r, -1.05 * r],
+            size: [0.85 * r, 0.85 * r, 0.85 * r],
+            yaw: 0.0,
+        },
+    ];
+    let clouds = [Placed {
+        points,
+        pose,
+        splat: 0.05 * r,
+    }];
+    Tabletop {
+        intrinsics: Tabletop::tof_intrinsics(),
+        distance,
+        pitch: core::f32::consts::FRAC_PI_2,
+        blocks: &blocks,
+        clouds: &clouds,
+        noise: 0.002,
+        seed: 3,
+    }
+    .render(HARNESS_WIDTH, HARNESS_HEIGHT, depth)
+}
+
+/// The harness frame as the depth image the scene stages read.
+///
+/// # Errors
+/// As [`DepthImage::new`].
+pub fn harness_image(depth: &[u16]) -> Result<crate::scene::DepthImage<'_>> {
+    crate::scene::DepthImage::new(
+        depth,
+        HARNESS_WIDTH,
+        HARNESS_HEIGHT,
+        HARNESS_WIDTH,
+        Tabletop::tof_intrinsics(),
+        DEPTH_SCALE,
+        0,
+    )
+}
+
+/// Writes what [`crate::Int8Model::locate`] found as words (f32 as hex
+/// bits), so the harness compares device and host bit for bit: the plane,
+/// the cell counts, every kept cluster, every candidate's registration
+/// and verification, and the winner.
+pub fn describe(
+    located: &crate::locate::Located,
+    out: &mut impl core::fmt::Write,
+) -> core::fmt::Result {
+    let s = &located.segmentation;
+    match s.plane {
+        Some(p) => {
+            write!(out, "plane")?;
+            for v in p.normal.iter().chain([&p.offset]) {
+                write!(out, " {:08x}", v.to_bits())?;
+            }
+        }
+        None => write!(out, "plane none")?,
+    }
+    let c = &s.clusters;
+    write!(
+        out,
+        " cells {} {} {} clusters {} {} {} {}",
+        s.valid_cells,
+        s.plane_cells,
+        c.foreground,
+        c.too_few_cells,
+        c.wrong_radius,
+        c.unmeasured,
+        c.kept.len()
+    )?;
+    for k in &c.kept {
+        write!(out, " c {} {}", k.label, k.cells)?;
+        for v in k.centroid.iter().chain([&k.radius]) {
+            write!(out, " {:08x}", v.to_bits())?;
+        }
+    }
+    for t in &located.tried {
+        let r = &t.registration;
+        write!(out, " t {} {}", t.cluster, t.points)?;
+        for v in r.pose.rotation.iter().chain(&r.pose.translation) {
+            write!(out, " {:08x}", v.to_bits())?;
+        }
+        write!(
+            out,
+            " {:08x} {:08x} {} {} {}",
+            r.relative_plane_residual.to_bits(),
+            r.fitness.to_bits(),
+            r.hypothesis,
+            r.icp_iterations,
+            r.reliable
+        )?;
+        match t.verification {
+            Some(v) => write!(
+                out,
+                " v {} {} {} {} {}",
+                v.supported, v.violations, v.occluded, v.unobserved, v.passed
+            )?,
+            None => write!(out, " v none")?,
+        }
+        write!(out, " {}", t.reliable)?;
+    }
+    match located.best {
+        Some(b) => write!(out, " best {}", b.cluster),
+        None => write!(out, " best none"),
+    }
+}

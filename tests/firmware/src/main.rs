@@ -324,7 +324,87 @@ fn main() -> ! {
                 }
             }
         }
+        #[cfg(not(feature = "microbit"))]
+        run_scene(m, &model, scratch, &counter, &mut line);
     }
     say!("done");
     exit(true)
+}
+
+/// The scene path on the harness frame ([`pcrnet_core::testing::scene`]):
+/// `model M scene segment INSTR` (the scene stages alone) and `model M
+/// scene locate INSTR STACK WORDS...` (the whole path, described word by
+/// word), or `model M scene error E`.
+#[cfg(not(feature = "microbit"))]
+fn run_scene(
+    m: usize,
+    model: &Int8Model,
+    scratch: &mut [i8],
+    counter: &icount::Counter,
+    line: &mut String<LINE>,
+) {
+    use pcrnet_core::scene::{self, SceneOptions};
+    use pcrnet_core::testing::scene as harness;
+    const W: usize = harness::HARNESS_WIDTH;
+    const H: usize = harness::HARNESS_HEIGHT;
+    const STEP: usize = 4;
+    static mut DEPTH: [u16; W * H] = [0; W * H];
+    static mut TEMPLATE: [[f32; 3]; 1024] = [[0.0; 3]; 1024];
+    static mut LABELS: [u16; scene::labels_len(W, H, STEP)] = [0; scene::labels_len(W, H, STEP)];
+    static mut POINTS: [[f32; 3]; 512] = [[0.0; 3]; 512];
+    // SAFETY: run_scene runs on one thread, one call at a time, and is
+    // the only code naming these buffers.
+    let (depth, template, labels, points) = unsafe {
+        (
+            &mut *core::ptr::addr_of_mut!(DEPTH),
+            &mut *core::ptr::addr_of_mut!(TEMPLATE),
+            &mut *core::ptr::addr_of_mut!(LABELS),
+            &mut *core::ptr::addr_of_mut!(POINTS),
+        )
+    };
+    if let Err(e) = harness::harness_frame(model, template, depth) {
+        say!("model {m} scene error {e:?}");
+        return;
+    }
+    let image = match harness::harness_image(depth) {
+        Ok(image) => image,
+        Err(e) => {
+            say!("model {m} scene error {e:?}");
+            return;
+        }
+    };
+    let scene_options = SceneOptions::for_object(model.object_radius());
+    let s0 = counter.instructions();
+    let segmented = scene::segment(&image, &scene_options, labels);
+    let s1 = counter.instructions();
+    if let Err(e) = segmented {
+        say!("model {m} scene error {e:?}");
+        return;
+    }
+    say!("model {m} scene segment {}", s1 - s0);
+    let options = Options::default();
+    let baseline = stack::paint();
+    let l0 = counter.instructions();
+    let located = model.locate(
+        &image,
+        &scene_options,
+        harness::HARNESS_CANDIDATES,
+        &options,
+        labels,
+        points,
+        scratch,
+    );
+    let l1 = counter.instructions();
+    let peak = stack::used_below(baseline);
+    line.clear();
+    match located {
+        Ok(located) => {
+            let _ = write!(line, "model {m} scene locate {} {peak} ", l1 - l0);
+            let _ = harness::describe(&located, line);
+        }
+        Err(e) => {
+            let _ = write!(line, "model {m} scene error {e:?}");
+        }
+    }
+    emit(line);
 }

@@ -1,7 +1,8 @@
 //! Link-time proof that no panic is reachable from the device entry points.
 //!
 //! This image calls every public inference entry point of `pcrnet-core`
-//! (load and parse, `register`, `track`, the network alone, `infer`, `encode`,
+//! (load and parse, `register`, `track`, `locate` on a depth image and an
+//! organised cloud, the network alone, `infer`, `encode`,
 //! `head`, `pose`, the f32 reference) and every function of the C API, on
 //! a blob, a cloud, options, tiles and scratch lengths the optimiser cannot
 //! see (they pass through [`black_box`]), so every branch that some input
@@ -68,6 +69,7 @@ fn rust_api(scratch: &mut [i8], f32_scratch: &mut [f32], feature: &mut [f32]) {
         let (source_feature, work) = scratch.split_at_mut(black_box(256).min(scratch.len()));
         let _ = black_box(model.head(source_feature, work));
         let _ = black_box(model.scratch_len(tile));
+        scene(&model, &options, scratch);
     }
     if let Ok(model) = F32Model::from_bytes(blob) {
         let f32_scratch = black_box(f32_scratch);
@@ -80,6 +82,64 @@ fn rust_api(scratch: &mut [i8], f32_scratch: &mut [f32], feature: &mut [f32]) {
         let (source_feature, work) =
             f32_scratch.split_at_mut(black_box(1024).min(f32_scratch.len()));
         let _ = black_box(network.head(source_feature, work));
+    }
+}
+
+/// The scene path: `locate` on a depth image and on an organised cloud of
+/// sizes, intrinsics, depth scale, settings and buffers the optimiser
+/// cannot see.
+fn scene(model: &Int8Model, options: &Options, scratch: &mut [i8]) {
+    use pcrnet_core::scene::{DepthImage, Intrinsics, OrganisedPoints, SceneOptions};
+    static DEPTH: [u16; 1024] = [0; 1024];
+    static mut LABELS: [u16; 512] = [0; 512];
+    static mut POINTS: [[f32; 3]; 128] = [[0.0; 3]; 128];
+    // SAFETY: `scene` runs on one thread, one call at a time, and is the
+    // only code naming these buffers.
+    let (labels, points) = unsafe {
+        (
+            &mut *core::ptr::addr_of_mut!(LABELS),
+            &mut *core::ptr::addr_of_mut!(POINTS),
+        )
+    };
+    let labels: &mut [u16] = black_box(labels);
+    let points: &mut [[f32; 3]] = black_box(points);
+    let depth: &[u16] = black_box(&DEPTH[..]);
+    let k: Intrinsics = black_box(Intrinsics {
+        fx: 100.0,
+        fy: 100.0,
+        cx: 16.0,
+        cy: 16.0,
+    });
+    let (width, height, stride) = (black_box(32), black_box(32), black_box(32));
+    let scene_options: SceneOptions = black_box(SceneOptions::for_object(black_box(1.0)));
+    let candidates = black_box(3);
+    if let Ok(image) = DepthImage::new(depth, width, height, stride, k, black_box(1e-3), 0) {
+        let located = model.locate(
+            &image,
+            &scene_options,
+            candidates,
+            options,
+            labels,
+            points,
+            scratch,
+        );
+        let _ = black_box(located.map(|l| l.best.is_some()));
+    }
+    if let Ok(cloud) = OrganisedPoints::new(black_box(&CLOUD[..]), black_box(8)) {
+        let cloud = match cloud.estimate_intrinsics() {
+            Some(k) => cloud.with_intrinsics(k),
+            None => cloud,
+        };
+        let located = model.locate(
+            &cloud,
+            &scene_options,
+            candidates,
+            options,
+            labels,
+            points,
+            scratch,
+        );
+        let _ = black_box(located.map(|l| l.best.is_some()));
     }
 }
 
