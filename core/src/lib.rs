@@ -100,6 +100,7 @@ pub mod refine;
 pub mod registration;
 pub mod scene;
 mod sizes;
+pub mod sweep;
 pub mod template;
 #[doc(hidden)]
 pub mod testing;

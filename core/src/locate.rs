@@ -15,6 +15,7 @@
 use crate::error::Result;
 use crate::registration::Registration;
 use crate::scene::{self, Organised, SceneOptions, Segmentation, Verification};
+use crate::sweep::Sweep;
 
 /// Most candidates registered per frame.
 pub const MAX_CANDIDATES: usize = 8;
@@ -58,7 +59,9 @@ impl Located {
 /// Segments `frame` and registers up to `candidates` (at most
 /// [`MAX_CANDIDATES`]) of the largest kept clusters with `register`, each
 /// from at most `points.len()` of its points, and checks each registration
-/// with `verify` (`None`: not verified).
+/// with `verify` (`None`: not verified). `register` is given the sweep
+/// ([`crate::sweep`]) when the scene options name the template's up axis
+/// and a plane was found or given, else `None`.
 ///
 /// # Errors
 /// What [`scene::segment`] or `register` returns; a candidate whose
@@ -70,10 +73,18 @@ pub fn locate<F: Organised>(
     candidates: usize,
     labels: &mut [u16],
     points: &mut [[f32; 3]],
-    mut register: impl FnMut(&[[f32; 3]]) -> Result<Registration>,
+    mut register: impl FnMut(&[[f32; 3]], Option<&Sweep>) -> Result<Registration>,
     mut verify: impl FnMut(&F, &Registration) -> Option<Verification>,
 ) -> Result<Located> {
     let segmentation = scene::segment(frame, scene, labels)?;
+    let sweep = match (scene.up, segmentation.plane) {
+        (Some(up), Some(plane)) => Some(Sweep {
+            plane,
+            up,
+            yaws: scene.yaws,
+        }),
+        _ => None,
+    };
     let mut tried = heapless::Vec::new();
     let mut first_error = None;
     let kept = &segmentation.clusters.kept;
@@ -82,7 +93,7 @@ pub fn locate<F: Organised>(
         let Some(source) = points.get(..n) else {
             continue;
         };
-        match register(source) {
+        match register(source, sweep.as_ref()) {
             Ok(registration) => {
                 let verification = verify(frame, &registration);
                 let _ = tried.push(Candidate {

@@ -264,6 +264,46 @@ pub(crate) fn run_checked(
     conclude(frame, &r, passes, counts, checked.degenerate, options)
 }
 
+/// [`Error::NonFiniteCoordinate`] for the first point with a NaN or
+/// infinite coordinate (paths without a network pass, which checks them).
+pub(crate) fn all_finite(source: &[[f32; 3]]) -> Result<()> {
+    match source.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+        Some(index) => Err(Error::NonFiniteCoordinate { index }),
+        None => Ok(()),
+    }
+}
+
+/// Registers `source` standing on `sweep`'s plane: the sweep's starts
+/// ([`crate::sweep`]) screened and the best refined, no network pass.
+pub(crate) fn run_swept(
+    frame: &Frame,
+    template: &Template<'_>,
+    source: &[[f32; 3]],
+    options: &Options,
+    sweep: &crate::sweep::Sweep,
+) -> Result<Registration> {
+    sweep.validate()?;
+    let checked = check(frame, template, source, options)?;
+    all_finite(source)?;
+    let starts = crate::sweep::starts(frame, template, &checked.subset, sweep);
+    let r = refine::resolve_starts(
+        template,
+        &checked.subset,
+        starts,
+        options.screen_iterations,
+        &options.icp_settings(),
+        options.inlier_distance,
+    )?;
+    conclude(
+        frame,
+        &r,
+        0,
+        PassCounts::default(),
+        checked.degenerate,
+        options,
+    )
+}
+
 /// The [`Registration`] of a refined and scored pose (model frame): the
 /// pose and distances in user units, the verdict. A non-finite pose or
 /// distance is an error.

@@ -104,9 +104,7 @@ pub(crate) fn step(
     pass: impl FnMut(&PointMap) -> Result<(Pose, PassCounts)>,
 ) -> Result<Tracking> {
     let checked = registration::check(frame, template, source, options)?;
-    if let Some(index) = source.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-        return Err(Error::NonFiniteCoordinate { index });
-    }
+    registration::all_finite(source)?;
     let [w, x, y, z] = previous.rotation;
     let norm = w * w + x * x + y * y + z * z;
     if !(previous.is_finite() && libm::fabsf(norm - 1.0) <= UNIT_TOLERANCE) {

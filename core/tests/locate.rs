@@ -196,3 +196,61 @@ fn a_frame_without_the_object_is_never_reliable() {
         "no block fits by its residual: the test proves nothing"
     );
 }
+
+/// One side of the object lying on the table in any yaw: the network's
+/// hypotheses do not reach it, the sweep about the table's normal does.
+#[test]
+fn any_yaw_on_the_table_is_found_by_the_sweep() {
+    use pcrnet_core::scene::Plane;
+    use pcrnet_core::sweep::Sweep;
+    let model = Int8Model::from_bytes(MODEL).unwrap();
+    let points = template();
+    let table = Plane {
+        normal: [0.0, 0.0, -1.0],
+        offset: DISTANCE,
+    };
+    // The template's -z lies along the table's normal when only yawed about z.
+    let sweep = Sweep::new(table, [0.0, 0.0, -1.0]);
+    let options = Options::default();
+    let mut errors = Vec::new();
+    for deg in [0.0f32, 70.0, 150.0, 230.0, 310.0] {
+        let turn = rotation([0.0, 0.0, 1.0], deg);
+        let back = points
+            .iter()
+            .map(|&p| turn.transform_point(p)[2])
+            .fold(f32::NEG_INFINITY, f32::max);
+        let truth = Pose {
+            translation: [0.1, -0.05, DISTANCE - back],
+            ..turn
+        };
+        let depth = render(
+            &[Placed {
+                points: &points,
+                pose: truth,
+                splat: 0.03,
+            }],
+            &[],
+        );
+        let frame =
+            DepthImage::new(&depth, W, H, W, Tabletop::tof_intrinsics(), DEPTH_SCALE, 0).unwrap();
+        let scene_options = SceneOptions::for_object(model.object_radius());
+        let mut labels = vec![0u16; scene::labels_len(W, H, scene_options.step)];
+        let s = scene::segment(&frame, &scene_options, &mut labels).unwrap();
+        let mut view = vec![[0f32; 3]; 512];
+        let n = s.gather(
+            &frame,
+            &scene_options,
+            &labels,
+            &s.clusters.kept[0],
+            &mut view,
+        );
+        let swept = model
+            .register_on_plane(&view[..n], &sweep, &options)
+            .unwrap();
+        let error = angle_deg(&swept.pose, &truth.inverse());
+        errors.push((deg, error, swept.reliable));
+    }
+    for (deg, error, reliable) in errors {
+        assert!(error < 5.0 && reliable, "yaw {deg}: {error} deg off");
+    }
+}

@@ -219,6 +219,21 @@ impl<'a> Int8Model<'a> {
         )
     }
 
+    /// Registers `source`, a view of the object standing on `sweep`'s plane
+    /// with the template's up axis along the plane's normal, by the yaw
+    /// sweep of [`crate::sweep`] (no network pass, no scratch): the
+    /// registration for one-sided views in any yaw, which the network's
+    /// hypotheses do not cover.
+    #[inline(never)]
+    pub fn register_on_plane(
+        &self,
+        source: &[[f32; 3]],
+        sweep: &crate::sweep::Sweep,
+        options: &Options,
+    ) -> Result<Registration> {
+        registration::run_swept(&self.p.frame, &self.template, source, options, sweep)
+    }
+
     /// Finds the template's object in a sensor frame and registers it
     /// (see [`crate::locate`]): the scene stages over `frame` with `scene`
     /// (start from [`crate::scene::SceneOptions::for_object`] with
@@ -253,7 +268,10 @@ impl<'a> Int8Model<'a> {
             candidates,
             labels,
             points,
-            |source| self.register_ready(source, options, tile, scratch, Ready::default()),
+            |source, sweep| match sweep {
+                Some(sweep) => self.register_on_plane(source, sweep, options),
+                None => self.register_ready(source, options, tile, scratch, Ready::default()),
+            },
             verify,
         )
     }

@@ -65,6 +65,13 @@ pub struct SceneOptions {
     /// How a candidate's pose is checked against the frame (`None`: not
     /// checked; also unchecked when the frame's intrinsics are unknown).
     pub verify: Option<VerifySettings>,
+    /// The template's up axis (template frame: the axis pointing away from
+    /// the surface the object rests on). With a plane found or given, each
+    /// candidate is registered by the yaw sweep about the plane's normal
+    /// ([`crate::sweep`]) instead of the network's hypotheses.
+    pub up: Option<[f32; 3]>,
+    /// Yaw starts of the sweep.
+    pub yaws: usize,
 }
 
 impl SceneOptions {
@@ -95,6 +102,8 @@ impl SceneOptions {
                 radius: [0.35 * radius, 1.6 * radius],
             },
             verify: Some(VerifySettings::for_object(radius)),
+            up: None,
+            yaws: crate::sweep::DEFAULT_YAWS,
         }
     }
 }

@@ -177,6 +177,12 @@ enum Command {
         /// With --scene: register at most this many of the largest clusters (1 to 8).
         #[arg(long, default_value_t = 3, requires = "scene")]
         candidates: usize,
+        /// With --scene: the template's up axis (x, y, z, -x, -y or -z: the
+        /// axis pointing away from the surface the object rests on). Each
+        /// candidate is then registered by a sweep of turns about the
+        /// plane found in the frame, for a view from one side in any yaw.
+        #[arg(long, requires = "scene", allow_hyphen_values = true, value_parser = scene::parse_axis)]
+        up: Option<[f32; 3]>,
         /// How the clouds are read.
         #[command(flatten)]
         reading: Reading,
@@ -297,6 +303,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             scene,
             intrinsics,
             candidates,
+            up,
             reading,
         } => {
             reading.check()?;
@@ -318,6 +325,7 @@ fn run(command: Command) -> anyhow::Result<()> {
                     frame: source,
                     intrinsics: intrinsics.as_deref(),
                     candidates,
+                    up,
                 };
                 return scene::run(args, &options, &reading, Output { aligned, json });
             }

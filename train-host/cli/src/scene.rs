@@ -31,6 +31,26 @@ pub(crate) struct SceneArgs<'a> {
     pub(crate) intrinsics: Option<&'a Path>,
     /// Candidates registered at most.
     pub(crate) candidates: usize,
+    /// The template's up axis, for the sweep.
+    pub(crate) up: Option<[f32; 3]>,
+}
+
+/// Parses `--up`: `x`, `y`, `z`, `-x`, `-y` or `-z`.
+pub(crate) fn parse_axis(s: &str) -> Result<[f32; 3], String> {
+    let axis = match s.trim().to_ascii_lowercase().as_str() {
+        "x" | "+x" => [1.0, 0.0, 0.0],
+        "y" | "+y" => [0.0, 1.0, 0.0],
+        "z" | "+z" => [0.0, 0.0, 1.0],
+        "-x" => [-1.0, 0.0, 0.0],
+        "-y" => [0.0, -1.0, 0.0],
+        "-z" => [0.0, 0.0, -1.0],
+        other => {
+            return Err(format!(
+                "`{other}` is not an axis: give x, y, z, -x, -y or -z (the template's axis pointing away from the surface it rests on)"
+            ));
+        }
+    };
+    Ok(axis)
 }
 
 /// Runs `register --scene`.
@@ -124,7 +144,10 @@ fn find<F: Organised>(
     aligned: Option<&Path>,
     json: Option<&Path>,
 ) -> anyhow::Result<()> {
-    let scene_options = SceneOptions::for_object(model.object_radius());
+    let scene_options = SceneOptions {
+        up: args.up,
+        ..SceneOptions::for_object(model.object_radius())
+    };
     let (width, height) = (frame.width(), frame.height());
     let mut labels = vec![0u16; scene::labels_len(width, height, scene_options.step)];
     let mut points = vec![[0f32; 3]; CANDIDATE_POINTS];
@@ -151,6 +174,14 @@ fn find<F: Organised>(
         scene_options.step,
         seconds * 1e3
     ));
+    say(match (args.up, located.segmentation.plane) {
+        (Some(up), Some(_)) => format!(
+            "registration: a sweep of {} turns about the plane's normal, the template's up axis {up:?} along it",
+            scene_options.yaws
+        ),
+        (Some(_), None) => "registration: the network's hypotheses (--up was given, but no plane was found to sweep about)".into(),
+        (None, _) => "registration: the network's hypotheses (give --up AXIS for an object standing on the plane in any yaw)".into(),
+    });
     for line in report_lines(&located) {
         say(line);
     }

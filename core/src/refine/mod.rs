@@ -12,8 +12,10 @@
 
 use core::num::NonZeroUsize;
 
+mod resolve;
+pub use resolve::{FLIP_MARGIN, Resolved, resolve, resolve_starts};
+
 use crate::eigen;
-use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{PointMap, Pose};
 use crate::template::Template;
@@ -71,6 +73,21 @@ impl<'s> Subset<'s> {
 
     fn points(&self) -> impl Iterator<Item = &'s [f32; 3]> + 's {
         self.source.iter().step_by(self.stride.max(1))
+    }
+
+    /// The mean of the used points in the model frame (f32 sums in order;
+    /// zero for no point).
+    pub fn centroid(&self) -> [f32; 3] {
+        let (mut sum, mut n) = ([0f32; 3], 0u32);
+        for &p in self.points() {
+            let q = self.frame.to_model(p);
+            for (s, v) in sum.iter_mut().zip(q) {
+                *s += v;
+            }
+            n += 1;
+        }
+        let n = n.max(1) as f32;
+        sum.map(|s| s / n)
     }
 }
 
@@ -415,133 +432,5 @@ pub fn degeneracy(
         Some(Degeneracy::Line)
     } else {
         None
-    }
-}
-
-/// The result of [`resolve`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Resolved {
-    /// The chosen pose (model frame).
-    pub pose: Pose,
-    /// Its fit.
-    pub fit: Fit,
-    /// Which start it came from: 0 the given pose, `k` the pose followed by turn `k - 1`.
-    pub hypothesis: usize,
-    /// ICP iterations run from that start.
-    pub icp_iterations: usize,
-}
-
-/// A turned hypothesis replaces the network's own pose only when its
-/// residual is below this share of the network's (see [`resolve`]).
-///
-/// Measured on 200 ModelNet10 test pairs (shipped model, noise 0.01): with
-/// sources resampled from the surface (no point shared with the template),
-/// plain "lowest residual wins" picked a symmetric flip of desks, tables
-/// and dressers in 13% of the pairs (AUC 0.86 against 0.98 for the network's
-/// pose alone), because sampling noise then hides the small asymmetries;
-/// with shared points the right pose's residual is near zero and any margin
-/// keeps it.
-pub const FLIP_MARGIN: f32 = 0.7;
-
-/// Flip resolution. Starts are `start` (the network's pose) and `start`
-/// followed by each of the first `hypotheses - 1` template turns. The
-/// network's start gets `screen` ICP iterations on every used point; each
-/// turned start gets them on half the points ([`Subset::thinned`]). The
-/// network's start and the best-scoring turned start then continue
-/// ICP on every used point up to `icp.iterations` in all and are scored
-/// again (a turned start whose screening converged is only scored again).
-/// The best turned pose wins only if its residual is below
-/// [`FLIP_MARGIN`] times the network's: the network's answer stands unless
-/// the template's points clearly favour a turn. With
-/// `screen >= icp.iterations` every start gets the full ICP.
-///
-/// Screening on half the points: measured with the shipped model on the
-/// `trust` experiment's pairs, the default registration on the Cortex-M4F
-/// takes 55.7 M instructions instead of 80.7 M (the firmware example),
-/// with ModelNet10 AUC 0.9967 (0.9967 before), resampled 0.9889 (0.9889)
-/// and unseen airplanes 0.9974 (0.9975), the same verdict rates. A quarter
-/// of the points (43 M) misranked a desk's right turn (AUC 0.9952, one
-/// pose 55 deg off). Two finalist turns gave 0.9973, but a second
-/// finalist that does not converge grinds through the whole ICP budget
-/// (K = 4: 64 M instead of 46 M), so one it is.
-pub fn resolve(
-    template: &Template<'_>,
-    subset: &Subset<'_>,
-    start: Pose,
-    hypotheses: usize,
-    screen: usize,
-    icp_settings: &IcpSettings,
-    max_distance: f32,
-) -> Result<Resolved> {
-    let turns = template.turns();
-    let count = hypotheses.min(turns.len().saturating_add(1)).max(1);
-    let first = IcpSettings {
-        iterations: screen.min(icp_settings.iterations),
-        ..*icp_settings
-    };
-    let rest = IcpSettings {
-        iterations: icp_settings.iterations.saturating_sub(first.iterations),
-        ..*icp_settings
-    };
-    let refine = |from: Pose,
-                  hypothesis: usize,
-                  settings: &IcpSettings,
-                  on: &Subset<'_>|
-     -> Result<Resolved> {
-        let (pose, icp_iterations) = icp(template, on, from, settings);
-        let fit = score(template, on, &pose, max_distance);
-        if fit.residual.is_finite() {
-            Ok(Resolved {
-                pose,
-                fit,
-                hypothesis,
-                icp_iterations,
-            })
-        } else {
-            Err(Error::NonFiniteResult)
-        }
-    };
-    // A finalist continues ICP on every used point; one whose screening
-    // stopped on its own (converged, or too few pairs) is only scored on
-    // them again if it was screened on fewer.
-    let finish = |r: Resolved, screened_on_all: bool| -> Result<Resolved> {
-        if rest.iterations == 0 || r.icp_iterations < first.iterations {
-            if screened_on_all {
-                return Ok(r);
-            }
-            let none = IcpSettings {
-                iterations: 0,
-                ..rest
-            };
-            let again = refine(r.pose, r.hypothesis, &none, subset)?;
-            return Ok(Resolved {
-                icp_iterations: r.icp_iterations,
-                ..again
-            });
-        }
-        let more = refine(r.pose, r.hypothesis, &rest, subset)?;
-        Ok(Resolved {
-            icp_iterations: r.icp_iterations + more.icp_iterations,
-            ..more
-        })
-    };
-    let network = finish(refine(start, 0, &first, subset)?, true)?;
-    let thin = subset.thinned();
-    let all = thin.stride == subset.stride;
-    let mut best_turn: Option<Resolved> = None;
-    for (k, &rotation) in turns.iter().enumerate().take(count - 1) {
-        let from = start.then(&Pose {
-            rotation,
-            translation: [0.0; 3],
-        });
-        let r = refine(from, k + 1, &first, &thin)?;
-        if best_turn.is_none_or(|b| r.fit.residual < b.fit.residual) {
-            best_turn = Some(r);
-        }
-    }
-    let best_turn = best_turn.map(|t| finish(t, all)).transpose()?;
-    match best_turn {
-        Some(t) if t.fit.residual < FLIP_MARGIN * network.fit.residual => Ok(t),
-        _ => Ok(network),
     }
 }
