@@ -7,10 +7,11 @@
 //! a point buffer that bounds each candidate's points, and the model's
 //! scratch. Each registration is checked against the frame
 //! ([`crate::scene::verify`]) when its intrinsics are known: a candidate is
-//! reliable when its registration is and its pose explains the frame. The
-//! winner is the reliable candidate with the lowest relative plane
-//! residual; without a reliable one, the lowest residual, reported not
-//! reliable. A frame without a kept cluster has no registration.
+//! reliable when its pose explains the frame and its residual is within the
+//! check's looser bound. The winner is a reliable candidate, the one with
+//! the fewest violations of free space (then the lowest relative plane
+//! residual); without a reliable one, the same order picks the best,
+//! reported not reliable. A frame without a kept cluster has no registration.
 
 use crate::error::Result;
 use crate::registration::Registration;
@@ -33,8 +34,10 @@ pub struct Candidate {
     /// Its pose checked against the frame ([`crate::scene::verify`]), when
     /// the frame's intrinsics are known and the options ask for it.
     pub verification: Option<Verification>,
-    /// The verdict: the registration reliable and, when verified, its
-    /// verification passed.
+    /// The verdict. Checked against the frame: the check passed, the
+    /// source is not degenerate and the relative plane residual is within
+    /// [`crate::scene::VerifySettings::max_residual`]; else the
+    /// registration's own verdict.
     pub reliable: bool,
 }
 
@@ -74,7 +77,7 @@ pub fn locate<F: Organised>(
     labels: &mut [u16],
     points: &mut [[f32; 3]],
     mut register: impl FnMut(&[[f32; 3]], Option<&Sweep>) -> Result<Registration>,
-    mut verify: impl FnMut(&F, &Registration) -> Option<Verification>,
+    mut verify: impl FnMut(&F, &Registration) -> Option<(Verification, f32)>,
 ) -> Result<Located> {
     let segmentation = scene::segment(frame, scene, labels)?;
     let sweep = match (scene.up, segmentation.plane) {
@@ -95,13 +98,21 @@ pub fn locate<F: Organised>(
         };
         match register(source, sweep.as_ref()) {
             Ok(registration) => {
-                let verification = verify(frame, &registration);
+                let checked = verify(frame, &registration);
+                let reliable = match checked {
+                    Some((v, max_residual)) => {
+                        v.passed
+                            && registration.degenerate.is_none()
+                            && registration.relative_plane_residual <= max_residual
+                    }
+                    None => registration.reliable,
+                };
                 let _ = tried.push(Candidate {
                     cluster: index,
                     points: n,
                     registration,
-                    verification,
-                    reliable: registration.reliable && verification.is_none_or(|v| v.passed),
+                    verification: checked.map(|(v, _)| v),
+                    reliable,
                 });
             }
             Err(e) => {
@@ -125,11 +136,20 @@ pub fn locate<F: Organised>(
     })
 }
 
-/// Whether `a` beats `b`: reliable first, then the lower relative plane
+/// Whether `a` beats `b`: reliable first; then, both checked against the
+/// frame, the smaller share of violations; else the lower relative plane
 /// residual (the earlier, larger cluster on a tie).
 fn better(a: &Candidate, b: &Candidate) -> bool {
     if a.reliable != b.reliable {
         return a.reliable;
+    }
+    if let (Some(va), Some(vb)) = (a.verification, b.verification) {
+        let share =
+            |v: Verification| v.violations as f32 / (v.supported + v.violations).max(1) as f32;
+        let (sa, sb) = (share(va), share(vb));
+        if sa != sb {
+            return sa < sb;
+        }
     }
     a.registration.relative_plane_residual < b.registration.relative_plane_residual
 }

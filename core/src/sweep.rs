@@ -113,7 +113,11 @@ pub(crate) fn starts(
         let moved = turn.transform_point(centroid);
         let along = dot(moved, up);
         let lift = base + offset + along;
-        let translation = [0, 1, 2].map(|i| -moved[i] + up[i] * lift);
+        let translation = [
+            -moved[0] + up[0] * lift,
+            -moved[1] + up[1] * lift,
+            -moved[2] + up[2] * lift,
+        ];
         (
             k,
             Pose {

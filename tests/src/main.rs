@@ -96,7 +96,7 @@ fn run_plans(
         })
         .collect();
     // The scene path per int8 model (not on the micro:bit: see `scene`).
-    let host_scenes: Vec<Option<scene::SceneResult>> = if board.machine == "microbit" {
+    let host_scenes: Vec<Option<Vec<scene::SceneResult>>> = if board.machine == "microbit" {
         vec![None; models.len()]
     } else {
         models.iter().map(|m| scene::expected(&m.blob)).collect()
@@ -383,14 +383,23 @@ fn report_figures(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
             pcrnet_core::testing::scene::HARNESS_WIDTH,
             pcrnet_core::testing::scene::HARNESS_HEIGHT,
         );
-        if let (Some(segment), Some(locate), Some(stack)) = (s.segment, s.locate, s.stack) {
+        if let Some(segment) = s.segment {
             println!("scene stages, {w} x {h} frame: {segment} instructions");
-            println!(
-                "locate (scene stages, {} candidates registered and verified), {w} x {h} frame: {locate} instructions, peak stack {stack} B",
-                s.result
-                    .as_ref()
-                    .map_or(0, |words| words.matches(" t ").count())
-            );
+        }
+        for (name, how) in [
+            ("locate", "the network's hypotheses"),
+            ("sweep", "the yaw sweep, --up given"),
+        ] {
+            if let Some(run) = s.runs.get(name) {
+                println!(
+                    "locate ({how}; scene stages, {} candidates registered and verified), {w} x {h} frame: {} instructions, peak stack {} B",
+                    run.result
+                        .as_ref()
+                        .map_or(0, |words| words.matches(" t ").count()),
+                    run.instructions,
+                    run.stack
+                );
+            }
         }
     }
     println!(

@@ -1,9 +1,11 @@
 //! The scene path in the harness: for every int8 model, the device renders
 //! the harness frame ([`pcrnet_core::testing::scene::harness_frame`]),
-//! runs the scene stages alone and then `Int8Model::locate` on it, and
-//! prints what it found as words ([`pcrnet_core::testing::scene::describe`]);
-//! the host computes the same ([`expected`]) and the words are compared
-//! ([`difference`]). Not on the micro:bit (16 KiB of RAM, the frame alone is 77 KB).
+//! runs the scene stages alone and then `Int8Model::locate` on it twice,
+//! with the network's hypotheses (`locate`) and with the template's up axis
+//! given (`sweep`), and prints what it found as words
+//! ([`pcrnet_core::testing::scene::describe`]); the host computes the same
+//! ([`expected`]) and the words are compared ([`difference`]). Not on the
+//! micro:bit (16 KiB of RAM; the frame alone is 77 KB).
 
 use std::collections::BTreeMap;
 
@@ -16,28 +18,41 @@ use crate::vectors::{SCRATCH_LEN, error_text};
 /// Sampling step of the harness's grid (the default of `SceneOptions::for_object`).
 const STEP: usize = 4;
 
-/// What `locate` found, as words, or the error's text.
+/// The runs per model, in the device's order.
+pub const RUNS: [&str; 2] = ["locate", "sweep"];
+
+/// What a run found, as words, or the error's text.
 pub type SceneResult = Result<String, String>;
 
-/// What the device printed for one model's scene.
+/// What the device printed for one run.
 #[derive(Debug, Clone, PartialEq)]
+pub struct DeviceRun {
+    /// Instructions of the `locate` call.
+    pub instructions: u64,
+    /// Its peak stack bytes.
+    pub stack: usize,
+    /// The words, or the error.
+    pub result: SceneResult,
+}
+
+/// What the device printed for one model's scene.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct DeviceScene {
     /// Instructions of the scene stages alone (`scene::segment`).
     pub segment: Option<u64>,
-    /// Instructions of the whole `locate` call.
-    pub locate: Option<u64>,
-    /// Peak stack bytes of the `locate` call.
-    pub stack: Option<usize>,
-    /// The words, or the error.
-    pub result: SceneResult,
+    /// Each run by name.
+    pub runs: BTreeMap<String, DeviceRun>,
+    /// The frame could not be made or segmented.
+    pub error: Option<String>,
 }
 
 /// Per model index.
 pub type Scenes = BTreeMap<usize, DeviceScene>;
 
-/// The host's result for `blob` (`None` for a blob that is not int8: the
-/// device runs no scene for it).
-pub fn expected(blob: &[u8]) -> Option<SceneResult> {
+/// The host's results for `blob`, one per [`RUNS`] (`None` for a blob that
+/// is not int8: the device runs no scene for it); a frame that cannot be
+/// made gives one `Err` per run.
+pub fn expected(blob: &[u8]) -> Option<Vec<SceneResult>> {
     let model = Int8Model::from_bytes(blob).ok()?;
     let (w, h) = (harness::HARNESS_WIDTH, harness::HARNESS_HEIGHT);
     let mut depth = vec![0u16; w * h];
@@ -45,25 +60,42 @@ pub fn expected(blob: &[u8]) -> Option<SceneResult> {
     let mut labels = vec![0u16; scene::labels_len(w, h, STEP)];
     let mut points = vec![[0f32; 3]; 512];
     let mut scratch = vec![0i8; SCRATCH_LEN];
-    let mut run = || -> Result<String, pcrnet_core::Error> {
-        harness::harness_frame(&model, &mut template, &mut depth)?;
-        let image = harness::harness_image(&depth)?;
-        let scene_options = SceneOptions::for_object(model.object_radius());
-        scene::segment(&image, &scene_options, &mut labels)?;
-        let located = model.locate(
-            &image,
-            &scene_options,
-            harness::HARNESS_CANDIDATES,
-            &Options::default(),
-            &mut labels,
-            &mut points,
-            &mut scratch,
-        )?;
-        let mut words = String::new();
-        harness::describe(&located, &mut words).expect("writing to a String");
-        Ok(words)
+    let frame = harness::harness_frame(&model, &mut template, &mut depth)
+        .and_then(|()| harness::harness_image(&depth));
+    let image = match frame {
+        Ok(image) => image,
+        Err(e) => return Some(vec![Err(error_text(&e)); RUNS.len()]),
     };
-    Some(run().map_err(|e| error_text(&e)))
+    let plain = SceneOptions::for_object(model.object_radius());
+    if let Err(e) = scene::segment(&image, &plain, &mut labels) {
+        return Some(vec![Err(error_text(&e)); RUNS.len()]);
+    }
+    let swept = SceneOptions {
+        up: Some(harness::HARNESS_UP),
+        ..plain
+    };
+    let results = [plain, swept]
+        .iter()
+        .map(|o| {
+            let located = model.locate(
+                &image,
+                o,
+                harness::HARNESS_CANDIDATES,
+                &Options::default(),
+                &mut labels,
+                &mut points,
+                &mut scratch,
+            );
+            located
+                .map(|l| {
+                    let mut words = String::new();
+                    harness::describe(&l, &mut words).expect("writing to a String");
+                    words
+                })
+                .map_err(|e| error_text(&e))
+        })
+        .collect();
+    Some(results)
 }
 
 /// Parses a `model M scene ...` line's words after `scene` into `scenes`;
@@ -72,38 +104,62 @@ pub fn parse_line(m: &str, words: &[&str], scenes: &mut Scenes) -> bool {
     let Ok(m) = m.parse::<usize>() else {
         return false;
     };
-    let entry = scenes.entry(m).or_insert(DeviceScene {
-        segment: None,
-        locate: None,
-        stack: None,
-        result: Err("no locate line".into()),
-    });
+    let entry = scenes.entry(m).or_default();
     match words {
         ["segment", n] => match n.parse() {
             Ok(n) => entry.segment = Some(n),
             Err(_) => return false,
         },
-        ["locate", instructions, stack, rest @ ..] => {
+        ["error", error @ ..] if !error.is_empty() => entry.error = Some(error.join(" ")),
+        [run, "error", error @ ..] if RUNS.contains(run) && !error.is_empty() => {
+            entry.runs.insert(
+                run.to_string(),
+                DeviceRun {
+                    instructions: 0,
+                    stack: 0,
+                    result: Err(error.join(" ")),
+                },
+            );
+        }
+        [run, instructions, stack, rest @ ..] if RUNS.contains(run) => {
             let (Ok(i), Ok(s)) = (instructions.parse(), stack.parse()) else {
                 return false;
             };
-            entry.locate = Some(i);
-            entry.stack = Some(s);
-            entry.result = Ok(rest.join(" "));
+            entry.runs.insert(
+                run.to_string(),
+                DeviceRun {
+                    instructions: i,
+                    stack: s,
+                    result: Ok(rest.join(" ")),
+                },
+            );
         }
-        ["error", error @ ..] if !error.is_empty() => entry.result = Err(error.join(" ")),
         _ => return false,
     }
     true
 }
 
 /// How the device's scene differs from the host's, if it does: the first
-/// differing word and its place.
-pub fn difference(host: &SceneResult, device: Option<&DeviceScene>) -> Option<String> {
+/// run that differs, its first differing word and its place.
+pub fn difference(host: &[SceneResult], device: Option<&DeviceScene>) -> Option<String> {
     let Some(device) = device else {
         return Some("no scene output from the device".into());
     };
-    match (host, &device.result) {
+    for (name, h) in RUNS.iter().zip(host) {
+        let d = match (&device.error, device.runs.get(*name)) {
+            (_, Some(run)) => run.result.clone(),
+            (Some(e), None) => Err(e.clone()),
+            (None, None) => return Some(format!("{name}: no output from the device")),
+        };
+        if let Some(why) = words_difference(h, &d) {
+            return Some(format!("{name}: {why}"));
+        }
+    }
+    None
+}
+
+fn words_difference(host: &SceneResult, device: &SceneResult) -> Option<String> {
+    match (host, device) {
         (Ok(h), Ok(d)) if h == d => None,
         (Ok(h), Ok(d)) => {
             let (hw, dw): (Vec<&str>, Vec<&str>) = (
@@ -136,38 +192,55 @@ mod tests {
         assert!(parse_line("2", &["segment", "1200"], &mut scenes));
         let words = ["locate", "900", "400", "plane", "3f800000", "best", "0"];
         assert!(parse_line("2", &words, &mut scenes));
+        assert!(parse_line(
+            "2",
+            &["sweep", "error", "InvalidOption"],
+            &mut scenes
+        ));
         let d = &scenes[&2];
+        assert_eq!(d.segment, Some(1200));
         assert_eq!(
-            (d.segment, d.locate, d.stack),
-            (Some(1200), Some(900), Some(400))
+            (d.runs["locate"].instructions, d.runs["locate"].stack),
+            (900, 400)
         );
-        let host: SceneResult = Ok("plane 3f800000 best 0".into());
+        let host: Vec<SceneResult> = vec![
+            Ok("plane 3f800000 best 0".into()),
+            Err("InvalidOption".into()),
+        ];
         assert_eq!(difference(&host, Some(d)), None);
-        let other: SceneResult = Ok("plane 3f800001 best 0".into());
+        let other: Vec<SceneResult> = vec![Ok("plane 3f800001 best 0".into()), host[1].clone()];
         let why = difference(&other, Some(d)).unwrap();
         assert!(
-            why.starts_with("word 1: host `3f800001` device `3f800000`"),
+            why.starts_with("locate: word 1: host `3f800001` device `3f800000`"),
             "{why}"
         );
         assert!(difference(&host, None).is_some());
         assert!(!parse_line("x", &["segment", "1"], &mut scenes));
         assert!(!parse_line("1", &["locate", "a"], &mut scenes));
+        assert!(!parse_line("1", &["other", "1", "2"], &mut scenes));
         assert!(parse_line("3", &["error", "InvalidFrame"], &mut scenes));
-        assert_eq!(scenes[&3].result, Err("InvalidFrame".to_string()));
+        let failed = vec![Err("InvalidFrame".to_string()); 2];
+        assert_eq!(difference(&failed, scenes.get(&3)), None);
     }
 
-    #[test]
-    fn the_shipped_model_finds_its_object_in_the_harness_frame() {
-        let blob = include_bytes!("../../models/embedded-default-int8.pcrn");
-        let words = expected(blob).unwrap().unwrap();
-        // The winner (`best CLUSTER`) is a candidate whose registration is
-        // reliable and whose check against the frame passed (`... true true`).
-        let (candidates, best) = words.rsplit_once(" best ").unwrap();
-        let winner = candidates
+    /// The winner (`best CLUSTER`) of `words` is a candidate whose
+    /// registration is reliable and whose check passed (`... true true`).
+    fn winner_is_reliable(words: &str) -> bool {
+        let Some((candidates, best)) = words.rsplit_once(" best ") else {
+            return false;
+        };
+        candidates
             .split(" t ")
             .skip(1)
             .find(|t| t.split_whitespace().next() == Some(best))
-            .unwrap_or_else(|| panic!("no candidate for cluster {best}: {words}"));
-        assert!(winner.ends_with("true true"), "{winner}");
+            .is_some_and(|t| t.ends_with("true"))
+    }
+
+    #[test]
+    fn the_sweep_finds_the_shipped_object_in_the_harness_frame() {
+        let blob = include_bytes!("../../models/embedded-default-int8.pcrn");
+        let results = expected(blob).unwrap();
+        let sweep = results[1].as_ref().unwrap();
+        assert!(winner_is_reliable(sweep), "{sweep}");
     }
 }

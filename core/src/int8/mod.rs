@@ -258,9 +258,8 @@ impl<'a> Int8Model<'a> {
             let settings = scene.verify?;
             let k = frame.intrinsics()?;
             let (template, model) = (&self.template, &self.p.frame);
-            Some(crate::scene::verify::verify(
-                frame, &k, template, model, &r.pose, &settings,
-            ))
+            let v = crate::scene::verify::verify(frame, &k, template, model, &r.pose, &settings);
+            Some((v, settings.max_residual))
         };
         crate::locate::locate(
             frame,

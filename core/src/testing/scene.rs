@@ -105,6 +105,48 @@ impl Tabletop<'_> {
         (centre, a, b)
     }
 
+    /// The camera-frame pose of an object standing on the table: its
+    /// template-frame `up` axis (unit) along the table's normal, turned
+    /// `yaw` about it, its lowest level along `up` (over `points`) on the
+    /// table, its origin over `at` (as [`Block::at`]).
+    pub fn stand(&self, points: &[[f32; 3]], up: [f32; 3], at: [f32; 2], yaw: f32) -> Pose {
+        let table_up = self.up();
+        // The shortest turn of `up` onto the table's normal, then the yaw.
+        let w = 1.0 + dot(up, table_up);
+        let c = cross(up, table_up);
+        let align = if w > 1e-6 {
+            [w, c[0], c[1], c[2]]
+        } else {
+            [0.0, 1.0, 0.0, 0.0]
+        };
+        let n = libm::sqrtf(align.iter().map(|v| v * v).sum::<f32>());
+        let align = Pose {
+            rotation: align.map(|v| v / n),
+            translation: [0.0; 3],
+        };
+        let (s, c) = (libm::sinf(yaw / 2.0), libm::cosf(yaw / 2.0));
+        let turn = Pose {
+            rotation: [c, s * table_up[0], s * table_up[1], s * table_up[2]],
+            translation: [0.0; 3],
+        };
+        let rotation = align.then(&turn);
+        let base = points
+            .iter()
+            .map(|&p| dot(rotation.transform_point(p), table_up))
+            .fold(f32::INFINITY, f32::min);
+        let (centre, _, _) = self.placement(&Block {
+            at,
+            size: [0.0; 3],
+            yaw: 0.0,
+        });
+        // The origin over `at`, then lifted so the base is on the table.
+        let lift = -base;
+        Pose {
+            translation: [0, 1, 2].map(|i| centre[i] + table_up[i] * lift),
+            ..rotation
+        }
+    }
+
     /// Renders the frame into `depth` (`width * height` millimetre values,
     /// row order, 0 where the ray meets nothing within 10 m).
     ///
@@ -198,6 +240,14 @@ impl Tabletop<'_> {
     }
 }
 
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
 /// Millimetres of a depth in metres (0, no point, beyond 10 m or for a
 /// non-finite depth).
 fn to_raw(z: f32) -> u16 {
@@ -214,13 +264,16 @@ pub const HARNESS_WIDTH: usize = 224;
 pub const HARNESS_HEIGHT: usize = 172;
 /// Candidates the harness registers.
 pub const HARNESS_CANDIDATES: usize = 3;
+/// The template axis the harness's object stands on (and the sweep's up axis).
+pub const HARNESS_UP: [f32; 3] = [0.0, 0.0, 1.0];
 
 /// Renders the harness's frame for `model` into `depth` (at least
 /// [`HARNESS_WIDTH`] x [`HARNESS_HEIGHT`]): the model's stored template
-/// points (user units, as many as `template` holds) lying on a table 4.3
-/// object radii below a camera looking straight down, turned 20 degrees,
-/// beside two blocks of about the object's size; noise 0.2% of depth
-/// squared. The same frame on every target: single f32 operations and `libm`.
+/// points (user units, as many as `template` holds) standing on their z
+/// axis ([`HARNESS_UP`]) on a table 4.3 object radii from a camera pitched
+/// 55 degrees down, turned 200 degrees about the table's normal, beside two
+/// blocks of about the object's size; noise 0.2% of depth squared. The same
+/// frame on every target: single f32 operations and `libm`.
 ///
 /// # Errors
 /// [`Error::BufferTooSmall`] when `depth` is too short.
@@ -237,23 +290,22 @@ pub fn harness_frame(
     let points = &template[..n];
     let r = model.object_radius();
     let distance = 4.3 * r;
-    // Turned 20 degrees about a tilted axis, its far side on the table.
-    let half = 10f32.to_radians();
-    let axis = [0.2f32, -0.3, 1.0];
-    let norm = libm::sqrtf(dot(axis, axis));
-    let s = libm::sinf(half) / norm;
-    let turn = Pose {
-        rotation: [libm::cosf(half), s * axis[0], s * axis[1], s * axis[2]],
-        translation: [0.0; 3],
+    let table = Tabletop {
+        intrinsics: Tabletop::tof_intrinsics(),
+        distance,
+        pitch: 55f32.to_radians(),
+        blocks: &[],
+        clouds: &[],
+        noise: 0.002,
+        seed: 3,
     };
-    let back = points
-        .iter()
-        .map(|&p| turn.transform_point(p)[2])
-        .fold(f32::NEG_INFINITY, f32::max);
-    let pose = Pose {
-        translation: [0.1 * r, -0.05 * r, distance - back],
-        ..turn
-    };
+    // Standing on its z axis, turned 200 degrees: outside the network's range.
+    let pose = table.stand(
+        points,
+        HARNESS_UP,
+        [0.1 * r, -0.05 * r],
+        200f32.to_radians(),
+    );
     let blocks = [
         Block {
             at: [1.55 * r, 0.5 * r],
@@ -272,13 +324,9 @@ pub fn harness_frame(
         splat: 0.05 * r,
     }];
     Tabletop {
-        intrinsics: Tabletop::tof_intrinsics(),
-        distance,
-        pitch: core::f32::consts::FRAC_PI_2,
         blocks: &blocks,
         clouds: &clouds,
-        noise: 0.002,
-        seed: 3,
+        ..table
     }
     .render(HARNESS_WIDTH, HARNESS_HEIGHT, depth)
 }

@@ -332,9 +332,11 @@ fn main() -> ! {
 }
 
 /// The scene path on the harness frame ([`pcrnet_core::testing::scene`]):
-/// `model M scene segment INSTR` (the scene stages alone) and `model M
-/// scene locate INSTR STACK WORDS...` (the whole path, described word by
-/// word), or `model M scene error E`.
+/// `model M scene segment INSTR` (the scene stages alone), then `model M
+/// scene RUN INSTR STACK WORDS...` for RUN `locate` (the network's
+/// hypotheses) and `sweep` (the template's up axis given), each the whole
+/// path described word by word, or `model M scene RUN error E`; a frame
+/// that cannot be made is `model M scene error E`.
 #[cfg(not(feature = "microbit"))]
 fn run_scene(
     m: usize,
@@ -383,28 +385,34 @@ fn run_scene(
     }
     say!("model {m} scene segment {}", s1 - s0);
     let options = Options::default();
-    let baseline = stack::paint();
-    let l0 = counter.instructions();
-    let located = model.locate(
-        &image,
-        &scene_options,
-        harness::HARNESS_CANDIDATES,
-        &options,
-        labels,
-        points,
-        scratch,
-    );
-    let l1 = counter.instructions();
-    let peak = stack::used_below(baseline);
-    line.clear();
-    match located {
-        Ok(located) => {
-            let _ = write!(line, "model {m} scene locate {} {peak} ", l1 - l0);
-            let _ = harness::describe(&located, line);
+    let swept = SceneOptions {
+        up: Some(harness::HARNESS_UP),
+        ..scene_options
+    };
+    for (name, run_options) in [("locate", &scene_options), ("sweep", &swept)] {
+        let baseline = stack::paint();
+        let l0 = counter.instructions();
+        let located = model.locate(
+            &image,
+            run_options,
+            harness::HARNESS_CANDIDATES,
+            &options,
+            labels,
+            points,
+            scratch,
+        );
+        let l1 = counter.instructions();
+        let peak = stack::used_below(baseline);
+        line.clear();
+        match located {
+            Ok(located) => {
+                let _ = write!(line, "model {m} scene {name} {} {peak} ", l1 - l0);
+                let _ = harness::describe(&located, line);
+            }
+            Err(e) => {
+                let _ = write!(line, "model {m} scene {name} error {e:?}");
+            }
         }
-        Err(e) => {
-            let _ = write!(line, "model {m} scene error {e:?}");
-        }
+        emit(line);
     }
-    emit(line);
 }

@@ -12,6 +12,7 @@
 //! | `heldout` | five-class training with and without more varied shapes added, on the five classes held out |
 //! | `resampled` | the paper's protocol beside sources sampled apart from the template, clean, noisy and single-view, generic and object-specific |
 //! | `tracking` | the device pipeline following moving objects through noisy single-view sensor streams, frame by frame |
+//! | `scene` | the device pipeline finding a known object standing in any yaw in generated cluttered depth frames, and frames without it |
 //!
 //! This module is their framework; the paper's six are in
 //! [`super::paper`], and `trust`, `resampled` and `heldout` have their own
@@ -35,7 +36,7 @@ use anyhow::Context as _;
 use crate::report::{Context, Report};
 
 /// The experiment names, in order.
-pub const EXPERIMENTS: [&str; 10] = [
+pub const EXPERIMENTS: [&str; 11] = [
     "generalisation",
     "noise",
     "partial",
@@ -46,6 +47,7 @@ pub const EXPERIMENTS: [&str; 10] = [
     "resampled",
     "heldout",
     "tracking",
+    "scene",
 ];
 
 /// Runs experiment `name` (one of [`EXPERIMENTS`]).
@@ -61,6 +63,7 @@ pub fn run_experiment(ctx: &Context, name: &str) -> anyhow::Result<Report> {
         "resampled" => crate::resampled::resampled(ctx),
         "heldout" => crate::heldout::heldout(ctx),
         "tracking" => crate::tracking::tracking(ctx),
+        "scene" => crate::scene::scene(ctx),
         other => anyhow::bail!(
             "unknown experiment {other} (one of {})",
             EXPERIMENTS.join(", ")

@@ -25,6 +25,7 @@ pub mod recipes;
 pub mod register;
 pub mod report;
 pub mod resampled;
+pub mod scene;
 pub mod tracking;
 pub mod trust;
 

@@ -244,6 +244,19 @@ impl<'a> Recorder<'a> {
         Ok(())
     }
 
+    /// Writes a picture `write` makes (PNG) beside the plots, listed with them.
+    pub(super) fn picture(
+        &mut self,
+        stem: &str,
+        write: impl FnOnce(&std::path::Path) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        std::fs::create_dir_all(&self.ctx.results)?;
+        let name = format!("{}-{stem}.png", self.name);
+        write(&self.ctx.results.join(&name))?;
+        self.plots.push(name);
+        Ok(())
+    }
+
     pub(super) fn finish(
         self,
         title: &str,
