@@ -61,7 +61,7 @@ pub fn expected(blob: &[u8]) -> Option<Vec<SceneResult>> {
     let mut points = vec![[0f32; 3]; 512];
     let mut scratch = vec![0i8; SCRATCH_LEN];
     let frame = harness::harness_frame(&model, &mut template, &mut depth)
-        .and_then(|()| harness::harness_image(&depth));
+        .and_then(|_| harness::harness_image(&depth));
     let image = match frame {
         Ok(image) => image,
         Err(e) => return Some(vec![Err(error_text(&e)); RUNS.len()]),

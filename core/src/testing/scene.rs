@@ -275,13 +275,17 @@ pub const HARNESS_UP: [f32; 3] = [0.0, 0.0, 1.0];
 /// blocks of about the object's size; noise 0.2% of depth squared. The same
 /// frame on every target: single f32 operations and `libm`.
 ///
+/// Returns the object's pose (template frame -> camera frame); a
+/// registration should return its inverse (or a turn about a symmetry of
+/// the template).
+///
 /// # Errors
 /// [`Error::BufferTooSmall`] when `depth` is too short.
 pub fn harness_frame(
     model: &crate::Int8Model,
     template: &mut [[f32; 3]],
     depth: &mut [u16],
-) -> Result<()> {
+) -> Result<Pose> {
     let t = model.template();
     let n = t.len().min(template.len());
     for (i, p) in template.iter_mut().enumerate().take(n) {
@@ -328,13 +332,14 @@ pub fn harness_frame(
         clouds: &clouds,
         ..table
     }
-    .render(HARNESS_WIDTH, HARNESS_HEIGHT, depth)
+    .render(HARNESS_WIDTH, HARNESS_HEIGHT, depth)?;
+    Ok(pose)
 }
 
 /// The harness frame as the depth image the scene stages read.
 ///
 /// # Errors
-/// As [`DepthImage::new`].
+/// As [`crate::scene::DepthImage::new`].
 pub fn harness_image(depth: &[u16]) -> Result<crate::scene::DepthImage<'_>> {
     crate::scene::DepthImage::new(
         depth,

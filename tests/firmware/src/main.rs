@@ -364,7 +364,7 @@ fn run_scene(
             &mut *core::ptr::addr_of_mut!(POINTS),
         )
     };
-    if let Err(e) = harness::harness_frame(model, template, depth) {
+    if let Err(e) = harness::harness_frame(model, template, depth).map(|_| ()) {
         say!("model {m} scene error {e:?}");
         return;
     }

@@ -203,6 +203,21 @@ enum Command {
     /// Without --model, the shipped embedded default int8 model (built into
     /// pcrnet) is used, and the output says so.
     Track(track::TrackArgs),
+    /// Write a generated depth frame to try `register --scene` on: the
+    /// model's template (the shipped one unless --model) standing on a
+    /// table turned 200 degrees about its z axis beside two blocks, as a
+    /// 224 x 172 time-of-flight camera sees it, the frame the QEMU harness
+    /// runs. Writes OUT (16-bit PNG, millimetres) and OUT with .json
+    /// (the intrinsics). Then: pcrnet register --scene OUT --intrinsics
+    /// OUT.json --up z.
+    Frame {
+        /// The PNG to write; its intrinsics go beside it, extension .json.
+        #[arg(long)]
+        out: PathBuf,
+        /// The int8 model whose template to draw (default: the shipped one).
+        #[arg(long)]
+        model: Option<PathBuf>,
+    },
 }
 
 /// Errors print as one chain of messages (no backtrace, whatever
@@ -344,6 +359,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             register(template, &source, origin, method, &options, out)?
         }
         Command::Track(args) => track::track(args)?,
+        Command::Frame { out, model } => scene::write_frame(&out, model.as_deref())?,
     }
     Ok(())
 }

@@ -334,3 +334,50 @@ fn located_json(located: &Located) -> serde_json::Value {
         "reliable": located.best.as_ref().is_some_and(|b| b.reliable),
     })
 }
+
+/// `pcrnet frame`: writes the harness frame of `model` (the shipped int8
+/// model without one) to `out` as a 16-bit PNG and its intrinsics beside
+/// it (`out` with extension `.json`).
+pub(crate) fn write_frame(out: &Path, model: Option<&Path>) -> anyhow::Result<()> {
+    use pcrnet_core::testing::scene as harness;
+    let blob = match model {
+        Some(path) => std::fs::read(path).with_context(|| format!("reading {}", path.display()))?,
+        None => crate::register::shipped_model(pcrnet_eval::methods::MethodKind::Device)
+            .context("no shipped int8 model in pcrnet")?
+            .0
+            .to_vec(),
+    };
+    let model = Int8Model::from_bytes(&blob).context(
+        "the frame draws an int8 model's template: give --model the int8 blob (`pcrnet export` writes it)",
+    )?;
+    let (width, height) = (harness::HARNESS_WIDTH, harness::HARNESS_HEIGHT);
+    let mut depth = vec![0u16; width * height];
+    let mut template = vec![[0f32; 3]; model.template().len()];
+    harness::harness_frame(&model, &mut template, &mut depth)?;
+    let frame = depth::DepthFrame {
+        depth,
+        width,
+        height,
+    };
+    depth::write_png(out, &frame).with_context(|| format!("writing {}", out.display()))?;
+    let k = harness::Tabletop::tof_intrinsics();
+    let camera = depth::CameraFile {
+        fx: k.fx,
+        fy: k.fy,
+        cx: k.cx,
+        cy: k.cy,
+        depth_scale: harness::DEPTH_SCALE,
+        invalid: 0,
+    };
+    let json = out.with_extension("json");
+    std::fs::write(&json, serde_json::to_string_pretty(&camera)? + "\n")
+        .with_context(|| format!("writing {}", json.display()))?;
+    println!(
+        "wrote {} ({width} x {height}, millimetres) and {}; try: pcrnet register --scene {} --intrinsics {} --up z",
+        out.display(),
+        json.display(),
+        out.display(),
+        json.display()
+    );
+    Ok(())
+}
