@@ -25,11 +25,9 @@ use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::Pose;
 use crate::refine::Subset;
-use crate::scene::Plane;
+use crate::scene::{DEFAULT_YAWS, Plane};
 use crate::template::Template;
 
-/// Yaw starts of [`Sweep::new`]: 30 degrees apart.
-pub const DEFAULT_YAWS: usize = 12;
 /// Most yaw starts.
 pub const MAX_YAWS: usize = 360;
 

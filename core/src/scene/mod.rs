@@ -74,6 +74,10 @@ pub struct SceneOptions {
     pub yaws: usize,
 }
 
+/// Yaw starts of a sweep unless asked otherwise ([`SceneOptions::yaws`],
+/// `Sweep::new`): 30 degrees apart.
+pub const DEFAULT_YAWS: usize = 12;
+
 impl SceneOptions {
     /// Settings for an object of `radius` user units (the largest distance
     /// of its points from their mean): a 4-pixel grid; the plane within 2%
@@ -103,7 +107,7 @@ impl SceneOptions {
             },
             verify: Some(VerifySettings::for_object(radius)),
             up: None,
-            yaws: crate::sweep::DEFAULT_YAWS,
+            yaws: DEFAULT_YAWS,
         }
     }
 }
