@@ -450,7 +450,6 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -1 => c"a required pointer is null",
         -2 => c"the point array is not 4-byte aligned",
         -3 => c"the model handle is not loaded: call pcrnet_model_load and check its status",
-        -41 => c"the previous pose is not finite or its quaternion is not of unit length: pass the pose a registration or tracking step wrote, or call pcrnet_register",
         -4 => c"the prepared handle is not prepared: call pcrnet_prepare (again after loading its model handle again) and check its status",
         -10 => c"not a model blob: magic bytes PCRN missing",
         -11 => c"unsupported model format version: re-export the model with `pcrnet export` (or `pcrnet upgrade` a version-2 f32 blob); a blob newer than this library needs a later library",
@@ -469,6 +468,8 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -33 => c"the network's output has a zero quaternion",
         -34 => c"the pose or residual is not finite: the coordinates are too large once moved into the model's frame",
         -40 => c"a registration option is out of range (zero passes, hypotheses or max_points, a negative or non-finite tolerance or distance, an unknown metric, or too many points)",
+        -41 => c"the previous pose is not finite or its quaternion is not of unit length: pass the pose a registration or tracking step wrote, or call pcrnet_register",
+        -42 => c"the depth frame or a scene setting cannot be used (a zero size or stride, a frame buffer shorter than height x stride, intrinsics or a depth scale not finite and positive, a sampling grid too large for its label buffer): check the camera's intrinsics, the frame's dimensions and the label buffer's length",
         -99 => c"an error this version of the C API has no code for: update the library",
         _ => c"unknown status",
     };

@@ -59,6 +59,10 @@ pub enum PcrnetStatus {
     /// The previous pose of `pcrnet_track` is not finite or its quaternion
     /// is not of unit length.
     PCRNET_ERROR_INVALID_POSE = -41,
+    /// A depth frame or a scene setting cannot be used: a zero size or
+    /// stride, a buffer too short for the frame, intrinsics or a depth
+    /// scale not finite and positive, a grid too large for its labels.
+    PCRNET_ERROR_INVALID_FRAME = -42,
     /// An error this version of the C API has no code for (a newer core).
     PCRNET_ERROR_OTHER = -99,
 }
@@ -84,6 +88,7 @@ impl From<Error> for PcrnetStatus {
             Error::NonFiniteResult => PCRNET_ERROR_NON_FINITE_RESULT,
             Error::InvalidOption { .. } => PCRNET_ERROR_INVALID_OPTION,
             Error::InvalidPose => PCRNET_ERROR_INVALID_POSE,
+            Error::InvalidFrame { .. } => PCRNET_ERROR_INVALID_FRAME,
             _ => PCRNET_ERROR_OTHER,
         }
     }

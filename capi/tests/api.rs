@@ -295,6 +295,7 @@ fn every_status_has_a_message_naming_what_to_do() {
         PCRNET_ERROR_NON_FINITE_RESULT,
         PCRNET_ERROR_INVALID_OPTION,
         PCRNET_ERROR_INVALID_POSE,
+        PCRNET_ERROR_INVALID_FRAME,
         PCRNET_ERROR_OTHER,
     ];
     let message = |s: i32| unsafe { CStr::from_ptr(pcrnet_status_message(s)) }.to_str();
