@@ -194,7 +194,8 @@ enum PcrnetStatus
   /*
    A depth frame or a scene setting cannot be used: a zero size or
    stride, a buffer too short for the frame, intrinsics or a depth
-   scale not finite and positive, a grid too large for its labels.
+   scale not finite and positive, a grid step of 0 or one of more cells
+   than its labels can number.
    */
   PCRNET_ERROR_INVALID_FRAME = -42,
   /*

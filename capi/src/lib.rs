@@ -469,7 +469,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -34 => c"the pose or residual is not finite: the coordinates are too large once moved into the model's frame",
         -40 => c"a registration option is out of range (zero passes, hypotheses or max_points, a negative or non-finite tolerance or distance, an unknown metric, or too many points)",
         -41 => c"the previous pose is not finite or its quaternion is not of unit length: pass the pose a registration or tracking step wrote, or call pcrnet_register",
-        -42 => c"the depth frame or a scene setting cannot be used (a zero size or stride, a frame buffer shorter than height x stride, intrinsics or a depth scale not finite and positive, a sampling grid too large for its label buffer): check the camera's intrinsics, the frame's dimensions and the label buffer's length",
+        -42 => c"the depth frame or a scene setting cannot be used (a zero size or stride, a frame buffer shorter than height x stride, intrinsics or a depth scale not finite and positive, a step of 0 or a sampling grid of more cells than its labels can number): check the camera's intrinsics and the frame's dimensions, or raise the grid step",
         -99 => c"an error this version of the C API has no code for: update the library",
         _ => c"unknown status",
     };

@@ -61,7 +61,8 @@ pub enum PcrnetStatus {
     PCRNET_ERROR_INVALID_POSE = -41,
     /// A depth frame or a scene setting cannot be used: a zero size or
     /// stride, a buffer too short for the frame, intrinsics or a depth
-    /// scale not finite and positive, a grid too large for its labels.
+    /// scale not finite and positive, a grid step of 0 or one of more cells
+    /// than its labels can number.
     PCRNET_ERROR_INVALID_FRAME = -42,
     /// An error this version of the C API has no code for (a newer core).
     PCRNET_ERROR_OTHER = -99,
