@@ -99,9 +99,14 @@ pub fn render_results(results: &Path) -> anyhow::Result<String> {
             md.push_str(&format!("- {line}\n"));
         }
         let p = &r.provenance;
+        let pairs = if p.pairs > 0 {
+            format!("{} pairs per set, ", p.pairs)
+        } else {
+            String::new()
+        };
         md.push_str(&format!(
-            "- Run: commit `{}`, {}, data `{}`, seed {}, {} pairs per set, {:.0} s.\n",
-            p.commit, p.machine, p.data, p.seed, p.pairs, p.seconds
+            "- Run: commit `{}`, {}, data `{}`, seed {}, {pairs}{:.0} s.\n",
+            p.commit, p.machine, p.data, p.seed, p.seconds
         ));
         for (m, cmd) in &p.models {
             md.push_str(&format!("- Model `{m}`: `{cmd}`\n"));

@@ -147,7 +147,8 @@ pub struct Provenance {
     pub data: String,
     /// Seed of the pair sets.
     pub seed: u64,
-    /// Pairs per set.
+    /// Pairs per set; 0 when the experiment reads no pair sets (it makes
+    /// its own sequences or frames).
     pub pairs: usize,
     /// Models used, with their training commands.
     pub models: Vec<(String, String)>,
@@ -184,6 +185,8 @@ pub(super) struct Recorder<'a> {
     /// The models used, with their training commands ([`Recorder::model`]
     /// in `recipes`, which loads and records them).
     pub(crate) models: Vec<(String, String)>,
+    /// Pairs per set, as the report states it (0: no pair sets).
+    pairs: usize,
 }
 
 impl<'a> Recorder<'a> {
@@ -195,7 +198,15 @@ impl<'a> Recorder<'a> {
             raw: Vec::new(),
             plots: Vec::new(),
             models: Vec::new(),
+            pairs: ctx.pairs,
         }
+    }
+
+    /// For an experiment that reads no pair sets (it makes its own sequences
+    /// or frames): the report does not state a pair count.
+    pub(super) fn without_pair_sets(mut self) -> Self {
+        self.pairs = 0;
+        self
     }
 
     /// The experiment's name (its reports' and pair sets' prefix).
@@ -276,7 +287,7 @@ impl<'a> Recorder<'a> {
                 machine: machine(),
                 data: self.ctx.data.display().to_string(),
                 seed: self.ctx.seed,
-                pairs: self.ctx.pairs,
+                pairs: self.pairs,
                 models: self.models,
                 seconds: started.elapsed().as_secs_f64(),
             },

@@ -60,7 +60,7 @@ struct FrameResult {
 /// Runs the experiment (see the module docs).
 pub fn scene(ctx: &Context) -> anyhow::Result<Report> {
     let started = Instant::now();
-    let mut rec = Recorder::new(ctx, "scene");
+    let mut rec = Recorder::new(ctx, "scene").without_pair_sets();
     let blob = std::fs::read(SHIPPED_INT8).with_context(|| {
         format!("reading {SHIPPED_INT8} (run the experiment from the repository root)")
     })?;
@@ -98,7 +98,7 @@ pub fn scene(ctx: &Context) -> anyhow::Result<Report> {
         "Finding the object in a cluttered depth frame",
         vec![
             format!("{SHAPES} seeded ModelNet10 test shapes per camera, each scaled to a radius of {RADIUS} m and bound as the template of the shipped model (`{SHIPPED_INT8}`, 512 stored points), standing upright on a table (its z axis up) in a yaw U[0, 360°) within ±0.1 m of where the optical axis meets the table, among 2 to 5 distractors (boxes 5 to 20 cm, other classes' shapes of radius 8 to 18 cm) that do not touch it."),
-            format!("Cameras: {}; pitched 35 to 65° down at the table; depth in millimetres with uniform noise of ±0.4% of the depth squared (m), rendered by ray casting (table, boxes) and z-buffered splats of the shapes' points (`pcrnet_core::testing::scene`). No missing pixels at edges and no flying pixels yet.", CAMERAS.iter().map(|c| format!("{} {} x {}, {:.0} m", c.name, c.width, c.height, c.distance[0])).collect::<Vec<_>>().join("; ")),
+            format!("Cameras: {}; pitched 35 to 65° down at the table; depth in millimetres with uniform noise of ±0.4% of the depth squared (m), rendered by ray casting (table, boxes) and z-buffered splats of the shapes' points (`pcrnet_core::testing::scene`). No missing pixels at edges and no flying pixels yet.", CAMERAS.iter().map(|c| format!("{}, {:.0} m", c.name, c.distance[0])).collect::<Vec<_>>().join("; ")),
             format!("`Int8Model::locate` with `SceneOptions::for_object(radius)` (4-pixel grid, RANSAC plane, clusters by radius, poses verified against the frame) and `Options::default()`, {CANDIDATES} candidates. Sweep: the template's up axis given (`--up z`), 12 yaws about the plane's normal, ICP. Network hypotheses: without it."),
             format!("Success: the winning pose within {SUCCESS_DEG}° and {SUCCESS_SHARE} of the template's size (2 radii) of the truth, whatever the verdict. Reliable-but-wrong: reported reliable and more than {SUCCESS_DEG}° off. A symmetric shape turned about its axis counts as wrong (issue 36 adds the symmetry-aware error). Absent: the same scene without the object. Times: host, one thread."),
         ],

@@ -55,7 +55,7 @@ struct Followed {
 /// Runs the experiment (see the module docs).
 pub fn tracking(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
-    let mut rec = Recorder::new(ctx, "tracking");
+    let mut rec = Recorder::new(ctx, "tracking").without_pair_sets();
     let blob = std::fs::read(SHIPPED_INT8).with_context(|| {
         format!("reading {SHIPPED_INT8} (run the experiment from the repository root)")
     })?;
