@@ -68,12 +68,12 @@ impl CameraFile {
 #[derive(Debug, thiserror::Error)]
 pub enum DepthError {
     /// The file cannot be read.
-    #[error("reading {path}: {source}")]
+    #[error("reading {path}: {error}")]
     Io {
         /// The file.
         path: String,
-        /// Why.
-        source: std::io::Error,
+        /// Why (printed in the message, so not also the error's source).
+        error: std::io::Error,
     },
     /// The PNG does not decode.
     #[error("{path}: not a readable PNG ({message})")]
@@ -113,9 +113,9 @@ pub enum DepthError {
 /// [`DepthError`] naming the file.
 pub fn read_png(path: &Path) -> Result<DepthFrame, DepthError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| DepthError::Io {
+    let bytes = std::fs::read(path).map_err(|error| DepthError::Io {
         path: name.clone(),
-        source,
+        error,
     })?;
     parse_png(&bytes).map_err(|e| match e {
         ParseError::Png(message) => DepthError::Png {
@@ -209,9 +209,9 @@ pub fn write_png(path: &Path, frame: &DepthFrame) -> std::io::Result<()> {
 /// [`DepthError`] naming the file.
 pub fn read_camera(path: &Path) -> Result<CameraFile, DepthError> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| DepthError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| DepthError::Io {
         path: name.clone(),
-        source,
+        error,
     })?;
     serde_json::from_str(&text).map_err(|e| DepthError::Camera {
         path: name,
