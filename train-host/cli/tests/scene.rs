@@ -89,23 +89,20 @@ fn scene_flags_are_checked() {
     let frame = png.to_str().unwrap();
     let e = run(&["--scene", frame]);
     assert!(e.contains("--intrinsics"), "{e}");
-    let e = run(&[
-        "--scene",
-        frame,
-        "--intrinsics",
-        dir.join("frame.json").to_str().unwrap(),
-        "--up",
-        "w",
-    ]);
+    let intrinsics = dir.join("frame.json");
+    let with_intrinsics = |flags: &[&str]| {
+        let mut args = vec![
+            "--scene",
+            frame,
+            "--intrinsics",
+            intrinsics.to_str().unwrap(),
+        ];
+        args.extend_from_slice(flags);
+        run(&args)
+    };
+    let e = with_intrinsics(&["--up", "w"]);
     assert!(e.contains("not an axis"), "{e}");
-    let e = run(&[
-        "--scene",
-        frame,
-        "--intrinsics",
-        dir.join("frame.json").to_str().unwrap(),
-        "--candidates",
-        "9",
-    ]);
+    let e = with_intrinsics(&["--candidates", "9"]);
     assert!(e.contains("--candidates"), "{e}");
     let e = run(&["--scene", frame, "--method", "icp"]);
     assert!(e.contains("--method device"), "{e}");
