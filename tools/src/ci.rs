@@ -83,6 +83,7 @@ pub(crate) fn ci() -> Result<(), String> {
     steps.time("publish dry-run (pcrnet-core, pcrnet-io)", || {
         // Both packages as crates.io would build them: pcrnet-io against
         // the packaged pcrnet-core, each from its own file list.
+        forget_unpacked_packages(&["pcrnet-core", "pcrnet-io"])?;
         cargo(&[
             "publish",
             "--dry-run",
@@ -117,6 +118,55 @@ pub(crate) fn ci() -> Result<(), String> {
 
 /// The wall-clock time of each of `ci`'s steps, printed at the end: where
 /// a run's minutes go.
+/// Removes what earlier dry-runs unpacked of our own packages into
+/// `$CARGO_HOME/registry/src`.
+///
+/// A multi-package `cargo publish --dry-run` serves the packaged crates
+/// from a temporary registry under `target/package` and unpacks them into
+/// `$CARGO_HOME/registry/src/<hash of that path>/NAME-VERSION`. A directory
+/// already there is reused without comparing it with the new package, so on
+/// a machine whose cargo home outlives the checkout, pcrnet-io was verified
+/// against an old pcrnet-core (the cause of a failed CI run: `unresolved
+/// import pcrnet_core::scene`; the same cargo behaviour as
+/// 0xMiden/miden-vm#2530). Only directories named after our packages are
+/// removed; they never come from crates.io.
+fn forget_unpacked_packages(packages: &[&str]) -> Result<(), String> {
+    let cargo_home = std::env::var_os("CARGO_HOME")
+        .map(std::path::PathBuf::from)
+        .or_else(|| {
+            std::env::var_os("HOME").map(|home| std::path::Path::new(&home).join(".cargo"))
+        });
+    let Some(cargo_home) = cargo_home else {
+        return Ok(());
+    };
+    let Ok(registries) = std::fs::read_dir(cargo_home.join("registry").join("src")) else {
+        return Ok(());
+    };
+    for registry in registries.flatten() {
+        let Ok(unpacked) = std::fs::read_dir(registry.path()) else {
+            continue;
+        };
+        for entry in unpacked.flatten() {
+            let name = entry.file_name();
+            let name = name.to_string_lossy();
+            let ours = packages.iter().any(|package| {
+                name.strip_prefix(package)
+                    .and_then(|rest| rest.strip_prefix('-'))
+                    .is_some_and(|version| version.starts_with(|c: char| c.is_ascii_digit()))
+            });
+            if ours {
+                std::fs::remove_dir_all(entry.path()).map_err(|error| {
+                    format!(
+                        "removing the stale unpacked package {}: {error}",
+                        entry.path().display()
+                    )
+                })?;
+            }
+        }
+    }
+    Ok(())
+}
+
 #[derive(Default)]
 struct Steps(Vec<(&'static str, std::time::Duration)>);
 
