@@ -72,9 +72,19 @@ static void report(const char *label, int32_t status, const PcrnetRegistration *
     const float scores[6] = {r->residual, r->relative_residual, r->plane_residual,
                              r->relative_plane_residual, r->fitness, r->inlier_rmse};
     print_bits(scores, 6);
-    printf(" %lu %lu %lu %lu %lu %lu %d\n", (unsigned long)r->hypothesis, (unsigned long)r->passes,
+    printf(" %lu %lu %lu %lu %lu %lu %d %d", (unsigned long)r->hypothesis, (unsigned long)r->passes,
            (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->out_of_range,
-           (unsigned long)r->degenerate, r->reliable ? 1 : 0);
+           (unsigned long)r->degenerate, r->reliable ? 1 : 0, r->has_free_axis ? 1 : 0);
+    const float axis[7] = {r->free_axis[0],       r->free_axis[1],       r->free_axis[2],
+                           r->free_axis_point[0], r->free_axis_point[1], r->free_axis_point[2],
+                           r->free_axis_stiffness};
+    print_bits(axis, 7);
+    printf(" %d", r->has_turn ? 1 : 0);
+    const float turn[9] = {r->turn_rotation[0],    r->turn_rotation[1],    r->turn_rotation[2],
+                           r->turn_rotation[3],    r->turn_translation[0], r->turn_translation[1],
+                           r->turn_translation[2], r->turn_degrees,        r->turn_relative_plane_residual};
+    print_bits(turn, 9);
+    printf("\n");
 }
 
 static int32_t run(const char *label, const float *points, size_t n, const PcrnetOptions *options,

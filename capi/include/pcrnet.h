@@ -336,9 +336,54 @@ typedef struct {
    */
   uint32_t degenerate;
   /*
+   With `has_free_axis`: the unit direction (sign arbitrary) of an
+   axis, template frame, about which a rotation barely changes the fit:
+   the pose's angle about it is arbitrary (a continuous symmetry).
+   */
+  float free_axis[3];
+  /*
+   With `has_free_axis`: the axis's point nearest the template's
+   centroid, template frame, source units.
+   */
+  float free_axis_point[3];
+  /*
+   With `has_free_axis`: how stiff the fit is to a rotation about it
+   (below 0.12; 0 is perfectly free).
+   */
+  float free_axis_stiffness;
+  /*
+   With `has_turn`: the rotation (unit quaternion `[w, x, y, z]`) of
+   the rigid motion of the template's frame taking the pose to another
+   that fits about as well (`other = turn after pose`; a discrete symmetry).
+   */
+  float turn_rotation[4];
+  /*
+   With `has_turn`: that motion's translation, source units.
+   */
+  float turn_translation[3];
+  /*
+   With `has_turn`: the turn's angle, degrees (0..=180).
+   */
+  float turn_degrees;
+  /*
+   With `has_turn`: the other pose's relative plane residual.
+   */
+  float turn_relative_plane_residual;
+  /*
    Not degenerate and the relative plane residual within `max_residual`.
    */
   bool reliable;
+  /*
+   A free rotation axis was found (`free_axis`, `free_axis_point`,
+   `free_axis_stiffness`; zero without one).
+   */
+  bool has_free_axis;
+  /*
+   A turn to another pose that fits about as well was found
+   (`turn_rotation`, `turn_translation`, `turn_degrees`,
+   `turn_relative_plane_residual`; zero without one).
+   */
+  bool has_turn;
 } PcrnetRegistration;
 
 /*

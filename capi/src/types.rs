@@ -219,13 +219,41 @@ pub struct PcrnetRegistration {
     pub out_of_range: u32,
     /// `PCRNET_DEGENERATE_NONE`, `_POINT` or `_LINE`.
     pub degenerate: u32,
+    /// With `has_free_axis`: the unit direction (sign arbitrary) of an
+    /// axis, template frame, about which a rotation barely changes the fit:
+    /// the pose's angle about it is arbitrary (a continuous symmetry).
+    pub free_axis: [f32; 3],
+    /// With `has_free_axis`: the axis's point nearest the template's
+    /// centroid, template frame, source units.
+    pub free_axis_point: [f32; 3],
+    /// With `has_free_axis`: how stiff the fit is to a rotation about it
+    /// (below 0.12; 0 is perfectly free).
+    pub free_axis_stiffness: f32,
+    /// With `has_turn`: the rotation (unit quaternion `[w, x, y, z]`) of
+    /// the rigid motion of the template's frame taking the pose to another
+    /// that fits about as well (`other = turn after pose`; a discrete symmetry).
+    pub turn_rotation: [f32; 4],
+    /// With `has_turn`: that motion's translation, source units.
+    pub turn_translation: [f32; 3],
+    /// With `has_turn`: the turn's angle, degrees (0..=180).
+    pub turn_degrees: f32,
+    /// With `has_turn`: the other pose's relative plane residual.
+    pub turn_relative_plane_residual: f32,
     /// Not degenerate and the relative plane residual within `max_residual`.
     pub reliable: bool,
+    /// A free rotation axis was found (`free_axis`, `free_axis_point`,
+    /// `free_axis_stiffness`; zero without one).
+    pub has_free_axis: bool,
+    /// A turn to another pose that fits about as well was found
+    /// (`turn_rotation`, `turn_translation`, `turn_degrees`,
+    /// `turn_relative_plane_residual`; zero without one).
+    pub has_turn: bool,
 }
 
 impl From<&Registration> for PcrnetRegistration {
     fn from(r: &Registration) -> Self {
         let count = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        let (axis, turn) = (r.ambiguity.axis, r.ambiguity.turn);
         PcrnetRegistration {
             rotation: r.pose.rotation,
             translation: r.pose.translation,
@@ -245,7 +273,16 @@ impl From<&Registration> for PcrnetRegistration {
                 Some(Degeneracy::Point) => PCRNET_DEGENERATE_POINT,
                 Some(Degeneracy::Line) => PCRNET_DEGENERATE_LINE,
             },
+            free_axis: axis.map_or([0.0; 3], |a| a.direction),
+            free_axis_point: axis.map_or([0.0; 3], |a| a.point),
+            free_axis_stiffness: axis.map_or(0.0, |a| a.stiffness),
+            turn_rotation: turn.map_or([0.0; 4], |t| t.motion.rotation),
+            turn_translation: turn.map_or([0.0; 3], |t| t.motion.translation),
+            turn_degrees: turn.map_or(0.0, |t| t.degrees),
+            turn_relative_plane_residual: turn.map_or(0.0, |t| t.relative_plane_residual),
             reliable: r.reliable,
+            has_free_axis: axis.is_some(),
+            has_turn: turn.is_some(),
         }
     }
 }

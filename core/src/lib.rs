@@ -84,6 +84,7 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod ambiguity;
 pub mod arch;
 pub mod eigen;
 mod error;
@@ -106,6 +107,7 @@ pub mod template;
 pub mod testing;
 pub mod track;
 
+pub use ambiguity::{Ambiguity, FreeAxis, Turn};
 pub use arch::{Arch, F32_TILE, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch_len};
 pub use error::{Error, Result};
 pub use float::F32Model;

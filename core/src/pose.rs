@@ -200,6 +200,13 @@ impl Frame {
         [(x - cx) * s, (y - cy) * s, (z - cz) * s]
     }
 
+    /// A model-frame point in user units, the inverse of [`Frame::to_model`]:
+    /// `p / scale + centre`, per axis.
+    pub fn to_user(&self, p: [f32; 3]) -> [f32; 3] {
+        let ([x, y, z], [cx, cy, cz], s) = (p, self.centre, self.scale);
+        [x / s + cx, y / s + cy, z / s + cz]
+    }
+
     /// A pose between model-frame clouds as a pose between user-unit
     /// clouds: with `N(p) = s (p - c)`, `N^-1 . P . N` keeps `R` and has
     /// `t = t_model / s + c - R c`.

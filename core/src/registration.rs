@@ -17,6 +17,7 @@
 //! [`crate::F32Model::register`]); with the int8 network, every value is
 //! bit-identical between them.
 
+use crate::ambiguity::{self, Ambiguity};
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{self, Centring, PointMap, Pose};
@@ -167,6 +168,10 @@ pub struct Registration {
     pub out_of_range: u32,
     /// The source's shape does not determine a pose.
     pub degenerate: Option<Degeneracy>,
+    /// Poses the fit cannot tell apart from this one: a free rotation axis
+    /// or a turn to another pose that fits about as well ([`crate::ambiguity`]).
+    /// Reported beside the verdict, which it does not change.
+    pub ambiguity: Ambiguity,
     /// Not degenerate, and the relative plane residual is at most the
     /// option's `max_residual`.
     pub reliable: bool,
@@ -261,7 +266,7 @@ pub(crate) fn run_checked(
         saturated,
         out_of_range,
     };
-    conclude(frame, &r, passes, counts, checked.degenerate, options)
+    conclude(frame, template, checked, &r, passes, counts, options)
 }
 
 /// [`Error::NonFiniteCoordinate`] for the first point with a NaN or
@@ -296,25 +301,28 @@ pub(crate) fn run_swept(
     )?;
     conclude(
         frame,
+        template,
+        &checked,
         &r,
         0,
         PassCounts::default(),
-        checked.degenerate,
         options,
     )
 }
 
-/// The [`Registration`] of a refined and scored pose (model frame): the
-/// pose and distances in user units, the verdict. A non-finite pose or
-/// distance is an error.
+/// The [`Registration`] of a refined and scored pose (model frame) of the
+/// checked points: the pose and distances in user units, the verdict, the
+/// ambiguity. A non-finite pose or distance is an error.
 pub(crate) fn conclude(
     frame: &Frame,
+    template: &Template<'_>,
+    checked: &Checked<'_>,
     r: &Resolved,
     passes: usize,
     counts: PassCounts,
-    degenerate: Option<Degeneracy>,
     options: &Options,
 ) -> Result<Registration> {
+    let degenerate = checked.degenerate;
     let pose = frame.pose_to_user(&r.pose);
     let residual = r.fit.residual / frame.scale;
     let inlier_rmse = r.fit.inlier_rmse / frame.scale;
@@ -337,6 +345,14 @@ pub(crate) fn conclude(
         saturated: counts.saturated,
         out_of_range: counts.out_of_range,
         degenerate,
+        ambiguity: ambiguity::assess(
+            frame,
+            template,
+            &checked.subset,
+            r,
+            options.inlier_distance,
+            options.max_residual,
+        ),
         reliable: degenerate.is_none() && r.fit.plane_residual <= options.max_residual,
     })
 }

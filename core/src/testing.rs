@@ -278,3 +278,40 @@ pub fn random_f32_blob_into<'o>(
     let n = write_blob(ModelKind::F32, &payload, out)?;
     Ok(&out[..n])
 }
+
+/// Writes `a` as two words, the free axis then the turn, each `none` or its
+/// f32 fields as hex bits joined by `:` (axis: direction, point, stiffness;
+/// turn: the motion's quaternion and translation, degrees, relative plane
+/// residual), so the harness compares device and host bit for bit.
+pub fn describe_ambiguity(
+    a: &crate::ambiguity::Ambiguity,
+    out: &mut impl core::fmt::Write,
+) -> core::fmt::Result {
+    fn words(out: &mut impl core::fmt::Write, values: &[f32]) -> core::fmt::Result {
+        for (i, v) in values.iter().enumerate() {
+            let sep = if i == 0 { "" } else { ":" };
+            write!(out, "{sep}{:08x}", v.to_bits())?;
+        }
+        Ok(())
+    }
+    match a.axis {
+        Some(x) => {
+            let [d0, d1, d2] = x.direction;
+            let [p0, p1, p2] = x.point;
+            words(out, &[d0, d1, d2, p0, p1, p2, x.stiffness])?;
+        }
+        None => write!(out, "none")?,
+    }
+    write!(out, " ")?;
+    match a.turn {
+        Some(t) => {
+            let [w, x, y, z] = t.motion.rotation;
+            let [tx, ty, tz] = t.motion.translation;
+            words(
+                out,
+                &[w, x, y, z, tx, ty, tz, t.degrees, t.relative_plane_residual],
+            )
+        }
+        None => write!(out, "none"),
+    }
+}

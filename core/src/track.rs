@@ -120,15 +120,17 @@ pub(crate) fn step(
         fit,
         hypothesis: 0,
         icp_iterations,
+        rival: None,
     };
     // A previous pose far out of the frame's reach can refine to a
     // non-finite one: that is a lost track, not an error.
     let held = registration::conclude(
         frame,
+        template,
+        &checked,
         &refined,
         0,
         PassCounts::default(),
-        checked.degenerate,
         options,
     );
     if let Ok(held) = held

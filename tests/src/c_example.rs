@@ -23,7 +23,7 @@ use crate::qemu;
 const REQUIRED: [&str; 4] = ["reg default", "reg network", "pose iterated", "reg nan"];
 
 /// Names of the values of an `@ reg` line after its status.
-const REG_FIELDS: [&str; 20] = [
+const REG_FIELDS: [&str; 38] = [
     "rotation w",
     "rotation x",
     "rotation y",
@@ -44,6 +44,24 @@ const REG_FIELDS: [&str; 20] = [
     "out_of_range",
     "degenerate",
     "reliable",
+    "has_free_axis",
+    "free_axis x",
+    "free_axis y",
+    "free_axis z",
+    "free_axis_point x",
+    "free_axis_point y",
+    "free_axis_point z",
+    "free_axis_stiffness",
+    "has_turn",
+    "turn_rotation w",
+    "turn_rotation x",
+    "turn_rotation y",
+    "turn_rotation z",
+    "turn_translation x",
+    "turn_translation y",
+    "turn_translation z",
+    "turn_degrees",
+    "turn_relative_plane_residual",
 ];
 
 fn hex(values: &[f32]) -> String {
@@ -55,29 +73,43 @@ fn hex(values: &[f32]) -> String {
 
 /// The `@ reg` line the example prints for this result.
 fn reg_line(label: &str, result: Result<PcrnetRegistration, PcrnetStatus>) -> String {
-    match result {
-        Err(s) => format!("@ reg {label} {}", s as i32),
-        Ok(r) => format!(
-            "@ reg {label} 0{}{}{} {} {} {} {} {} {} {}",
-            hex(&r.rotation),
-            hex(&r.translation),
-            hex(&[
-                r.residual,
-                r.relative_residual,
-                r.plane_residual,
-                r.relative_plane_residual,
-                r.fitness,
-                r.inlier_rmse,
-            ]),
-            r.hypothesis,
-            r.passes,
-            r.icp_iterations,
-            r.saturated,
-            r.out_of_range,
-            r.degenerate,
-            u8::from(r.reliable)
-        ),
+    let r = match result {
+        Err(s) => return format!("@ reg {label} {}", s as i32),
+        Ok(r) => r,
+    };
+    let mut line = format!(
+        "@ reg {label} 0{}{}{}",
+        hex(&r.rotation),
+        hex(&r.translation),
+        hex(&[
+            r.residual,
+            r.relative_residual,
+            r.plane_residual,
+            r.relative_plane_residual,
+            r.fitness,
+            r.inlier_rmse,
+        ])
+    );
+    for count in [
+        r.hypothesis,
+        r.passes,
+        r.icp_iterations,
+        r.saturated,
+        r.out_of_range,
+        r.degenerate,
+        u32::from(r.reliable),
+        u32::from(r.has_free_axis),
+    ] {
+        line += &format!(" {count}");
     }
+    line += &hex(&r.free_axis);
+    line += &hex(&r.free_axis_point);
+    line += &hex(&[r.free_axis_stiffness]);
+    line += &format!(" {}", u8::from(r.has_turn));
+    line += &hex(&r.turn_rotation);
+    line += &hex(&r.turn_translation);
+    line += &hex(&[r.turn_degrees, r.turn_relative_plane_residual]);
+    line
 }
 
 /// What the host computes for the call an `@` line reports, as that line.

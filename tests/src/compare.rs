@@ -105,7 +105,8 @@ fn hex_bits(s: &str) -> Option<u32> {
 }
 
 /// `instructions stack qw qx qy qz tx ty tz residual relative fitness rmse
-/// hypothesis passes icp_iterations saturated out_of_range degenerate reliable`.
+/// hypothesis passes icp_iterations saturated out_of_range degenerate reliable
+/// axis turn`.
 pub fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
     let [
         instructions,
@@ -130,6 +131,8 @@ pub fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
         out_of_range,
         degenerate,
         reliable,
+        axis,
+        turn,
     ] = rest
     else {
         return None;
@@ -154,6 +157,7 @@ pub fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
             out_of_range: out_of_range.parse().ok()?,
             degenerate: degenerate.to_string(),
             reliable: reliable.parse().ok()?,
+            ambiguity: format!("{axis} {turn}"),
         }),
         instructions: instructions.parse().ok()?,
         stack: stack.parse().ok()?,
@@ -335,7 +339,8 @@ pub fn registration_difference(
             .or_else(|| int_difference("saturated", h.saturated, d.saturated))
             .or_else(|| int_difference("out_of_range", h.out_of_range, d.out_of_range))
             .or_else(|| int_difference("degenerate", &h.degenerate, &d.degenerate))
-            .or_else(|| int_difference("reliable", h.reliable, d.reliable)),
+            .or_else(|| int_difference("reliable", h.reliable, d.reliable))
+            .or_else(|| int_difference("ambiguity", &h.ambiguity, &d.ambiguity)),
         (h, Some(d)) if h == d => None,
         (h, Some(d)) => Some(format!("host {h:?} device {d:?}")),
     }
@@ -398,7 +403,7 @@ mod tests {
         let out = "calibration 2000000 2000000\nstatic_ram 65600\n\
                    case 0 ok 100 250 512 feature 7f80ff00 head 1 -2 3 4 5 6 7 pose 3f800000 0 0 0 0 0 0\n\
                    case 0 iter ok 3 3f800000 0 0 0 0 0 1\n\
-                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 1 1 7 12 2 none true\n\
+                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 1 1 7 12 2 none true none none\n\
                    case 1 error false EmptyCloud\ncase 1 iter error EmptyCloud\n\
                    case 1 reg 0 error 20 100 InvalidOption { what: \"hypotheses must be at least 1\" }\n\
                    case 1 reg 1 error 20 100 EmptyCloud\ndone\n";
@@ -453,6 +458,7 @@ mod tests {
             out_of_range: 2,
             degenerate: "none".into(),
             reliable: true,
+            ambiguity: "none none".into(),
         };
         assert_eq!(
             registration_difference(&Ok(host.clone()), Some(&reg.outcome)),

@@ -68,6 +68,8 @@ pub struct RegistrationBits {
     pub degenerate: String,
     /// Whether the pose is reliable.
     pub reliable: bool,
+    /// The ambiguity as two words ([`pcrnet_core::testing::describe_ambiguity`]).
+    pub ambiguity: String,
 }
 
 impl From<&Registration> for RegistrationBits {
@@ -89,6 +91,12 @@ impl From<&Registration> for RegistrationBits {
                 .degenerate
                 .map_or_else(|| "none".to_string(), |d| format!("{d:?}")),
             reliable: r.reliable,
+            ambiguity: {
+                let mut words = String::new();
+                // Writing into a String cannot fail.
+                let _ = pcrnet_core::testing::describe_ambiguity(&r.ambiguity, &mut words);
+                words
+            },
         }
     }
 }

@@ -60,6 +60,15 @@ pub fn sentinel() -> PcrnetRegistration {
         saturated: 7,
         out_of_range: 7,
         degenerate: 7,
+        free_axis: [7.0; 3],
+        free_axis_point: [7.0; 3],
+        free_axis_stiffness: 7.0,
+        turn_rotation: [7.0; 4],
+        turn_translation: [7.0; 3],
+        turn_degrees: 7.0,
+        turn_relative_plane_residual: 7.0,
         reliable: true,
+        has_free_axis: true,
+        has_turn: true,
     }
 }

@@ -13,7 +13,10 @@
 use core::num::NonZeroUsize;
 
 mod resolve;
-pub use resolve::{FLIP_MARGIN, Resolved, resolve, resolve_starts};
+pub(crate) use resolve::apart;
+pub use resolve::{
+    FLIP_MARGIN, RIVAL_MIN_TURN_COS, RIVAL_SCREEN_RATIO, Resolved, Rival, resolve, resolve_starts,
+};
 
 use crate::eigen;
 use crate::format::Frame;
@@ -134,7 +137,7 @@ pub struct Fit {
 }
 
 /// `max_distance` (model units) as a squared int16-step limit for the search.
-fn limit(template: &Template<'_>, max_distance: f32) -> u64 {
+pub(crate) fn limit(template: &Template<'_>, max_distance: f32) -> u64 {
     let steps = max_distance / template.step();
     let sq = steps * steps;
     // Non-finite or huge limits search everything.
@@ -284,19 +287,42 @@ fn icp_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64)
     })
 }
 
-/// One point-to-plane ICP update (model frame): the small motion
-/// `(omega, t)` minimising `sum (n . (R p + t - q))^2` linearised at the
-/// current pose (`R ~ I + [omega]x`; Low, *Linear least-squares
-/// optimization for point-to-plane ICP*, 2004), solved as 6x6 normal
-/// equations accumulated in f32 in point order and applied as the exact
-/// rotation of angle `|omega|`. `None` with fewer than 6 pairs or a
-/// singular system.
-fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64) -> Option<Pose> {
+/// The point-to-plane normal equations at a pose (model units): for each
+/// used source point `p` (moved by the pose, on the grid) with a nearest
+/// template point `q` within the search limit, the row
+/// `j = [p x n, n]` of the linearised motion `(omega, t)` and the offset
+/// `r = n . (q - p)`, summed in point order as `a = sum j j^T` (upper
+/// triangle) and `b = sum j r`.
+pub(crate) struct PlaneSystem {
+    /// `sum j j^T`, upper triangle (rows: omega x y z, then t x y z).
+    pub a: [[f32; 6]; 6],
+    /// `sum j r`.
+    pub b: [f32; 6],
+    /// Pairs summed.
+    pub pairs: u32,
+    /// The sum of the paired source points (model units, in point order).
+    pub sum: [f32; 3],
+    /// The sum of their squared norms.
+    pub sum_squares: f32,
+}
+
+/// Accumulates the [`PlaneSystem`] of `pose` on the subset, pairing points
+/// within the squared step limit `lim`.
+pub(crate) fn plane_system(
+    template: &Template<'_>,
+    subset: &Subset<'_>,
+    pose: &Pose,
+    lim: u64,
+) -> PlaneSystem {
     let map = PointMap::new(subset.frame, pose);
     let step = template.step();
-    let mut a = [[0f32; 6]; 6];
-    let mut b = [0f32; 6];
-    let mut n_pairs = 0u32;
+    let mut sys = PlaneSystem {
+        a: [[0f32; 6]; 6],
+        b: [0f32; 6],
+        pairs: 0,
+        sum: [0f32; 3],
+        sum_squares: 0.0,
+    };
     for p in subset.points() {
         let pq = template.quantize(map.apply(*p));
         let Some(nb) = template.nearest(pq, lim + 1) else {
@@ -315,16 +341,32 @@ fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u6
         ];
         for i in 0..6 {
             for k in i..6 {
-                a[i][k] += j[i] * j[k];
+                sys.a[i][k] += j[i] * j[k];
             }
-            b[i] += j[i] * r;
+            sys.b[i] += j[i] * r;
         }
-        n_pairs += 1;
+        for (s, v) in sys.sum.iter_mut().zip(p) {
+            *s += v;
+        }
+        sys.sum_squares += p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
+        sys.pairs += 1;
     }
-    if n_pairs < 6 {
+    sys
+}
+
+/// One point-to-plane ICP update (model frame): the small motion
+/// `(omega, t)` minimising `sum (n . (R p + t - q))^2` linearised at the
+/// current pose (`R ~ I + [omega]x`; Low, *Linear least-squares
+/// optimization for point-to-plane ICP*, 2004), solved as 6x6 normal
+/// equations ([`plane_system`], accumulated in f32 in point order) and
+/// applied as the exact rotation of angle `|omega|`. `None` with fewer
+/// than 6 pairs or a singular system.
+fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64) -> Option<Pose> {
+    let sys = plane_system(template, subset, pose, lim);
+    if sys.pairs < 6 {
         return None;
     }
-    let x = eigen::solve_damped(&a, &b, 1e-6)?;
+    let x = eigen::solve_damped(&sys.a, &sys.b, 1e-6)?;
     let omega = [x[0], x[1], x[2]];
     let angle = libm::sqrtf(omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]);
     let rotation = if angle > 0.0 {

@@ -19,6 +19,50 @@ pub struct Resolved {
     pub hypothesis: usize,
     /// ICP iterations run from that start.
     pub icp_iterations: usize,
+    /// The best start that ended elsewhere, refined as far as the chosen
+    /// one: what [`crate::ambiguity`] compares the chosen pose with.
+    pub rival: Option<Rival>,
+}
+
+/// A refined start other than the chosen one (see [`Resolved::rival`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rival {
+    /// Its pose (model frame).
+    pub pose: Pose,
+    /// Its fit, on the same points as the chosen pose's.
+    pub fit: Fit,
+    /// Which start it came from (numbered as [`Resolved::hypothesis`]).
+    pub hypothesis: usize,
+}
+
+impl Resolved {
+    /// This result as the rival of another.
+    fn as_rival(&self) -> Rival {
+        Rival {
+            pose: self.pose,
+            fit: self.fit,
+            hypothesis: self.hypothesis,
+        }
+    }
+}
+
+/// [`resolve_starts`] refines a second start as well when its screened
+/// residual is at most this many times the best's and its pose lies at
+/// least [`RIVAL_MIN_TURN_COS`] away: a start that might fit as well.
+pub const RIVAL_SCREEN_RATIO: f32 = 1.5;
+
+/// A screened start is a rival only if its rotation differs from the best's
+/// by at least 10 degrees: `|q_best . q_rival|` at most `cos(10 deg / 2)`.
+/// Nearer starts fell into the same fit.
+pub const RIVAL_MIN_TURN_COS: f32 = 0.996_194_7;
+
+/// Screened starts [`Search::best_of`] keeps to find a rival among.
+const KEPT: usize = 4;
+
+/// Whether two rotations differ by more than the rival's least turn.
+pub(crate) fn apart(a: &Pose, b: &Pose) -> bool {
+    let dot: f32 = a.rotation.iter().zip(b.rotation).map(|(x, y)| x * y).sum();
+    libm::fabsf(dot) <= RIVAL_MIN_TURN_COS
 }
 
 /// A turned hypothesis replaces the network's own pose only when its
@@ -84,6 +128,7 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
                 fit,
                 hypothesis,
                 icp_iterations,
+                rival: None,
             })
         } else {
             Err(Error::NonFiniteResult)
@@ -117,18 +162,65 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
 
     /// Screens every `(hypothesis, start)` on the thinned points; the one
     /// with the lowest residual (the first on a tie) finishes.
-    fn best_of(&self, starts: impl IntoIterator<Item = (usize, Pose)>) -> Result<Option<Resolved>> {
+    fn best_of(&self, starts: impl IntoIterator<Item = (usize, Pose)>) -> Result<Option<Screened>> {
         let thin = self.subset.thinned();
         let all = thin.stride == self.subset.stride;
-        let mut best: Option<Resolved> = None;
+        // The lowest residuals so far, ascending (ties keep the earlier
+        // start), at most one per fit: a start that ends near a kept one
+        // (not [`apart`]) replaces it only if lower.
+        let mut kept: [Option<Resolved>; KEPT] = [None; KEPT];
         for (hypothesis, from) in starts {
             let r = self.refine(from, hypothesis, &self.first, &thin)?;
-            if best.is_none_or(|b| r.fit.residual < b.fit.residual) {
-                best = Some(r);
+            let same = kept
+                .iter()
+                .position(|k| k.is_some_and(|k| !apart(&k.pose, &r.pose)));
+            let slot = match same {
+                Some(i) if kept[i].is_some_and(|k| r.fit.residual < k.fit.residual) => i,
+                Some(_) => continue,
+                None => KEPT - 1,
+            };
+            if kept[slot].is_some_and(|k| r.fit.residual >= k.fit.residual) {
+                continue;
+            }
+            kept[slot] = Some(r);
+            // Back into ascending order: move it up past higher residuals.
+            let mut i = slot;
+            while i > 0
+                && kept[i - 1]
+                    .is_none_or(|k| kept[i].is_some_and(|r| r.fit.residual < k.fit.residual))
+            {
+                kept.swap(i - 1, i);
+                i -= 1;
             }
         }
-        best.map(|b| self.finish(b, all)).transpose()
+        let [best, rest @ ..] = kept;
+        let Some(best) = best else {
+            return Ok(None);
+        };
+        let rival = rest
+            .into_iter()
+            .flatten()
+            .find(|r| apart(&best.pose, &r.pose));
+        Ok(Some(Screened {
+            screened_residual: best.fit.residual,
+            best: self.finish(best, all)?,
+            rival,
+            all,
+        }))
     }
+}
+
+/// What [`Search::best_of`] found.
+struct Screened {
+    /// The best start, finished.
+    best: Resolved,
+    /// Its residual when screened.
+    screened_residual: f32,
+    /// The best screened start [`apart`] from it (among the [`KEPT`]
+    /// lowest distinct fits), not finished.
+    rival: Option<Resolved>,
+    /// Whether screening used every point.
+    all: bool,
 }
 
 /// Flip resolution. Starts are `start` (the network's pose) and `start`
@@ -140,7 +232,8 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
 /// again (a turned start whose screening converged is only scored again).
 /// The best turned pose wins only if its residual is below
 /// [`FLIP_MARGIN`] times the network's: the network's answer stands unless
-/// the template's points clearly favour a turn. With
+/// the template's points clearly favour a turn; the finalist that loses is
+/// the result's [`Resolved::rival`]. With
 /// `screen >= icp.iterations` every start gets the full ICP.
 ///
 /// Screening on half the points: measured with the shipped model on the
@@ -176,17 +269,29 @@ pub fn resolve(
             };
             (k + 1, start.then(&turn))
         });
-    match search.best_of(turned)? {
-        Some(t) if t.fit.residual < FLIP_MARGIN * network.fit.residual => Ok(t),
-        _ => Ok(network),
-    }
+    Ok(match search.best_of(turned)? {
+        Some(Screened { best: t, .. }) if t.fit.residual < FLIP_MARGIN * network.fit.residual => {
+            Resolved {
+                rival: Some(network.as_rival()),
+                ..t
+            }
+        }
+        Some(Screened { best: t, .. }) => Resolved {
+            rival: Some(t.as_rival()),
+            ..network
+        },
+        None => network,
+    })
 }
 
 /// The best of `starts` (model frame, numbered by their hypothesis): each
 /// gets `screen` ICP iterations on half the used points
 /// ([`Subset::thinned`]), the one with the lowest residual continues on
-/// every used point up to `icp.iterations` in all. An empty list is
-/// [`Error::InvalidOption`].
+/// every used point up to `icp.iterations` in all. The best start that
+/// ended elsewhere ([`RIVAL_MIN_TURN_COS`]) continues too when its screened
+/// residual is within [`RIVAL_SCREEN_RATIO`] of the best's: it is the
+/// result's [`Resolved::rival`] (at most one more finish, so the work stays
+/// bounded). An empty list is [`Error::InvalidOption`].
 pub fn resolve_starts(
     template: &Template<'_>,
     subset: &Subset<'_>,
@@ -196,7 +301,17 @@ pub fn resolve_starts(
     max_distance: f32,
 ) -> Result<Resolved> {
     let search = Search::new(template, subset, screen, icp_settings, max_distance);
-    search.best_of(starts)?.ok_or(Error::InvalidOption {
+    let found = search.best_of(starts)?.ok_or(Error::InvalidOption {
         what: "a sweep needs at least one start",
+    })?;
+    let rival = match found.rival {
+        Some(r) if r.fit.residual <= RIVAL_SCREEN_RATIO * found.screened_residual => {
+            Some(search.finish(r, found.all)?.as_rival())
+        }
+        _ => None,
+    };
+    Ok(Resolved {
+        rival,
+        ..found.best
     })
 }

@@ -411,7 +411,8 @@ pub fn describe(
             )?,
             None => write!(out, " v none")?,
         }
-        write!(out, " {}", t.reliable)?;
+        write!(out, " {} ", t.reliable)?;
+        super::describe_ambiguity(&r.ambiguity, out)?;
     }
     match located.best {
         Some(b) => write!(out, " best {}", b.cluster),

@@ -133,7 +133,7 @@ macro_rules! say {
 
 /// Appends a registration's fields: the pose, the six distances (hex bits),
 /// `hypothesis passes icp_iterations saturated out_of_range`, the
-/// degeneracy and the verdict.
+/// degeneracy, the verdict and the ambiguity (two words).
 fn write_registration(line: &mut String<LINE>, r: &Registration) {
     for v in r.pose.rotation.iter().chain(&r.pose.translation) {
         let _ = write!(line, " {:08x}", v.to_bits());
@@ -157,7 +157,8 @@ fn write_registration(line: &mut String<LINE>, r: &Registration) {
         None => write!(line, "none"),
         Some(d) => write!(line, "{d:?}"),
     };
-    let _ = write!(line, " {}", r.reliable);
+    let _ = write!(line, " {} ", r.reliable);
+    let _ = pcrnet_core::testing::describe_ambiguity(&r.ambiguity, line);
 }
 
 /// Working memory of every call; only `main` names it.

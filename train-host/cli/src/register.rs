@@ -255,6 +255,9 @@ pub(crate) fn register(
                 c.out_of_range
             ));
         }
+        for line in crate::ambiguity::lines(&c.ambiguity, origin) {
+            say(line);
+        }
         say(if c.reliable {
             "trust: RELIABLE (relative plane residual within the threshold)".into()
         } else {
@@ -315,6 +318,7 @@ fn report_json(method: &str, out: &methods::Outcome, pose: &FilePose) -> serde_j
         v["saturated"] = c.saturated.into();
         v["out_of_range"] = c.out_of_range.into();
         v["reliable"] = c.reliable.into();
+        v["ambiguity"] = crate::ambiguity::json(&c.ambiguity, pose.origin);
     }
     v
 }
