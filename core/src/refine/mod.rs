@@ -287,12 +287,25 @@ fn icp_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64)
     })
 }
 
+/// Where [`plane_system`] linearises each pair's rotation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum LinearisedAt {
+    /// At the moved source point `p` (ICP's update).
+    Source,
+    /// At its nearest template point `q`: at a converged pose `p` lies
+    /// near `q`'s tangent plane, and `q x n` carries neither the source's
+    /// noise nor the gap between the two samplings of the surface, so a
+    /// rotation the template's shape cannot observe shows as a zero (the
+    /// ambiguity check).
+    Template,
+}
+
 /// The point-to-plane normal equations at a pose (model units): for each
 /// used source point `p` (moved by the pose, on the grid) with a nearest
 /// template point `q` within the search limit, the row
-/// `j = [p x n, n]` of the linearised motion `(omega, t)` and the offset
-/// `r = n . (q - p)`, summed in point order as `a = sum j j^T` (upper
-/// triangle) and `b = sum j r`.
+/// `j = [x x n, n]` of the linearised motion `(omega, t)` (`x` is `p` or
+/// `q`, see [`LinearisedAt`]) and the offset `r = n . (q - p)`, summed in
+/// point order as `a = sum j j^T` (upper triangle) and `b = sum j r`.
 pub(crate) struct PlaneSystem {
     /// `sum j j^T`, upper triangle (rows: omega x y z, then t x y z).
     pub a: [[f32; 6]; 6],
@@ -300,10 +313,33 @@ pub(crate) struct PlaneSystem {
     pub b: [f32; 6],
     /// Pairs summed.
     pub pairs: u32,
-    /// The sum of the paired source points (model units, in point order).
+    /// The sum of the points `x` the rotation was linearised at (model
+    /// units, in point order).
     pub sum: [f32; 3],
     /// The sum of their squared norms.
     pub sum_squares: f32,
+}
+
+/// Calls `f(p, i, n, offset)` for every used source point `p` (moved by
+/// `pose`, on the grid) whose nearest template point `i` lies within the
+/// squared step limit `lim`, in point order: `n` is the unit normal at `i`
+/// and `offset` is `n . (point_i - p)` in steps.
+pub(crate) fn for_each_plane_pair(
+    template: &Template<'_>,
+    subset: &Subset<'_>,
+    pose: &Pose,
+    lim: u64,
+    mut f: impl FnMut([i16; 3], usize, [f32; 3], f32),
+) {
+    let map = PointMap::new(subset.frame, pose);
+    for p in subset.points() {
+        let pq = template.quantize(map.apply(*p));
+        let Some(nb) = template.nearest(pq, lim + 1) else {
+            continue;
+        };
+        let (offset, n) = template.plane_offset(nb.index, pq);
+        f(pq, nb.index, n, offset);
+    }
 }
 
 /// Accumulates the [`PlaneSystem`] of `pose` on the subset, pairing points
@@ -313,8 +349,8 @@ pub(crate) fn plane_system(
     subset: &Subset<'_>,
     pose: &Pose,
     lim: u64,
+    at: LinearisedAt,
 ) -> PlaneSystem {
-    let map = PointMap::new(subset.frame, pose);
     let step = template.step();
     let mut sys = PlaneSystem {
         a: [[0f32; 6]; 6],
@@ -323,13 +359,12 @@ pub(crate) fn plane_system(
         sum: [0f32; 3],
         sum_squares: 0.0,
     };
-    for p in subset.points() {
-        let pq = template.quantize(map.apply(*p));
-        let Some(nb) = template.nearest(pq, lim + 1) else {
-            continue;
-        };
-        let (offset, n) = template.plane_offset(nb.index, pq);
-        let p = pq.map(|v| v as f32 * step);
+    for_each_plane_pair(template, subset, pose, lim, |pq, index, n, offset| {
+        let p = match at {
+            LinearisedAt::Source => pq,
+            LinearisedAt::Template => template.point(index),
+        }
+        .map(|v| v as f32 * step);
         let r = offset * step;
         let j = [
             p[1] * n[2] - p[2] * n[1],
@@ -350,7 +385,7 @@ pub(crate) fn plane_system(
         }
         sys.sum_squares += p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
         sys.pairs += 1;
-    }
+    });
     sys
 }
 
@@ -362,7 +397,7 @@ pub(crate) fn plane_system(
 /// applied as the exact rotation of angle `|omega|`. `None` with fewer
 /// than 6 pairs or a singular system.
 fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64) -> Option<Pose> {
-    let sys = plane_system(template, subset, pose, lim);
+    let sys = plane_system(template, subset, pose, lim, LinearisedAt::Source);
     if sys.pairs < 6 {
         return None;
     }

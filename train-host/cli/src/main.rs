@@ -103,7 +103,7 @@ enum Command {
     /// rigid transform (Euler U[-45, 45] deg, translation U[-1, 1]) as
     /// little-endian f32 x y z (the firmware example's input) and as XYZ.
     Shape {
-        /// box, torus or ell.
+        /// box, torus, ell (no symmetry), cylinder or cone (free about their axis).
         #[arg(long, default_value = "ell")]
         kind: String,
         /// Number of points.
@@ -293,7 +293,9 @@ fn run(command: Command) -> anyhow::Result<()> {
                 "box" => Shape::Box,
                 "torus" => Shape::Torus,
                 "ell" => Shape::Ell,
-                other => anyhow::bail!("unknown shape {other} (box, torus, ell)"),
+                "cylinder" => Shape::Cylinder,
+                "cone" => Shape::Cone,
+                other => anyhow::bail!("unknown shape {other} (box, torus, ell, cylinder, cone)"),
             };
             let cloud = sample(shape, points, seed);
             write_cloud(&out, &cloud)?;

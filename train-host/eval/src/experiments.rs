@@ -13,6 +13,7 @@
 //! | `resampled` | the paper's protocol beside sources sampled apart from the template, clean, noisy and single-view, generic and object-specific |
 //! | `tracking` | the device pipeline following moving objects through noisy single-view sensor streams, frame by frame |
 //! | `scene` | the device pipeline finding a known object standing in any yaw in generated cluttered depth frames, and frames without it |
+//! | `ambiguity` | whether the device pipeline says when a pose is one of several that fit (shapes with and without a symmetry), and the error up to symmetry |
 //!
 //! This module is their framework; the paper's six are in
 //! [`super::paper`], and `trust`, `resampled` and `heldout` have their own
@@ -36,7 +37,7 @@ use anyhow::Context as _;
 use crate::report::{Context, Report};
 
 /// The experiment names, in order.
-pub const EXPERIMENTS: [&str; 11] = [
+pub const EXPERIMENTS: [&str; 12] = [
     "generalisation",
     "noise",
     "partial",
@@ -48,6 +49,7 @@ pub const EXPERIMENTS: [&str; 11] = [
     "heldout",
     "tracking",
     "scene",
+    "ambiguity",
 ];
 
 /// Runs experiment `name` (one of [`EXPERIMENTS`]).
@@ -64,6 +66,7 @@ pub fn run_experiment(ctx: &Context, name: &str) -> anyhow::Result<Report> {
         "heldout" => crate::heldout::heldout(ctx),
         "tracking" => crate::tracking::tracking(ctx),
         "scene" => crate::scene::scene(ctx),
+        "ambiguity" => crate::ambiguity::ambiguity(ctx),
         other => anyhow::bail!(
             "unknown experiment {other} (one of {})",
             EXPERIMENTS.join(", ")

@@ -11,6 +11,7 @@
 //! experiments (`paper`, `trust`, `resampled`, `heldout`, `recipes`), and
 //! `experiments` (the dispatch) above them all.
 
+pub mod ambiguity;
 pub mod cli;
 pub mod experiments;
 pub mod heldout;
@@ -26,6 +27,7 @@ pub mod register;
 pub mod report;
 pub mod resampled;
 pub mod scene;
+pub mod symmetry;
 pub mod tracking;
 pub mod trust;
 
@@ -82,6 +84,18 @@ pub struct PairScore {
     /// The device pipeline's winning hypothesis.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hypothesis: Option<usize>,
+    /// The error up to the shape's symmetry: ADD-S ([`symmetry::add_s`])
+    /// as a share of the template's diameter ([`symmetry::diameter`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub symmetric_error: Option<f64>,
+    /// The device pipeline reported the pose ambiguous (a free axis or a
+    /// turn, [`pcrnet_core::ambiguity`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambiguous: Option<bool>,
+    /// The reported ambiguity explains the pose's error
+    /// ([`symmetry::explains`]); `None` when none was reported.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub explained: Option<bool>,
 }
 
 /// A method's scores on a set of pairs.
@@ -168,6 +182,14 @@ pub fn score(
                 plane_residual: check.map(|c| c.plane_residual as f64),
                 reliable: check.map(|c| c.reliable),
                 hypothesis: check.map(|c| c.hypothesis),
+                symmetric_error: Some(
+                    symmetry::add_s(&pose, &symmetry::truth(&p.r_gt, &p.t_gt), &p.template)
+                        / symmetry::diameter(&p.template),
+                ),
+                ambiguous: check.map(|c| c.ambiguity.is_ambiguous()),
+                explained: check
+                    .filter(|c| c.ambiguity.is_ambiguous())
+                    .map(|c| symmetry::explains(&c.ambiguity, &pose, &p.r_gt)),
             },
             precision,
             failure,

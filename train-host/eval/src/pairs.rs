@@ -46,6 +46,12 @@ pub enum Shapes {
         /// How many shapes.
         count: usize,
     },
+    /// Generated shapes with a symmetry ([`Dataset::symmetric`]: cylinders,
+    /// cones, boxes); needs no files.
+    Symmetric {
+        /// How many shapes.
+        count: usize,
+    },
     /// One object of one's own ([`Dataset::object`]): every pair is a pose
     /// of it.
     Object {
@@ -180,6 +186,7 @@ impl PairSetSpec {
                 self.seed,
             )?,
             Shapes::Generated { count } => Dataset::generated(*count, self.points, self.seed),
+            Shapes::Symmetric { count } => Dataset::symmetric(*count, self.points, self.seed),
             Shapes::Object { path } => {
                 Dataset::object(path, self.points, self.sampling, self.seed)?
             }

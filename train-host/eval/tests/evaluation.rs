@@ -179,7 +179,7 @@ fn results_markdown_shows_tables_plots_and_what_is_missing() {
     assert!(md.contains("noise-auc.png"));
     assert!(md.contains("commit `abc`"));
     assert!(md.contains(
-        "Not run yet: generalisation, partial, sparse, speed, iterations, trust, resampled, heldout, tracking, scene."
+        "Not run yet: generalisation, partial, sparse, speed, iterations, trust, resampled, heldout, tracking, scene, ambiguity."
     ));
     std::fs::remove_dir_all(dir).ok();
 }

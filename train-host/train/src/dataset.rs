@@ -228,15 +228,41 @@ impl Dataset {
             (Shape::Torus, "torus"),
             (Shape::Ell, "ell"),
         ];
+        Self::generated_of(&kinds, true, count, points, seed)
+    }
+
+    /// `count` generated shapes with a symmetry (cylinder and cone, free
+    /// about their axis; the box, whose half turns about its axes fit as
+    /// well), in turn, not stretched (a stretch would break the cylinder's
+    /// and the cone's symmetry), preprocessed as loaded data.
+    pub fn symmetric(count: usize, points: usize, seed: u64) -> Self {
+        let kinds = [
+            (Shape::Cylinder, "cylinder"),
+            (Shape::Cone, "cone"),
+            (Shape::Box, "box"),
+        ];
+        Self::generated_of(&kinds, false, count, points, seed)
+    }
+
+    /// `count` shapes of `kinds` in turn, each with its own sampling and,
+    /// with `stretch`, a random per-axis stretch in `[0.6, 1]`.
+    fn generated_of(
+        kinds: &[(Shape, &str)],
+        stretch: bool,
+        count: usize,
+        points: usize,
+        seed: u64,
+    ) -> Self {
         let mut clouds = Vec::with_capacity(count);
         let mut rest = Vec::with_capacity(count);
         let mut labels = Vec::with_capacity(count);
         let mut names = Vec::with_capacity(count);
         for i in 0..count {
-            let (kind, name) = kinds[i % kinds.len()];
+            let (kind, name) = kinds[i % kinds.len().max(1)];
             let s = mix_seed(seed, 0x6E7, i as u64);
             let mut rng = ChaCha8Rng::seed_from_u64(s);
-            let stretch: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.6..=1.0));
+            let drawn: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.6..=1.0));
+            let stretch = if stretch { drawn } else { [1.0; 3] };
             let stretched = |seed| -> Vec<[f32; 3]> {
                 shapes::sample(kind, points, seed)
                     .into_iter()

@@ -14,6 +14,10 @@ pub enum Shape {
     Torus,
     /// An "L" made of two boxes (no symmetry, good for registration).
     Ell,
+    /// Closed cylinder about z, radius 0.25, height 1: free about its axis.
+    Cylinder,
+    /// Closed cone about z, base radius 0.4, height 1: free about its axis.
+    Cone,
 }
 
 /// `n` points sampled on a shape, centred and scaled into the unit box.
@@ -37,10 +41,42 @@ pub fn sample(shape: Shape, n: usize, seed: u64) -> Vec<[f32; 3]> {
                     box_surface(&mut rng, [0.25, 0.7, 0.25], [-0.375, 0.475, 0.0])
                 }
             }
+            Shape::Cylinder => revolution_surface(&mut rng, 0.25, 0.25),
+            Shape::Cone => revolution_surface(&mut rng, 0.4, 0.0),
         })
         .collect();
     normalise(&mut pts);
     pts
+}
+
+/// A point on the closed surface of revolution about z between the base
+/// circle of radius `bottom` (z = -0.5) and the top circle of radius `top`
+/// (z = 0.5; 0 for a cone's apex), side and caps chosen by area.
+fn revolution_surface(rng: &mut ChaCha8Rng, bottom: f32, top: f32) -> [f32; 3] {
+    let slant = ((bottom - top).powi(2) + 1.0).sqrt();
+    let side = std::f32::consts::PI * (bottom + top) * slant;
+    let (base, lid) = (
+        std::f32::consts::PI * bottom * bottom,
+        std::f32::consts::PI * top * top,
+    );
+    let a = rng.random_range(0.0..std::f32::consts::TAU);
+    let pick = rng.random_range(0.0..side + base + lid);
+    let (r, z) = if pick < side {
+        // Uniform in area along the slant: the radius grows linearly.
+        let u: f32 = rng.random_range(0.0..1.0);
+        let (r0, r1) = (bottom, top);
+        let t = if (r1 - r0).abs() < 1e-6 {
+            u
+        } else {
+            ((r0 * r0 + u * (r1 * r1 - r0 * r0)).sqrt() - r0) / (r1 - r0)
+        };
+        (r0 + t * (r1 - r0), t - 0.5)
+    } else if pick < side + base {
+        (bottom * rng.random_range(0.0f32..1.0).sqrt(), -0.5)
+    } else {
+        (top * rng.random_range(0.0f32..1.0).sqrt(), 0.5)
+    };
+    [r * a.cos(), r * a.sin(), z]
 }
 
 fn box_surface(rng: &mut ChaCha8Rng, size: [f32; 3], centre: [f32; 3]) -> [f32; 3] {

@@ -153,7 +153,7 @@ fn run(
         let (r, t) = pose_errors(&best.registration.pose, &g.truth);
         rotation_deg = r;
         translation = t / size;
-        adds = add_s(&best.registration.pose, &g.truth, &g.template) / size;
+        adds = crate::symmetry::add_s(&best.registration.pose, &g.truth, &g.template) / size;
     }
     Ok(FrameResult {
         camera: camera.name,
@@ -181,7 +181,7 @@ fn run(
                     passed: false,
                 });
                 (
-                    add_s(&c.registration.pose, &g.truth, &g.template) / size,
+                    crate::symmetry::add_s(&c.registration.pose, &g.truth, &g.template) / size,
                     c.registration.relative_plane_residual,
                     v.supported,
                     v.violations,
@@ -217,29 +217,6 @@ fn pose_errors(est: &pcrnet_core::Pose, truth: &pcrnet_core::Pose) -> (f64, f64)
         .sum::<f64>()
         .sqrt();
     (r, t)
-}
-
-/// ADD-S (Hinterstoisser et al., 2012; BOP's symmetric distance): the
-/// template moved into the camera frame by `est` and by `truth`, the mean
-/// distance from each truth-moved point to the nearest est-moved point.
-/// A turn about a symmetry of the shape costs nothing.
-fn add_s(est: &pcrnet_core::Pose, truth: &pcrnet_core::Pose, template: &[[f32; 3]]) -> f64 {
-    use kiddo::SquaredEuclidean;
-    use kiddo::immutable::float::kdtree::ImmutableKdTree;
-    let (e, t) = (est.inverse(), truth.inverse());
-    let moved: Vec<[f64; 3]> = template
-        .iter()
-        .map(|&p| e.transform_point(p).map(f64::from))
-        .collect();
-    let tree: ImmutableKdTree<f64, u32, 3, 16> = ImmutableKdTree::new_from_slice(&moved);
-    let total: f64 = template
-        .iter()
-        .map(|&p| {
-            let q = t.transform_point(p).map(f64::from);
-            tree.nearest_one::<SquaredEuclidean>(&q).distance.sqrt()
-        })
-        .sum();
-    total / template.len().max(1) as f64
 }
 
 /// One row per camera and method.
