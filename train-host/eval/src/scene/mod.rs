@@ -47,6 +47,9 @@ struct FrameResult {
     translation: f64,
     adds: f64,
     registration_reliable: bool,
+    /// The winner's registration reported an ambiguity, and whether it
+    /// explains the pose's error ([`crate::symmetry::explains`]).
+    ambiguous: Option<bool>,
     verified: Option<bool>,
     clusters: usize,
     candidates: usize,
@@ -166,6 +169,13 @@ fn run(
         translation,
         adds,
         registration_reliable: located.best.is_some_and(|b| b.registration.reliable),
+        ambiguous: located
+            .best
+            .filter(|b| b.registration.ambiguity.is_ambiguous())
+            .map(|b| {
+                let r = &b.registration;
+                crate::symmetry::explains(&r.ambiguity, &r.pose, &g.truth.rotation_matrix())
+            }),
         verified: located.best.and_then(|b| b.verification).map(|v| v.passed),
         clusters: located.segmentation.clusters.kept.len(),
         candidates: located.tried.len(),
@@ -241,10 +251,12 @@ fn table(all: &[FrameResult]) -> Table {
                 .filter(|f| f.found && f.registration_reliable && f.verified == Some(false))
                 .count();
             let reliable = with.iter().filter(|f| f.reliable).count();
-            let wrong = with
+            let wrong: Vec<_> = with
                 .iter()
                 .filter(|f| f.reliable && f.rotation_deg > SUCCESS_DEG)
-                .count();
+                .collect();
+            let wrong_ambiguous = wrong.iter().filter(|f| f.ambiguous.is_some()).count();
+            let wrong_explained = wrong.iter().filter(|f| f.ambiguous == Some(true)).count();
             let good_flagged = with.iter().filter(|f| f.found && !f.reliable).count();
             let absent_reliable = without.iter().filter(|f| f.reliable).count();
             let mean = |v: &[&FrameResult], f: fn(&FrameResult) -> f64| {
@@ -257,7 +269,12 @@ fn table(all: &[FrameResult]) -> Table {
                 share(success, n),
                 share(adds_success, n),
                 share(reliable, n),
-                share(wrong, n),
+                format!(
+                    "{} ({} ambiguous, {} explained)",
+                    share(wrong.len(), n),
+                    wrong_ambiguous,
+                    wrong_explained
+                ),
                 format!(
                     "{} ({} by the check)",
                     share(good_flagged, success.max(1) as f64),
@@ -280,7 +297,7 @@ fn table(all: &[FrameResult]) -> Table {
             "success (5°, 0.05)",
             "ADD-S within 0.05",
             "reliable",
-            "reliable but > 5° off",
+            "reliable but > 5° off (of those reported ambiguous; the report explaining the error)",
             "good poses flagged",
             "absent: reliable",
             "clusters kept",
