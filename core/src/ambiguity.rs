@@ -140,6 +140,28 @@ fn free_axis(
     max_distance: f32,
 ) -> Option<FreeAxis> {
     let lim = refine::limit(template, max_distance);
+    let (u, t, radius) = least_stiff_twist(template, subset, pose, lim)?;
+    let stiffness = displacement_quantile(template, subset, pose, lim, (u, t), radius);
+    if stiffness >= FREE_AXIS_STIFFNESS {
+        return None;
+    }
+    let c = cross(u, t);
+    Some(FreeAxis {
+        direction: u,
+        point: frame.to_user(c),
+        stiffness,
+    })
+}
+
+/// The least stiff unit twist `(u, t)` of the normal equations at `pose`
+/// (see [`free_axis`]) and the RMS distance of the matched template points
+/// from their centroid; `None` with fewer than 6 pairs or no spread.
+fn least_stiff_twist(
+    template: &Template<'_>,
+    subset: &Subset<'_>,
+    pose: &Pose,
+    lim: u64,
+) -> Option<([f32; 3], [f32; 3], f32)> {
     let sys = refine::plane_system(template, subset, pose, lim, LinearisedAt::Template);
     if sys.pairs < 6 {
         return None;
@@ -185,16 +207,7 @@ fn free_axis(
     let (_, vectors) = eigen::symmetric(schur);
     let u = vectors[2];
     let t = [0, 1, 2].map(|k| -(x[k][0] * u[0] + x[k][1] * u[1] + x[k][2] * u[2]));
-    let stiffness = displacement_quantile(template, subset, pose, lim, (u, t), libm::sqrtf(spread));
-    if stiffness >= FREE_AXIS_STIFFNESS {
-        return None;
-    }
-    let c = cross(u, t);
-    Some(FreeAxis {
-        direction: u,
-        point: frame.to_user(c),
-        stiffness,
-    })
+    Some((u, t, libm::sqrtf(spread)))
 }
 
 /// Resolution of the stiffness: the quantile is read off a histogram of
@@ -226,8 +239,9 @@ fn displacement_quantile(
     radius: f32,
 ) -> f32 {
     let step = template.step();
-    let mut bins = [0u32; BINS];
-    let mut total = 0u32;
+    // u16 counters: a subset holds at most `refine::MAX_SUBSET` (65,535) points.
+    let mut bins = [0u16; BINS];
+    let mut total = 0u16;
     refine::for_each_plane_pair(template, subset, pose, lim, |_, index, n, _| {
         let q = template.point(index).map(|v| v as f32 * step);
         let qn = cross(q, n);
@@ -235,8 +249,9 @@ fn displacement_quantile(
             qn[0] * u[0] + qn[1] * u[1] + qn[2] * u[2] + n[0] * t[0] + n[1] * t[1] + n[2] * t[2];
         // `as` saturates (and maps NaN to bin 0); the last bin takes the rest.
         let k = (libm::fabsf(d) / radius / STIFFNESS_BIN) as usize;
-        bins[k.min(BINS - 1)] += 1;
-        total += 1;
+        let bin = &mut bins[k.min(BINS - 1)];
+        *bin = bin.saturating_add(1);
+        total = total.saturating_add(1);
     });
     let need = (u64::from(total) * u64::from(QUANTILE_IN_FIFTHS)).div_ceil(5);
     let mut seen = 0u64;

@@ -103,7 +103,8 @@ enum Command {
     /// rigid transform (Euler U[-45, 45] deg, translation U[-1, 1]) as
     /// little-endian f32 x y z (the firmware example's input) and as XYZ.
     Shape {
-        /// box, torus, ell (no symmetry), cylinder or cone (free about their axis).
+        /// ell (no symmetry), box (half turns fit as well), torus, cylinder or
+        /// cone (free about their axis).
         #[arg(long, default_value = "ell")]
         kind: String,
         /// Number of points.
