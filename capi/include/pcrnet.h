@@ -105,7 +105,8 @@ enum PcrnetStatus
    */
   PCRNET_ERROR_NULL_POINTER = -1,
   /*
-   The point array is not 4-byte aligned.
+   An array is not aligned for its type (points: 4 bytes; depth
+   values and labels: 2).
    */
   PCRNET_ERROR_MISALIGNED = -2,
   /*
@@ -387,6 +388,173 @@ typedef struct {
 } PcrnetRegistration;
 
 /*
+ How to look for the object (`pcrnet_scene_options_default` fills the
+ defaults); the rest of the scene settings follow from the model's
+ object radius (`pcrnet_core::scene::SceneOptions::for_object`).
+ */
+typedef struct {
+  /*
+   Pixels between grid samples (4).
+   */
+  uint32_t step;
+  /*
+   Candidates registered, largest clusters first (3; at most 8).
+   */
+  uint32_t candidates;
+  /*
+   With `has_up`: the template's up axis (template frame: the axis
+   pointing away from the surface it rests on). Each candidate is then
+   registered by a yaw sweep about the plane's normal, for a view from
+   one side in any yaw.
+   */
+  float up[3];
+  /*
+   Yaw starts of that sweep (12: 30 degrees apart).
+   */
+  uint32_t yaws;
+  /*
+   With `has_plane`: the plane the objects stand on, unit normal
+   towards the sensor (sensor frame) ...
+   */
+  float plane_normal[3];
+  /*
+   ... and the sensor's distance from it, user units. Without
+   `has_plane` the dominant plane is found (seeded RANSAC).
+   */
+  float plane_offset;
+  /*
+   `up` is given.
+   */
+  bool has_up;
+  /*
+   `plane_normal` and `plane_offset` are given.
+   */
+  bool has_plane;
+  /*
+   Check each candidate's pose against the frame (true): a pose is
+   reliable only if the template's points that should be visible are
+   seen where it puts them, and none lies in front of what the sensor saw.
+   */
+  bool verify;
+} PcrnetSceneOptions;
+
+/*
+ A 16-bit depth image the caller owns: `height` rows of `stride`
+ pixels (`width` of them used), row-major, from the top-left pixel.
+ The sensor frame is x right, y down, z forward (the usual pinhole
+ camera), in `depth_scale` user units per count.
+ */
+typedef struct {
+  /*
+   `height * stride` depth values, 2-byte aligned.
+   */
+  const uint16_t *depth;
+  /*
+   Pixels a row.
+   */
+  size_t width;
+  /*
+   Rows.
+   */
+  size_t height;
+  /*
+   Pixels from one row's start to the next's (at least `width`).
+   */
+  size_t stride;
+  /*
+   Focal length along a row, pixels.
+   */
+  float fx;
+  /*
+   Focal length along a column, pixels.
+   */
+  float fy;
+  /*
+   Principal point, column.
+   */
+  float cx;
+  /*
+   Principal point, row.
+   */
+  float cy;
+  /*
+   User units per depth count (0.001 turns millimetres into metres);
+   the template's units, as for `pcrnet_register`'s points.
+   */
+  float depth_scale;
+  /*
+   The value of a pixel the sensor has no depth for (usually 0).
+   */
+  uint16_t invalid;
+} PcrnetDepthImage;
+
+/*
+ What `pcrnet_locate` found.
+ */
+typedef struct {
+  /*
+   With `found`: the winner's registration, its pose mapping the
+   sensor frame onto the template (user units), its `reliable` the
+   registration's own verdict (see `reliable` below for the frame's).
+   */
+  PcrnetRegistration registration;
+  /*
+   With `has_plane`: the plane taken out (unit normal towards the
+   sensor) ...
+   */
+  float plane_normal[3];
+  /*
+   ... and the sensor's distance from it, user units.
+   */
+  float plane_offset;
+  /*
+   With `verified`: the winner's template points seen at their place ...
+   */
+  uint32_t supported;
+  /*
+   ... in front of what the sensor saw (free space) ...
+   */
+  uint32_t violations;
+  /*
+   ... behind it ...
+   */
+  uint32_t occluded;
+  /*
+   ... and outside the frame or at a pixel without depth.
+   */
+  uint32_t unobserved;
+  /*
+   The winner's place among the kept clusters (largest first).
+   */
+  uint32_t cluster;
+  /*
+   Clusters kept by their size.
+   */
+  uint32_t clusters_kept;
+  /*
+   Candidates registered.
+   */
+  uint32_t candidates_tried;
+  /*
+   A candidate was registered (a kept cluster exists).
+   */
+  bool found;
+  /*
+   The winner's verdict: checked against the frame when `verified`,
+   else its registration's.
+   */
+  bool reliable;
+  /*
+   The winner was checked against the frame.
+   */
+  bool verified;
+  /*
+   A plane was found or given.
+   */
+  bool has_plane;
+} PcrnetLocated;
+
+/*
  A model handle and a scratch made ready by `pcrnet_prepare`: storage
  the caller owns. Its contents are private; its size and 8-byte
  alignment are fixed on every target.
@@ -509,6 +677,56 @@ PcrnetStatus pcrnet_network_pose(const PcrnetModel *model,
  static memory; an unknown value gives "unknown status".
  */
 const char *pcrnet_status_message(int32_t status);
+
+/*
+ The label elements (`uint16_t`) `pcrnet_locate` needs for a
+ `width x height` frame sampled every `step` pixels (0 for a step of 0).
+ */
+size_t pcrnet_scene_labels_len(size_t width, size_t height, uint32_t step);
+
+/*
+ Writes the default scene options to `out` (nothing for null): a 4-pixel
+ grid, 3 candidates, the plane found, no up axis, poses verified.
+
+ # Safety
+ `out` must be null or point to a writable `PcrnetSceneOptions`.
+ */
+void pcrnet_scene_options_default(PcrnetSceneOptions *out);
+
+/*
+ Finds the model's object in a depth frame and registers it: the
+ dominant plane (found, or given in `scene`) taken out, what stands off
+ it split into clusters, those the size of the object kept, the largest
+ `scene->candidates` registered as `pcrnet_register` does (each from at
+ most `points_capacity` of its points) and checked against the frame,
+ the best reliable one reported. A frame without a kept cluster is
+ success with `found` false. Writes `out` on success.
+
+ Buffers, all caller-owned and not overlapping: `labels`, at least
+ `pcrnet_scene_labels_len(width, height, step)` elements; `points`,
+ `3 * points_capacity` floats (512 points is plenty); `scratch` as for
+ `pcrnet_register`. A bad frame or scene setting is
+ `PCRNET_ERROR_INVALID_FRAME`.
+
+ # Safety
+ `model`, `options`, `scratch` as `pcrnet_register` says; `image` must
+ point to a `PcrnetDepthImage` whose `depth` holds `height * stride`
+ readable values; `scene` to a `PcrnetSceneOptions`; `labels` to
+ `labels_len` writable `uint16_t`; `points` to `3 * points_capacity`
+ writable floats; `out` to a writable `PcrnetLocated` (each may be null,
+ which is a status).
+ */
+PcrnetStatus pcrnet_locate(const PcrnetModel *model,
+                           const PcrnetDepthImage *image,
+                           const PcrnetSceneOptions *scene,
+                           const PcrnetOptions *options,
+                           uint16_t *labels,
+                           size_t labels_len,
+                           float *points,
+                           size_t points_capacity,
+                           int8_t *scratch,
+                           size_t scratch_len,
+                           PcrnetLocated *out);
 
 /*
  Makes `scratch` ready for many calls of `model` and fills `prepared`.

@@ -49,9 +49,14 @@
 use core::ffi::c_char;
 use core::mem::{align_of, size_of};
 
+mod locate;
 mod prepared;
 mod track;
 mod types;
+pub use locate::{
+    PcrnetDepthImage, PcrnetLocated, PcrnetSceneOptions, pcrnet_locate, pcrnet_scene_labels_len,
+    pcrnet_scene_options_default,
+};
 pub use prepared::{
     PCRNET_PREPARED_SIZE, PCRNET_PREPARED_WORDS, PcrnetPrepared, pcrnet_prepare,
     pcrnet_prepared_network_pose, pcrnet_prepared_register,
@@ -148,6 +153,7 @@ unsafe fn slice<'a, T>(ptr: *const T, len: usize) -> Result<&'a [T], PcrnetStatu
     if len == 0 {
         return Ok(&[]);
     }
+    addressable::<T>(len)?;
     if ptr.is_null() {
         return Err(PCRNET_ERROR_NULL_POINTER);
     }
@@ -410,35 +416,52 @@ unsafe fn network_pose_into(
     }
 }
 
+/// Whether `len` elements of `T` fit in one allocation (`isize::MAX`
+/// bytes); a length that cannot is [`PCRNET_ERROR_INVALID_OPTION`].
+fn addressable<T>(len: usize) -> Result<(), PcrnetStatus> {
+    match len.checked_mul(size_of::<T>()) {
+        Some(bytes) if bytes <= isize::MAX as usize => Ok(()),
+        _ => Err(PCRNET_ERROR_INVALID_OPTION),
+    }
+}
+
 /// `n_points` points of 3 floats at `points`.
 ///
 /// # Safety
 /// As [`slice`] for `3 * n_points` floats.
 unsafe fn cloud<'a>(points: *const f32, n_points: usize) -> Result<&'a [[f32; 3]], PcrnetStatus> {
-    if n_points
-        .checked_mul(size_of::<[f32; 3]>())
-        .is_none_or(|b| b > isize::MAX as usize)
-    {
-        return Err(PCRNET_ERROR_INVALID_OPTION);
-    }
     // SAFETY: [f32; 3] has the alignment of f32; the caller's contract.
     unsafe { slice(points as *const [f32; 3], n_points) }
+}
+
+/// `len` writable elements at `ptr`; null with `len > 0` is an error, and
+/// so is a pointer not aligned for `T`.
+///
+/// # Safety
+/// If non-null, `ptr` must point to `len` writable `T` nothing else uses
+/// during the call.
+unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize) -> Result<&'a mut [T], PcrnetStatus> {
+    if len == 0 {
+        return Ok(&mut []);
+    }
+    addressable::<T>(len)?;
+    if ptr.is_null() {
+        return Err(PCRNET_ERROR_NULL_POINTER);
+    }
+    if !(ptr as usize).is_multiple_of(align_of::<T>()) {
+        return Err(PCRNET_ERROR_MISALIGNED);
+    }
+    // SAFETY: non-null, aligned, and the caller's contract above.
+    Ok(unsafe { core::slice::from_raw_parts_mut(ptr, len) })
 }
 
 /// The scratch buffer; null with a non-zero length is an error.
 ///
 /// # Safety
-/// If non-null, `scratch` must point to `len` writable bytes nothing else
-/// uses during the call.
+/// As [`slice_mut`] for `len` bytes.
 unsafe fn scratch_mut<'a>(scratch: *mut i8, len: usize) -> Result<&'a mut [i8], PcrnetStatus> {
-    if len == 0 {
-        return Ok(&mut []);
-    }
-    if scratch.is_null() {
-        return Err(PCRNET_ERROR_NULL_POINTER);
-    }
-    // SAFETY: non-null, i8 has alignment 1, and the caller's contract.
-    Ok(unsafe { core::slice::from_raw_parts_mut(scratch, len) })
+    // SAFETY: the caller's contract.
+    unsafe { slice_mut(scratch, len) }
 }
 
 /// What a status means and what to do, as a NUL-terminated string in
@@ -448,7 +471,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
     let text: &'static core::ffi::CStr = match status {
         0 => c"success",
         -1 => c"a required pointer is null",
-        -2 => c"the point array is not 4-byte aligned",
+        -2 => c"an array is not aligned for its type: points and floats need 4-byte alignment, depth values and labels 2-byte",
         -3 => c"the model handle is not loaded: call pcrnet_model_load and check its status",
         -4 => c"the prepared handle is not prepared: call pcrnet_prepare (again after loading its model handle again) and check its status",
         -10 => c"not a model blob: magic bytes PCRN missing",
@@ -467,7 +490,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -32 => c"every point lies outside the model's input range: the cloud is in other units than the template, or far from where the template is; bring it into the template's units and frame",
         -33 => c"the network's output has a zero quaternion",
         -34 => c"the pose or residual is not finite: the coordinates are too large once moved into the model's frame",
-        -40 => c"a registration option is out of range (zero passes, hypotheses or max_points, a negative or non-finite tolerance or distance, an unknown metric, or too many points)",
+        -40 => c"a registration option is out of range (zero passes, hypotheses or max_points, a negative or non-finite tolerance or distance, an unknown metric, or more points or buffer elements than memory can hold)",
         -41 => c"the previous pose is not finite or its quaternion is not of unit length: pass the pose a registration or tracking step wrote, or call pcrnet_register",
         -42 => c"the depth frame or a scene setting cannot be used (a zero size or stride, a frame buffer shorter than height x stride, intrinsics or a depth scale not finite and positive, a step of 0 or a sampling grid of more cells than its labels can number): check the camera's intrinsics and the frame's dimensions, or raise the grid step",
         -99 => c"an error this version of the C API has no code for: update the library",

@@ -14,7 +14,8 @@ pub enum PcrnetStatus {
     PCRNET_OK = 0,
     /// A required pointer is null.
     PCRNET_ERROR_NULL_POINTER = -1,
-    /// The point array is not 4-byte aligned.
+    /// An array is not aligned for its type (points: 4 bytes; depth
+    /// values and labels: 2).
     PCRNET_ERROR_MISALIGNED = -2,
     /// The model handle was not filled by a successful `pcrnet_model_load`.
     PCRNET_ERROR_NOT_LOADED = -3,
@@ -188,7 +189,7 @@ pub const PCRNET_DEGENERATE_LINE: u32 = 2;
 /// (`pcrnet_core::Registration`): `p_template = R p_source + t`, in the
 /// source's units.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PcrnetRegistration {
     /// Unit quaternion `[w, x, y, z]`, `w >= 0`.
     pub rotation: [f32; 4],

@@ -206,7 +206,7 @@ fn least_stiff_twist(
     }
     let (_, vectors) = eigen::symmetric(schur);
     let u = vectors[2];
-    let t = [0, 1, 2].map(|k| -(x[k][0] * u[0] + x[k][1] * u[1] + x[k][2] * u[2]));
+    let t = x.map(|row| -(row[0] * u[0] + row[1] * u[1] + row[2] * u[2]));
     Some((u, t, libm::sqrtf(spread)))
 }
 

@@ -16,6 +16,10 @@ pub fn shipped_blob() -> Vec<u8> {
     std::fs::read(models().join("embedded-default-int8.pcrn")).expect("shipped int8 model")
 }
 
+#[allow(
+    dead_code,
+    reason = "each test binary compiles this module; locate.rs renders its frames instead"
+)]
 pub fn shipped_source() -> Vec<[f32; 3]> {
     let text = std::fs::read_to_string(models().join("embedded-default-source.xyz"))
         .expect("shipped source");

@@ -217,5 +217,52 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
             black_box(&mut passes_run),
         ));
         black_box(capi::pcrnet_status_message(black_box(-3)));
+        c_locate(model, scratch, scratch_len);
+    }
+}
+
+/// `pcrnet_locate` on a frame, settings and buffers the optimiser cannot see.
+///
+/// # Safety
+/// `model` points to a handle and `scratch` to `scratch_len` writable bytes.
+unsafe fn c_locate(model: *const capi::PcrnetModel, scratch: *mut i8, scratch_len: usize) {
+    static DEPTH: [u16; 1024] = [0; 1024];
+    static mut LABELS: [u16; 512] = [0; 512];
+    static mut POINTS: [f32; 384] = [0.0; 384];
+    let image = black_box(capi::PcrnetDepthImage {
+        depth: black_box(DEPTH.as_ptr()),
+        width: black_box(32),
+        height: black_box(32),
+        stride: black_box(32),
+        fx: black_box(100.0),
+        fy: black_box(100.0),
+        cx: black_box(16.0),
+        cy: black_box(16.0),
+        depth_scale: black_box(1e-3),
+        invalid: black_box(0),
+    });
+    let mut scene = core::mem::MaybeUninit::<capi::PcrnetSceneOptions>::uninit();
+    let mut options = core::mem::MaybeUninit::<capi::PcrnetOptions>::uninit();
+    let mut out = core::mem::MaybeUninit::<capi::PcrnetLocated>::uninit();
+    // SAFETY: every pointer is to live storage of the right size (the
+    // statics are named by this function only, which runs once at a time);
+    // the C API checks null, alignment and lengths itself.
+    unsafe {
+        capi::pcrnet_scene_options_default(black_box(scene.as_mut_ptr()));
+        capi::pcrnet_options_default(black_box(options.as_mut_ptr()));
+        black_box(capi::pcrnet_scene_labels_len(32, 32, black_box(4)));
+        black_box(capi::pcrnet_locate(
+            model,
+            &image,
+            black_box(scene.as_ptr()),
+            black_box(options.as_ptr()),
+            black_box(core::ptr::addr_of_mut!(LABELS) as *mut u16),
+            black_box(512),
+            black_box(core::ptr::addr_of_mut!(POINTS) as *mut f32),
+            black_box(128),
+            scratch,
+            scratch_len,
+            black_box(out.as_mut_ptr()),
+        ));
     }
 }
