@@ -1,6 +1,7 @@
-/* The model blob and a stored source cloud, linked into flash from the
- * files the Makefile names (MODEL_BLOB, SOURCE_POINTS: quoted paths).
- * The blob may sit at any alignment; the points are floats, so 4-aligned. */
+/* The model blob, a stored source cloud and a depth frame, linked into
+ * flash from the files the Makefile names (MODEL_BLOB, SOURCE_POINTS,
+ * DEPTH_FRAME: quoted paths). The blob may sit at any alignment; the
+ * points are floats, so 4-aligned; the frame's pixels are uint16_t. */
     .section .rodata.pcrnet_data, "a"
     .balign 4
     .global model_blob
@@ -15,3 +16,10 @@ source_points:
     .incbin SOURCE_POINTS
     .global source_points_end
 source_points_end:
+
+    .balign 4
+    .global depth_frame
+depth_frame:
+    .incbin DEPTH_FRAME
+    .global depth_frame_end
+depth_frame_end:

@@ -19,13 +19,27 @@ extern const uint8_t model_blob[], model_blob_end[];
 extern const float source_points[];
 extern const uint8_t source_points_end[];
 
+/* data.S: a depth frame, 224 x 172 pixels row by row, millimetres (the
+ * frame `pcrnet frame` draws: the template on a table beside two blocks). */
+extern const uint16_t depth_frame[];
+extern const uint8_t depth_frame_end[];
+#define FRAME_WIDTH 224
+#define FRAME_HEIGHT 172
+#define FRAME_STEP 4
+#define FRAME_POINTS 512
+
 /* Working memory, all static: the model handle, the encoder's scratch, and
- * a RAM copy of the cloud (a sensor driver would fill it on a device). */
+ * a RAM copy of the cloud (a sensor driver would fill it on a device); for
+ * the frame, the scene stages' labels (pcrnet_scene_labels_len) and the
+ * points of one candidate. */
 #define MAX_POINTS 4096
 #define SCRATCH_BYTES 16384
 static PcrnetModel model;
 static int8_t scratch[SCRATCH_BYTES];
 static float cloud[3 * MAX_POINTS];
+static uint16_t labels[2 * ((FRAME_WIDTH + FRAME_STEP - 1) / FRAME_STEP) *
+                       ((FRAME_HEIGHT + FRAME_STEP - 1) / FRAME_STEP)];
+static float frame_points[3 * FRAME_POINTS];
 
 /* A 64-bit count in decimal (nano printf has no %llu). */
 static void print_count(uint64_t v) {
@@ -48,6 +62,28 @@ static void print_bits(const float *v, size_t n) {
     }
 }
 
+/* Every value of a registration as bits (after a "@ reg" or "@ locate"
+ * line's head), in the order the host formats them. */
+static void print_registration_bits(const PcrnetRegistration *r) {
+    print_bits(r->rotation, 4);
+    print_bits(r->translation, 3);
+    const float scores[6] = {r->residual, r->relative_residual, r->plane_residual,
+                             r->relative_plane_residual, r->fitness, r->inlier_rmse};
+    print_bits(scores, 6);
+    printf(" %lu %lu %lu %lu %lu %lu %d %d", (unsigned long)r->hypothesis, (unsigned long)r->passes,
+           (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->out_of_range,
+           (unsigned long)r->degenerate, r->reliable ? 1 : 0, r->has_free_axis ? 1 : 0);
+    const float axis[7] = {r->free_axis[0],       r->free_axis[1],       r->free_axis[2],
+                           r->free_axis_point[0], r->free_axis_point[1], r->free_axis_point[2],
+                           r->free_axis_stiffness};
+    print_bits(axis, 7);
+    printf(" %d", r->has_turn ? 1 : 0);
+    const float turn[9] = {r->turn_rotation[0],    r->turn_rotation[1],    r->turn_rotation[2],
+                           r->turn_rotation[3],    r->turn_translation[0], r->turn_translation[1],
+                           r->turn_translation[2], r->turn_degrees,        r->turn_relative_plane_residual};
+    print_bits(turn, 9);
+}
+
 /* The readable report of one registration, then its "@ reg" line. */
 static void report(const char *label, int32_t status, const PcrnetRegistration *r, uint64_t instructions) {
     printf("register %s: %s, ", label, pcrnet_status_message(status));
@@ -67,23 +103,7 @@ static void report(const char *label, int32_t status, const PcrnetRegistration *
            (unsigned long)r->out_of_range);
     printf("  reliable: %s\n", r->reliable ? "yes" : "no");
     printf("@ reg %s 0", label);
-    print_bits(r->rotation, 4);
-    print_bits(r->translation, 3);
-    const float scores[6] = {r->residual, r->relative_residual, r->plane_residual,
-                             r->relative_plane_residual, r->fitness, r->inlier_rmse};
-    print_bits(scores, 6);
-    printf(" %lu %lu %lu %lu %lu %lu %d %d", (unsigned long)r->hypothesis, (unsigned long)r->passes,
-           (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->out_of_range,
-           (unsigned long)r->degenerate, r->reliable ? 1 : 0, r->has_free_axis ? 1 : 0);
-    const float axis[7] = {r->free_axis[0],       r->free_axis[1],       r->free_axis[2],
-                           r->free_axis_point[0], r->free_axis_point[1], r->free_axis_point[2],
-                           r->free_axis_stiffness};
-    print_bits(axis, 7);
-    printf(" %d", r->has_turn ? 1 : 0);
-    const float turn[9] = {r->turn_rotation[0],    r->turn_rotation[1],    r->turn_rotation[2],
-                           r->turn_rotation[3],    r->turn_translation[0], r->turn_translation[1],
-                           r->turn_translation[2], r->turn_degrees,        r->turn_relative_plane_residual};
-    print_bits(turn, 9);
+    print_registration_bits(r);
     printf("\n");
 }
 
@@ -93,6 +113,76 @@ static int32_t run(const char *label, const float *points, size_t n, const Pcrne
     int32_t status = pcrnet_register(&model, points, n, options, scratch, sizeof scratch, r);
     report(label, status, r, instructions_now() - start);
     return status;
+}
+
+/* The object found in the depth frame and registered (the plane taken
+ * out, clusters of the object's size registered by a yaw sweep about the
+ * plane's normal, each checked against the frame), then its "@ locate"
+ * line. */
+static void locate(void) {
+    size_t pixels = (size_t)(depth_frame_end - (const uint8_t *)depth_frame) / sizeof(uint16_t);
+    if (pixels != (size_t)FRAME_WIDTH * FRAME_HEIGHT) {
+        printf("the stored frame has %lu pixels; this example takes %d x %d\n", (unsigned long)pixels,
+               FRAME_WIDTH, FRAME_HEIGHT);
+        return;
+    }
+    /* The time-of-flight camera the frame was drawn with (`pcrnet frame`
+     * writes it to FRAME.json). */
+    const PcrnetDepthImage image = {.depth = depth_frame,
+                                    .width = FRAME_WIDTH,
+                                    .height = FRAME_HEIGHT,
+                                    .stride = FRAME_WIDTH,
+                                    .fx = 194.0f,
+                                    .fy = 194.0f,
+                                    .cx = 111.5f,
+                                    .cy = 85.5f,
+                                    .depth_scale = 0.001f,
+                                    .invalid = 0};
+    PcrnetSceneOptions scene;
+    pcrnet_scene_options_default(&scene);
+    scene.step = FRAME_STEP;
+    scene.has_up = true; /* the template's z axis points away from the table */
+    scene.up[0] = 0.0f;
+    scene.up[1] = 0.0f;
+    scene.up[2] = 1.0f;
+    PcrnetOptions options;
+    pcrnet_options_default(&options);
+    PcrnetLocated found;
+    uint64_t start = instructions_now();
+    int32_t status = pcrnet_locate(&model, &image, &scene, &options, labels, sizeof labels / sizeof labels[0],
+                                   frame_points, FRAME_POINTS, scratch, sizeof scratch, &found);
+    uint64_t used = instructions_now() - start;
+    printf("locate in a %d x %d depth frame (yaw sweep, up z): %s, ", FRAME_WIDTH, FRAME_HEIGHT,
+           pcrnet_status_message(status));
+    print_count(used);
+    printf(" instructions\n");
+    if (status != PCRNET_OK) {
+        printf("@ locate sweep %ld\n", (long)status);
+        return;
+    }
+    if (found.found) {
+        const PcrnetRegistration *r = &found.registration;
+        printf("  cluster %lu of %lu kept, %lu registered; plane residual %.4f of the size\n",
+               (unsigned long)found.cluster, (unsigned long)found.clusters_kept,
+               (unsigned long)found.candidates_tried, (double)r->relative_plane_residual);
+        printf("  rotation (w x y z): %.6f %.6f %.6f %.6f, translation %.4f %.4f %.4f\n", (double)r->rotation[0],
+               (double)r->rotation[1], (double)r->rotation[2], (double)r->rotation[3], (double)r->translation[0],
+               (double)r->translation[1], (double)r->translation[2]);
+        printf("  checked against the frame: %lu points seen, %lu in free space; %s%s\n",
+               (unsigned long)found.supported, (unsigned long)found.violations,
+               found.reliable ? "reliable" : "not reliable",
+               r->has_turn || r->has_free_axis ? " (ambiguous: a symmetric object)" : "");
+    } else {
+        printf("  no cluster of the object's size\n");
+    }
+    printf("@ locate sweep 0 %d %d %d %d %lu %lu %lu %lu %lu %lu %lu", found.found ? 1 : 0, found.reliable ? 1 : 0,
+           found.verified ? 1 : 0, found.has_plane ? 1 : 0, (unsigned long)found.cluster,
+           (unsigned long)found.clusters_kept, (unsigned long)found.candidates_tried, (unsigned long)found.supported,
+           (unsigned long)found.violations, (unsigned long)found.occluded, (unsigned long)found.unobserved);
+    print_bits(found.plane_normal, 3);
+    print_bits(&found.plane_offset, 1);
+    print_registration_bits(&found.registration);
+    printf("\n");
 }
 
 int main(void) {
@@ -155,6 +245,9 @@ int main(void) {
         print_bits(pose, 7);
     }
     printf("\n");
+
+    /* From a raw depth frame to the object's pose. */
+    locate();
 
     /* Bad input is a status with a message, never a crash. */
     memcpy(cloud, source_points, 3 * n * sizeof(float));

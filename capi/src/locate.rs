@@ -4,7 +4,7 @@
 //! against the frame, the best verified one reported.
 
 use PcrnetStatus::*;
-use pcrnet_core::locate::MAX_CANDIDATES;
+use pcrnet_core::locate::{Located, MAX_CANDIDATES};
 use pcrnet_core::scene::{self, DepthImage, Intrinsics, PlaneChoice, SceneOptions};
 
 use crate::types::{PcrnetRegistration, PcrnetStatus};
@@ -111,6 +111,58 @@ pub struct PcrnetLocated {
     pub has_plane: bool,
 }
 
+impl PcrnetSceneOptions {
+    /// The Rust scene options these give for an object of `radius` user
+    /// units: [`SceneOptions::for_object`] with this step, plane, check, up
+    /// axis and yaws.
+    pub fn scene_options(&self, radius: f32) -> SceneOptions {
+        let defaults = SceneOptions::for_object(radius);
+        SceneOptions {
+            step: self.step as usize,
+            plane: if self.has_plane {
+                PlaneChoice::Given(scene::Plane {
+                    normal: self.plane_normal,
+                    offset: self.plane_offset,
+                })
+            } else {
+                defaults.plane
+            },
+            verify: if self.verify { defaults.verify } else { None },
+            up: self.has_up.then_some(self.up),
+            yaws: self.yaws as usize,
+            ..defaults
+        }
+    }
+}
+
+impl From<&Located> for PcrnetLocated {
+    fn from(located: &Located) -> Self {
+        let count = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        let best = located.best;
+        let check = best.and_then(|b| b.verification);
+        let plane = located.segmentation.plane;
+        PcrnetLocated {
+            registration: match &best {
+                Some(b) => (&b.registration).into(),
+                None => PcrnetRegistration::default(),
+            },
+            plane_normal: plane.map_or([0.0; 3], |p| p.normal),
+            plane_offset: plane.map_or(0.0, |p| p.offset),
+            supported: check.map_or(0, |v| v.supported),
+            violations: check.map_or(0, |v| v.violations),
+            occluded: check.map_or(0, |v| v.occluded),
+            unobserved: check.map_or(0, |v| v.unobserved),
+            cluster: best.map_or(0, |b| count(b.cluster)),
+            clusters_kept: count(located.segmentation.clusters.kept.len()),
+            candidates_tried: count(located.tried.len()),
+            found: best.is_some(),
+            reliable: best.is_some_and(|b| b.reliable),
+            verified: check.is_some(),
+            has_plane: plane.is_some(),
+        }
+    }
+}
+
 /// The label elements (`uint16_t`) `pcrnet_locate` needs for a
 /// `width x height` frame sampled every `step` pixels (0 for a step of 0).
 #[unsafe(no_mangle)]
@@ -208,22 +260,7 @@ pub unsafe extern "C" fn pcrnet_locate(
             image.depth_scale,
             image.invalid,
         )?;
-        let defaults = SceneOptions::for_object(m.object_radius());
-        let scene_options = SceneOptions {
-            step: scene.step as usize,
-            plane: if scene.has_plane {
-                PlaneChoice::Given(scene::Plane {
-                    normal: scene.plane_normal,
-                    offset: scene.plane_offset,
-                })
-            } else {
-                defaults.plane
-            },
-            verify: if scene.verify { defaults.verify } else { None },
-            up: scene.has_up.then_some(scene.up),
-            yaws: scene.yaws as usize,
-            ..defaults
-        };
+        let scene_options = scene.scene_options(m.object_radius());
         // SAFETY: the caller's contract for `labels`, `points` and `scratch`.
         let (labels, points, scratch) = unsafe {
             (
@@ -242,29 +279,7 @@ pub unsafe extern "C" fn pcrnet_locate(
             points,
             scratch,
         )?;
-        let count = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-        let best = located.best;
-        let check = best.and_then(|b| b.verification);
-        let plane = located.segmentation.plane;
-        Ok(PcrnetLocated {
-            registration: match &best {
-                Some(b) => (&b.registration).into(),
-                None => PcrnetRegistration::default(),
-            },
-            plane_normal: plane.map_or([0.0; 3], |p| p.normal),
-            plane_offset: plane.map_or(0.0, |p| p.offset),
-            supported: check.map_or(0, |v| v.supported),
-            violations: check.map_or(0, |v| v.violations),
-            occluded: check.map_or(0, |v| v.occluded),
-            unobserved: check.map_or(0, |v| v.unobserved),
-            cluster: best.map_or(0, |b| count(b.cluster)),
-            clusters_kept: count(located.segmentation.clusters.kept.len()),
-            candidates_tried: count(located.tried.len()),
-            found: best.is_some(),
-            reliable: best.is_some_and(|b| b.reliable),
-            verified: check.is_some(),
-            has_plane: plane.is_some(),
-        })
+        Ok(PcrnetLocated::from(&located))
     };
     match run() {
         Ok(r) => {

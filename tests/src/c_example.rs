@@ -20,7 +20,33 @@ use crate::qemu;
 
 /// Calls the example always makes; `every-start` follows only an
 /// unreliable `default`.
-const REQUIRED: [&str; 4] = ["reg default", "reg network", "pose iterated", "reg nan"];
+const REQUIRED: [&str; 5] = [
+    "reg default",
+    "reg network",
+    "pose iterated",
+    "locate sweep",
+    "reg nan",
+];
+
+/// Names of the values of an `@ locate` line after its status, before the
+/// registration's ([`REG_FIELDS`]).
+const LOCATE_FIELDS: [&str; 15] = [
+    "found",
+    "reliable",
+    "verified",
+    "has_plane",
+    "cluster",
+    "clusters_kept",
+    "candidates_tried",
+    "supported",
+    "violations",
+    "occluded",
+    "unobserved",
+    "plane_normal x",
+    "plane_normal y",
+    "plane_normal z",
+    "plane_offset",
+];
 
 /// Names of the values of an `@ reg` line after its status.
 const REG_FIELDS: [&str; 38] = [
@@ -73,12 +99,17 @@ fn hex(values: &[f32]) -> String {
 
 /// The `@ reg` line the example prints for this result.
 fn reg_line(label: &str, result: Result<PcrnetRegistration, PcrnetStatus>) -> String {
-    let r = match result {
-        Err(s) => return format!("@ reg {label} {}", s as i32),
-        Ok(r) => r,
-    };
+    match result {
+        Err(s) => format!("@ reg {label} {}", s as i32),
+        Ok(r) => format!("@ reg {label} 0{}", registration_words(&r)),
+    }
+}
+
+/// Every value of a registration as the example prints it after a line's
+/// head (each word with its leading space).
+fn registration_words(r: &PcrnetRegistration) -> String {
     let mut line = format!(
-        "@ reg {label} 0{}{}{}",
+        "{}{}{}",
         hex(&r.rotation),
         hex(&r.translation),
         hex(&[
@@ -112,10 +143,83 @@ fn reg_line(label: &str, result: Result<PcrnetRegistration, PcrnetStatus>) -> St
     line
 }
 
+/// The `@ locate` line the example prints for `pcrnet_locate` on its
+/// frame, computed on the host with `Int8Model::locate` and the C API's own
+/// conversions (scene options in, `PcrnetLocated` out).
+fn locate_line(model: &Int8Model<'_>, depth: &[u16], scratch: &mut [i8]) -> String {
+    use pcrnet::{PcrnetLocated, PcrnetSceneOptions};
+    use pcrnet_core::testing::scene as harness;
+    let scene = PcrnetSceneOptions {
+        step: 4,
+        candidates: 3,
+        up: [0.0, 0.0, 1.0],
+        yaws: pcrnet_core::scene::DEFAULT_YAWS as u32,
+        plane_normal: [0.0; 3],
+        plane_offset: 0.0,
+        has_up: true,
+        has_plane: false,
+        verify: true,
+    };
+    let options = scene.scene_options(model.object_radius());
+    let mut labels = vec![0u16; pcrnet_core::scene::labels_len(FRAME.0, FRAME.1, options.step)];
+    let mut points = vec![[0f32; 3]; 512];
+    let located = harness::harness_image(depth).and_then(|image| {
+        model.locate(
+            &image,
+            &options,
+            scene.candidates as usize,
+            &Options::default(),
+            &mut labels,
+            &mut points,
+            scratch,
+        )
+    });
+    let out = match located {
+        Ok(l) => PcrnetLocated::from(&l),
+        Err(e) => return format!("@ locate sweep {}", PcrnetStatus::from(e) as i32),
+    };
+    let counts = [
+        u32::from(out.found),
+        u32::from(out.reliable),
+        u32::from(out.verified),
+        u32::from(out.has_plane),
+        out.cluster,
+        out.clusters_kept,
+        out.candidates_tried,
+        out.supported,
+        out.violations,
+        out.occluded,
+        out.unobserved,
+    ];
+    let counts: String = counts.iter().map(|c| format!(" {c}")).collect();
+    format!(
+        "@ locate sweep 0{counts}{}{}{}",
+        hex(&out.plane_normal),
+        hex(&[out.plane_offset]),
+        registration_words(&out.registration)
+    )
+}
+
+/// The size of the frame the example links (the QEMU harness's).
+const FRAME: (usize, usize) = (
+    pcrnet_core::testing::scene::HARNESS_WIDTH,
+    pcrnet_core::testing::scene::HARNESS_HEIGHT,
+);
+
+/// The frame the example links for `blob`: the harness's, drawn with the
+/// model's template ([`pcrnet_core::testing::scene::harness_frame`]).
+pub fn frame(blob: &[u8]) -> anyhow::Result<Vec<u16>> {
+    let model = Int8Model::from_bytes(blob).context("the host rejects the example's model")?;
+    let mut depth = vec![0u16; FRAME.0 * FRAME.1];
+    let mut template = vec![[0f32; 3]; model.template().len()];
+    pcrnet_core::testing::scene::harness_frame(&model, &mut template, &mut depth)?;
+    Ok(depth)
+}
+
 /// What the host computes for the call an `@` line reports, as that line.
 fn expected_line(
     model: &Int8Model<'_>,
-    source: &[[f32; 3]],
+    (source, depth): (&[[f32; 3]], &[u16]),
     kind: &str,
     label: &str,
     scratch: &mut [i8],
@@ -149,6 +253,7 @@ fn expected_line(
             ),
             Err(e) => format!("@ pose {label} {}", PcrnetStatus::from(e) as i32),
         },
+        ("locate", "sweep") => locate_line(model, depth, scratch),
         _ => bail!("the C example printed an unknown call `@ {kind} {label}`"),
     })
 }
@@ -169,6 +274,12 @@ fn difference(kind: &str, device: &str, host: &str) -> String {
         if a != b {
             let name = match kind {
                 "reg" => REG_FIELDS.get(i).copied().unwrap_or("extra value"),
+                "locate" => LOCATE_FIELDS
+                    .iter()
+                    .chain(&REG_FIELDS)
+                    .nth(i)
+                    .copied()
+                    .unwrap_or("extra value"),
                 _ if i == 0 => "passes",
                 _ => ["qw", "qx", "qy", "qz", "tx", "ty", "tz"]
                     .get(i - 1)
@@ -186,6 +297,7 @@ fn difference(kind: &str, device: &str, host: &str) -> String {
 pub fn check(output: &str, blob: &[u8], source: &[[f32; 3]]) -> anyhow::Result<usize> {
     let model = Int8Model::from_bytes(blob).context("the host rejects the example's model")?;
     let mut scratch = vec![0i8; model.scratch_len(pcrnet_core::MAX_TILE)];
+    let depth = frame(blob)?;
     let mut seen = Vec::new();
     let mut failures = Vec::new();
     let mut done = false;
@@ -194,7 +306,7 @@ pub fn check(output: &str, blob: &[u8], source: &[[f32; 3]]) -> anyhow::Result<u
         match words.as_slice() {
             ["@", "done"] => done = true,
             ["@", kind, label, ..] => {
-                let host = expected_line(&model, source, kind, label, &mut scratch)?;
+                let host = expected_line(&model, (source, &depth), kind, label, &mut scratch)?;
                 if host != line {
                     failures.push(format!("{kind} {label}: {}", difference(kind, line, &host)));
                 }
@@ -220,10 +332,20 @@ pub fn check(output: &str, blob: &[u8], source: &[[f32; 3]]) -> anyhow::Result<u
 /// is reachable from the C functions the example calls.
 pub fn build(root: &Path) -> anyhow::Result<std::path::PathBuf> {
     let build = root.join("target").join("firmware-c");
+    // The depth frame the example links (the Makefile's FRAME).
+    let blob = std::fs::read(root.join("models/embedded-default-int8.pcrn"))?;
+    let bytes: Vec<u8> = frame(&blob)?.iter().flat_map(|d| d.to_le_bytes()).collect();
+    std::fs::create_dir_all(&build)?;
+    let frame_file = build.join("frame.u16");
+    if std::fs::read(&frame_file).ok().as_deref() != Some(&bytes[..]) {
+        std::fs::write(&frame_file, &bytes)
+            .with_context(|| format!("writing {}", frame_file.display()))?;
+    }
     let status = Command::new("make")
         .arg("-C")
         .arg(root.join("firmware-c"))
         .arg(format!("BUILD={}", build.display()))
+        .arg(format!("FRAME={}", frame_file.display()))
         .arg("CAPI_FEATURES=prove-no-panic")
         .arg(format!(
             "CARGO={}",
@@ -261,10 +383,12 @@ mod tests {
     fn host_output(blob: &[u8], source: &[[f32; 3]]) -> String {
         let model = Int8Model::from_bytes(blob).unwrap();
         let mut scratch = vec![0i8; model.scratch_len(1)];
+        let depth = frame(blob).unwrap();
         let mut out = String::from("pcrnet C example\n");
         for call in REQUIRED {
             let (kind, label) = call.split_once(' ').unwrap();
-            out += &expected_line(&model, source, kind, label, &mut scratch).unwrap();
+            let inputs = (source, &depth[..]);
+            out += &expected_line(&model, inputs, kind, label, &mut scratch).unwrap();
             out.push('\n');
         }
         out + "@ done\n"

@@ -372,10 +372,15 @@ pub(crate) fn write_frame(out: &Path, model: Option<&Path>) -> anyhow::Result<()
     let json = out.with_extension("json");
     std::fs::write(&json, serde_json::to_string_pretty(&camera)? + "\n")
         .with_context(|| format!("writing {}", json.display()))?;
+    // The same pixels raw, for firmware that links a frame (firmware-c).
+    let raw = out.with_extension("u16");
+    let bytes: Vec<u8> = frame.depth.iter().flat_map(|d| d.to_le_bytes()).collect();
+    std::fs::write(&raw, bytes).with_context(|| format!("writing {}", raw.display()))?;
     println!(
-        "wrote {} ({width} x {height}, millimetres) and {}; try: pcrnet register --scene {} --intrinsics {} --up z",
+        "wrote {} ({width} x {height}, millimetres), {} and {} (the pixels as little-endian u16, row by row); try: pcrnet register --scene {} --intrinsics {} --up z",
         out.display(),
         json.display(),
+        raw.display(),
         out.display(),
         json.display()
     );

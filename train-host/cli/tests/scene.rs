@@ -56,6 +56,13 @@ fn the_generated_frame_gives_the_object_s_pose() {
     let truth = harness::harness_frame(&model, &mut template, &mut depth)
         .unwrap()
         .inverse();
+    // The raw pixels beside the PNG are the frame's, little-endian.
+    let raw = std::fs::read(dir.join("frame.u16")).unwrap();
+    let pixels: Vec<u16> = raw
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect();
+    assert_eq!(pixels, depth);
     let d: f64 = q
         .iter()
         .zip(truth.rotation)
