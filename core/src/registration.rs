@@ -310,6 +310,57 @@ pub(crate) fn run_swept(
     )
 }
 
+/// Registers `source` from `start` (user units): ICP from it against the
+/// template's points and the verdict, no network pass and no other start
+/// (how [`crate::locate`] checks the turn a registration reports).
+pub(crate) fn run_from(
+    frame: &Frame,
+    template: &Template<'_>,
+    source: &[[f32; 3]],
+    start: &Pose,
+    options: &Options,
+) -> Result<Registration> {
+    let checked = check(frame, template, source, options)?;
+    all_finite(source)?;
+    if !start.is_finite() {
+        return Err(Error::InvalidPose);
+    }
+    let start = frame.pose_to_model(&start.normalised());
+    refine_from(frame, template, &checked, start, options).1
+}
+
+/// ICP from `start` (model frame) on the checked points, scored and
+/// concluded: the refined pose (model frame) and its registration (an
+/// error when it is not finite).
+pub(crate) fn refine_from(
+    frame: &Frame,
+    template: &Template<'_>,
+    checked: &Checked<'_>,
+    start: Pose,
+    options: &Options,
+) -> (Pose, Result<Registration>) {
+    let (pose, icp_iterations) =
+        refine::icp(template, &checked.subset, start, &options.icp_settings());
+    let fit = refine::score(template, &checked.subset, &pose, options.inlier_distance);
+    let refined = Resolved {
+        pose,
+        fit,
+        hypothesis: 0,
+        icp_iterations,
+        rival: None,
+    };
+    let registration = conclude(
+        frame,
+        template,
+        checked,
+        &refined,
+        0,
+        PassCounts::default(),
+        options,
+    );
+    (pose, registration)
+}
+
 /// The [`Registration`] of a refined and scored pose (model frame) of the
 /// checked points: the pose and distances in user units, the verdict, the
 /// ambiguity. A non-finite pose or distance is an error.

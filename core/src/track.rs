@@ -22,7 +22,6 @@
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{Centring, PointMap, Pose};
-use crate::refine::{self, Resolved};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
 
@@ -112,27 +111,9 @@ pub(crate) fn step(
     }
     // Unit length again: a pose carried through a stream composes without end.
     let start = frame.pose_to_model(&previous.normalised());
-    let (pose, icp_iterations) =
-        refine::icp(template, &checked.subset, start, &options.icp_settings());
-    let fit = refine::score(template, &checked.subset, &pose, options.inlier_distance);
-    let refined = Resolved {
-        pose,
-        fit,
-        hypothesis: 0,
-        icp_iterations,
-        rival: None,
-    };
     // A previous pose far out of the frame's reach can refine to a
     // non-finite one: that is a lost track, not an error.
-    let held = registration::conclude(
-        frame,
-        template,
-        &checked,
-        &refined,
-        0,
-        PassCounts::default(),
-        options,
-    );
+    let (pose, held) = registration::refine_from(frame, template, &checked, start, options);
     if let Ok(held) = held
         && held.reliable
         && within_step(&start, &pose)

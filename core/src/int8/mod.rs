@@ -38,6 +38,7 @@ use crate::error::{Error, Result};
 use crate::fixed::INPUT_QMAX;
 use crate::format::{self, Int8Layer, Int8Payload, ModelKind};
 use crate::kernel::{Requant, bytes_of};
+use crate::locate::Start;
 use crate::pose::{self, Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
@@ -267,9 +268,14 @@ impl<'a> Int8Model<'a> {
             candidates,
             labels,
             points,
-            |source, sweep| match sweep {
-                Some(sweep) => self.register_on_plane(source, sweep, options),
-                None => self.register_ready(source, options, tile, scratch, Ready::default()),
+            |source, start| match start {
+                Start::Sweep(sweep) => self.register_on_plane(source, sweep, options),
+                Start::Network => {
+                    self.register_ready(source, options, tile, scratch, Ready::default())
+                }
+                Start::Pose(pose) => {
+                    registration::run_from(&self.p.frame, &self.template, source, pose, options)
+                }
             },
             verify,
         )
