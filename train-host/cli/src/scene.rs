@@ -201,6 +201,9 @@ fn find<F: Organised>(
             (true, None) => "trust: RELIABLE (plane residual within the threshold; not checked against the frame)".into(),
             (false, _) => "trust: NOT RELIABLE - do not act on this pose (no candidate both fits the template and explains the frame)".into(),
         });
+        for line in crate::ambiguity::lines(&r.ambiguity, origin) {
+            say(line);
+        }
         if let Some(path) = aligned {
             let cluster = located.segmentation.clusters.kept.get(best.cluster);
             let n = cluster.map_or(0, |c| {
@@ -235,6 +238,7 @@ fn find<F: Organised>(
         v["origin"] = origin.into();
         if let Some(best) = &located.best {
             v["translation"] = file_translation(best.registration.pose.translation).into();
+            v["ambiguity"] = crate::ambiguity::json(&best.registration.ambiguity, origin);
         }
         write_json(path, &v)?;
     }
@@ -310,6 +314,7 @@ fn candidate_json(c: &Candidate) -> serde_json::Value {
             "unobserved": v.unobserved, "passed": v.passed,
         })),
         "reliable": c.reliable,
+        "ambiguous": r.ambiguity.is_ambiguous(),
     })
 }
 

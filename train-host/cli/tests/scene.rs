@@ -70,6 +70,8 @@ fn the_generated_frame_gives_the_object_s_pose() {
         .sum();
     let error = 2.0 * d.abs().min(1.0).acos().to_degrees();
     assert!(error < 5.0, "{error} deg off: {v}");
+    // Whether the winner is one of several poses that fit, and how.
+    assert!(v["ambiguity"]["ambiguous"].is_boolean(), "{v}");
     let candidates = v["candidates"].as_array().unwrap();
     assert!(!candidates.is_empty() && candidates.len() <= 3);
     std::fs::remove_dir_all(&dir).ok();
