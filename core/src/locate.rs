@@ -83,7 +83,7 @@ pub enum Start<'a> {
 /// the turned pose and checked too: the frame sees what the template's fit
 /// cannot (which side faces the sensor, what stands in front), and the pose
 /// with the smaller share of violations is kept, its turn pointing to the
-/// other ([`settle_turn`]).
+/// other (the margin: [`TURN_MARGIN`]).
 ///
 /// # Errors
 /// What [`scene::segment`] or `register` returns; a candidate whose
