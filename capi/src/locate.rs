@@ -111,6 +111,25 @@ pub struct PcrnetLocated {
     pub has_plane: bool,
 }
 
+impl Default for PcrnetSceneOptions {
+    /// What `pcrnet_scene_options_default` writes: a 4-pixel grid, 3
+    /// candidates, the plane found, no up axis (z when set), 12 yaws,
+    /// poses verified.
+    fn default() -> Self {
+        PcrnetSceneOptions {
+            step: 4,
+            candidates: 3,
+            up: [0.0, 0.0, 1.0],
+            yaws: scene::DEFAULT_YAWS as u32,
+            plane_normal: [0.0; 3],
+            plane_offset: 0.0,
+            has_up: false,
+            has_plane: false,
+            verify: true,
+        }
+    }
+}
+
 impl PcrnetSceneOptions {
     /// The Rust scene options these give for an object of `radius` user
     /// units: [`SceneOptions::for_object`] with this step, plane, check, up
@@ -180,19 +199,8 @@ pub unsafe extern "C" fn pcrnet_scene_options_default(out: *mut PcrnetSceneOptio
     if out.is_null() {
         return;
     }
-    let defaults = PcrnetSceneOptions {
-        step: 4,
-        candidates: 3,
-        up: [0.0, 0.0, 1.0],
-        yaws: scene::DEFAULT_YAWS as u32,
-        plane_normal: [0.0; 3],
-        plane_offset: 0.0,
-        has_up: false,
-        has_plane: false,
-        verify: true,
-    };
     // SAFETY: non-null; the caller's contract.
-    unsafe { out.write(defaults) };
+    unsafe { out.write(PcrnetSceneOptions::default()) };
 }
 
 /// Finds the model's object in a depth frame and registers it: the

@@ -149,6 +149,18 @@ impl Pose {
             .all(|v| v.is_finite())
     }
 
+    /// `|q . q_other|`, the cosine of half the angle between the two
+    /// rotations (1: the same rotation; the quaternions' signs do not matter).
+    pub fn rotation_cosine(&self, other: &Pose) -> f32 {
+        let dot: f32 = self
+            .rotation
+            .iter()
+            .zip(other.rotation)
+            .map(|(a, b)| a * b)
+            .sum();
+        libm::fabsf(dot)
+    }
+
     /// `||T - I||_F^2` of the 4x4 matrix: how far the pose is from the identity.
     pub fn distance_to_identity_squared(&self) -> f32 {
         let r = self.rotation_matrix();

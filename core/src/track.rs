@@ -76,19 +76,13 @@ pub const MAX_STEP_SHIFT: f32 = 0.25;
 
 /// Whether `refined` is within one step's reach of `start` (model frame).
 fn within_step(start: &Pose, refined: &Pose) -> bool {
-    let dot: f32 = start
-        .rotation
-        .iter()
-        .zip(refined.rotation)
-        .map(|(a, b)| a * b)
-        .sum();
     let shift: f32 = start
         .translation
         .iter()
         .zip(refined.translation)
         .map(|(a, b)| (a - b) * (a - b))
         .sum();
-    libm::fabsf(dot) >= MAX_STEP_TURN_COS && shift <= MAX_STEP_SHIFT * MAX_STEP_SHIFT
+    start.rotation_cosine(refined) >= MAX_STEP_TURN_COS && shift <= MAX_STEP_SHIFT * MAX_STEP_SHIFT
 }
 
 /// One tracking step with `pass` the network pass a fallback registration

@@ -149,16 +149,11 @@ fn registration_words(r: &PcrnetRegistration) -> String {
 fn locate_line(model: &Int8Model<'_>, depth: &[u16], scratch: &mut [i8]) -> String {
     use pcrnet::{PcrnetLocated, PcrnetSceneOptions};
     use pcrnet_core::testing::scene as harness;
+    // As firmware-c/main.c sets them: the defaults, up z.
     let scene = PcrnetSceneOptions {
-        step: 4,
-        candidates: 3,
-        up: [0.0, 0.0, 1.0],
-        yaws: pcrnet_core::scene::DEFAULT_YAWS as u32,
-        plane_normal: [0.0; 3],
-        plane_offset: 0.0,
         has_up: true,
-        has_plane: false,
-        verify: true,
+        up: [0.0, 0.0, 1.0],
+        ..PcrnetSceneOptions::default()
     };
     let options = scene.scene_options(model.object_radius());
     let mut labels = vec![0u16; pcrnet_core::scene::labels_len(FRAME.0, FRAME.1, options.step)];

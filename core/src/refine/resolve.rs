@@ -61,8 +61,7 @@ const KEPT: usize = 4;
 
 /// Whether two rotations differ by more than the rival's least turn.
 pub(crate) fn apart(a: &Pose, b: &Pose) -> bool {
-    let dot: f32 = a.rotation.iter().zip(b.rotation).map(|(x, y)| x * y).sum();
-    libm::fabsf(dot) <= RIVAL_MIN_TURN_COS
+    a.rotation_cosine(b) <= RIVAL_MIN_TURN_COS
 }
 
 /// A turned hypothesis replaces the network's own pose only when its

@@ -72,15 +72,8 @@ pub fn explains(ambiguity: &Ambiguity, est: &Pose, r_gt: &Mat3) -> bool {
         metrics::rotation_error_deg(&other.rotation_matrix(), r_gt) < GOOD_BELOW_DEG
     });
     let axis_explains = ambiguity.axis.is_some_and(|a| {
-        let r = est.rotation_matrix();
-        // The error rotation R_est R_gt^T, a motion of the template's frame.
-        let m: [[f64; 3]; 3] = std::array::from_fn(|i| {
-            std::array::from_fn(|j| {
-                (0..3)
-                    .map(|k| f64::from(r[i][k]) * f64::from(r_gt[j][k]))
-                    .sum()
-            })
-        });
+        // The error rotation, a motion of the template's frame.
+        let m = metrics::error_rotation(&est.rotation_matrix(), r_gt);
         let axis = [m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1]];
         let norm = axis.iter().map(|v| v * v).sum::<f64>().sqrt();
         let dot: f64 = (0..3).map(|k| axis[k] * f64::from(a.direction[k])).sum();

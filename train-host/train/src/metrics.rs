@@ -27,17 +27,24 @@ use crate::geometry::Mat3;
 /// the `acos` form has a floor of about 0.02 degrees: a rotation compared
 /// with itself did not score 0).
 pub fn rotation_error_deg(r_est: &Mat3, r_gt: &Mat3) -> f64 {
+    let m = error_rotation(r_est, r_gt);
+    let tr = m[0][0] + m[1][1] + m[2][2];
+    let axis = [m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1]];
+    let sin = 0.5 * axis.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let cos = 0.5 * (tr - 1.0);
+    sin.atan2(cos).to_degrees()
+}
+
+/// The error rotation `R_est R_gt^T` in f64: the turn that takes the true
+/// rotation to the estimate, in the frame both map onto (the template's).
+pub fn error_rotation(r_est: &Mat3, r_gt: &Mat3) -> [[f64; 3]; 3] {
     let mut m = [[0f64; 3]; 3];
     for (i, row) in m.iter_mut().enumerate() {
         for (j, v) in row.iter_mut().enumerate() {
             *v = (0..3).map(|k| r_est[i][k] as f64 * r_gt[j][k] as f64).sum();
         }
     }
-    let tr = m[0][0] + m[1][1] + m[2][2];
-    let axis = [m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1]];
-    let sin = 0.5 * axis.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let cos = 0.5 * (tr - 1.0);
-    sin.atan2(cos).to_degrees()
+    m
 }
 
 /// Translation error: the Euclidean norm of `t_est - t_gt`, in f64.
