@@ -116,7 +116,10 @@ impl fmt::Display for Error {
         match *self {
             Error::BadMagic => write!(f, "not a model blob: magic bytes `PCRN` missing"),
             Error::UnsupportedVersion { found } => {
-                let reads = crate::header::FORMAT_VERSION;
+                let (oldest, reads) = (
+                    crate::header::OLDEST_READABLE,
+                    crate::header::FORMAT_VERSION,
+                );
                 if found > reads {
                     write!(
                         f,
@@ -125,7 +128,7 @@ impl fmt::Display for Error {
                 } else {
                     write!(
                         f,
-                        "unsupported model format version {found} (this build reads {reads}); re-export the model with `pcrnet export`, or upgrade a version-2 f32 blob with `pcrnet upgrade`"
+                        "unsupported model format version {found} (this build reads {oldest} to {reads}); re-export the model with `pcrnet export`, or upgrade a version-2 f32 blob with `pcrnet upgrade`"
                     )
                 }
             }

@@ -3,12 +3,19 @@
 //! ```text
 //! offset  size  field
 //! 0       4     magic  b"PCRN"
-//! 4       2     format version, u16 little-endian (currently 3)
+//! 4       2     format version, u16 little-endian (currently 4; 3 is read too)
 //! 6       1     kind: 0 = int8 (device), 1 = f32 (host reference)
 //! 7       4     payload length P, u32 little-endian
-//! 11      P     payload: postcard encoding of Int8Payload or F32Payload
+//! 11      P     payload: postcard encoding of Int8Payload or F32Payload,
+//!               then (format 4) of Option<NearestTable>
 //! 11+P    4     CRC-32 (ISO-HDLC, as zlib) of bytes 0 .. 11+P, little-endian
 //! ```
+//!
+//! Format 4 adds only the template's closest-point table after the payload
+//! ([`NearestTable`]: a precomputed answer to the nearest-point search, which
+//! makes ICP several times cheaper); a format-3 blob reads as one without a
+//! table and gives the same results, more slowly. `pcrnet upgrade` adds the
+//! table to a format-3 blob.
 //!
 //! The payload starts with the architecture ([`Arch`]), the template's
 //! [`Frame`] and [`TemplateCloud`] and, for int8, the quantization
@@ -26,7 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::arch::{Arch, MAX_LAYERS};
 use crate::error::{Error, Result};
-pub use crate::header::{FORMAT_VERSION, ModelKind};
+pub use crate::header::{FORMAT_VERSION, ModelKind, OLDEST_READABLE};
 
 /// First four bytes of every blob.
 pub const MAGIC: [u8; 4] = *b"PCRN";
@@ -110,6 +117,40 @@ pub struct TemplateCloud<'a> {
     pub cells: &'a [u8],
     /// Symmetry turns (unit quaternions, model frame).
     pub turns: heapless::Vec<[f32; 4], MAX_TURNS>,
+}
+
+/// The template's closest-point table: for each cell of a box of cubic
+/// cells around the template, the stored points that can be the nearest
+/// to some place in the cell, so a search there scans a few points instead
+/// of walking the grid ([`crate::template`]).
+///
+/// - cell `(i, j, k)` (x slowest, z fastest) covers int16 steps
+///   `origin + (i, j, k) * edge ..= origin + (i, j, k) * edge + edge - 1`;
+/// - `offsets`: `dims[0] * dims[1] * dims[2] + 1` u16 little-endian
+///   offsets into `candidates`, counted in entries: cell `c` holds entries
+///   `offsets[c] .. offsets[c + 1]`;
+/// - `candidates`: u16 little-endian indices of template points (in the
+///   blob's sorted order), ascending within a cell. A cell without entries
+///   is not tabulated (its list would be too long): the grid search answers
+///   there, as it does outside the box.
+///
+/// A point is left out of a cell only when another point is strictly
+/// nearer to every place in the cell, so the table finds exactly the point
+/// the grid search finds, ties included. Built by
+/// [`crate::template::build_table`]; checked by
+/// [`crate::template::Template::new`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NearestTable<'a> {
+    /// Lowest corner of the box, int16 steps.
+    pub origin: [i16; 3],
+    /// Edge of a cell, int16 steps (>= 1).
+    pub edge: u16,
+    /// Cells along x, y and z (each >= 1).
+    pub dims: [u8; 3],
+    /// `cells + 1` u16 little-endian offsets into `candidates` (entries).
+    pub offsets: &'a [u8],
+    /// u16 little-endian template point indices.
+    pub candidates: &'a [u8],
 }
 
 /// One quantized hidden layer (encoder or head).
@@ -209,14 +250,39 @@ pub struct F32Payload<'a> {
     pub template_feature: &'a [u8],
 }
 
-/// Checks the envelope of a blob and returns its payload bytes.
-pub fn open(blob: &[u8], expected: ModelKind) -> Result<&[u8]> {
-    open_version(blob, expected, FORMAT_VERSION)
+/// Checks a model blob's envelope (magic, a version this build reads, kind,
+/// length, CRC) and decodes its payload and, from format 4, the template's
+/// closest-point table. The payload and table must use every payload byte.
+pub fn decode_model<'a, T: Deserialize<'a>>(
+    blob: &'a [u8],
+    expected: ModelKind,
+) -> Result<(T, Option<NearestTable<'a>>)> {
+    let (version, body) = envelope(blob, expected, |v| {
+        (OLDEST_READABLE..=FORMAT_VERSION).contains(&v)
+    })?;
+    let (payload, rest) = postcard::take_from_bytes::<T>(body).map_err(|_| Error::Malformed)?;
+    if version < 4 {
+        return if rest.is_empty() {
+            Ok((payload, None))
+        } else {
+            Err(Error::Malformed)
+        };
+    }
+    Ok((payload, decode(rest)?))
 }
 
-/// [`open`] for a blob of format `version` (tools that read older formats
-/// to upgrade them; this build decodes only [`FORMAT_VERSION`] payloads).
+/// Checks the envelope of a blob of format `version` exactly and returns
+/// its payload bytes (tools that read older formats to upgrade them).
 pub fn open_version(blob: &[u8], expected: ModelKind, version: u16) -> Result<&[u8]> {
+    envelope(blob, expected, |v| v == version).map(|(_, body)| body)
+}
+
+/// The version and payload bytes of a blob whose version `accept`s.
+fn envelope(
+    blob: &[u8],
+    expected: ModelKind,
+    accept: impl Fn(u16) -> bool,
+) -> Result<(u16, &[u8])> {
     let header = blob.get(..HEADER_LEN).ok_or(Error::Truncated {
         needed: HEADER_LEN + CRC_LEN,
         available: blob.len(),
@@ -237,7 +303,7 @@ pub fn open_version(blob: &[u8], expected: ModelKind, version: u16) -> Result<&[
     }
     let header = header?;
     let found = u16::from_le_bytes([header[4], header[5]]);
-    if found != version {
+    if !accept(found) {
         return Err(Error::UnsupportedVersion { found });
     }
     if header[6] != expected as u8 {
@@ -267,7 +333,7 @@ pub fn open_version(blob: &[u8], expected: ModelKind, version: u16) -> Result<&[
     if stored != computed {
         return Err(Error::BadCrc { stored, computed });
     }
-    Ok(&body[HEADER_LEN..])
+    Ok((found, &body[HEADER_LEN..]))
 }
 
 /// Decodes a payload, requiring that it is consumed exactly.
@@ -278,16 +344,30 @@ pub fn decode<'a, T: Deserialize<'a>>(payload: &'a [u8]) -> Result<T> {
     }
 }
 
-/// Bytes a blob of this payload takes.
-pub fn blob_len<T: Serialize>(payload: &T) -> Result<usize> {
-    let p = postcard::serialize_with_flavor(payload, postcard::ser_flavors::Size::default())
-        .map_err(|_| Error::Malformed)?;
-    Ok(HEADER_LEN + p + CRC_LEN)
+/// Bytes a blob of this payload and table takes.
+pub fn blob_len<T: Serialize>(payload: &T, table: Option<&NearestTable<'_>>) -> Result<usize> {
+    let size =
+        |bytes: core::result::Result<usize, postcard::Error>| bytes.map_err(|_| Error::Malformed);
+    let p = size(postcard::serialize_with_flavor(
+        payload,
+        postcard::ser_flavors::Size::default(),
+    ))?;
+    let t = size(postcard::serialize_with_flavor(
+        &table,
+        postcard::ser_flavors::Size::default(),
+    ))?;
+    Ok(HEADER_LEN + p + t + CRC_LEN)
 }
 
-/// Writes a blob (header, payload, CRC) into `out`, returning its length.
-pub fn write_blob<T: Serialize>(kind: ModelKind, payload: &T, out: &mut [u8]) -> Result<usize> {
-    let needed = blob_len(payload)?;
+/// Writes a blob of the current format (header, payload, table, CRC) into
+/// `out`, returning its length.
+pub fn write_blob<T: Serialize>(
+    kind: ModelKind,
+    payload: &T,
+    table: Option<&NearestTable<'_>>,
+    out: &mut [u8],
+) -> Result<usize> {
+    let needed = blob_len(payload, table)?;
     let available = out.len();
     let out = out
         .get_mut(..needed)
@@ -298,7 +378,11 @@ pub fn write_blob<T: Serialize>(kind: ModelKind, payload: &T, out: &mut [u8]) ->
     header[4..6].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
     header[6] = kind as u8;
     header[7..11].copy_from_slice(&(payload_len as u32).to_le_bytes());
-    postcard::to_slice(payload, &mut rest[..payload_len]).map_err(|_| Error::Malformed)?;
+    let body = &mut rest[..payload_len];
+    let used = postcard::to_slice(payload, body)
+        .map_err(|_| Error::Malformed)?
+        .len();
+    postcard::to_slice(&table, &mut body[used..]).map_err(|_| Error::Malformed)?;
     let crc = CRC32.checksum(&out[..needed - CRC_LEN]);
     out[needed - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
     Ok(needed)

@@ -7,7 +7,7 @@
 //! layer widths by hand.
 
 use crate::arch::{MAX_LAYERS, MAX_TILE, int8_scratch_len};
-use crate::format::{CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, ModelKind};
+use crate::format::{CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, ModelKind, OLDEST_READABLE};
 
 // The header pattern in `int8_payload` spells these bytes out one by one.
 const _: () = assert!(HEADER_LEN == 11 && MAGIC.len() == 4);
@@ -76,7 +76,8 @@ pub const fn scratch_len_for(blob: &[u8], tile: usize) -> Option<usize> {
     Some(int8_scratch_len(encoder, head, tile))
 }
 
-/// The payload of a blob whose header says int8, this format version, and
+/// The payload of a blob whose header says int8, a format version this
+/// build reads, and
 /// a payload length that with the header and the CRC is the blob's length.
 const fn int8_payload(blob: &[u8]) -> Option<&[u8]> {
     let [m0, m1, m2, m3, v0, v1, kind, p0, p1, p2, p3, rest @ ..] = blob else {
@@ -85,7 +86,8 @@ const fn int8_payload(blob: &[u8]) -> Option<&[u8]> {
     if *m0 != MAGIC[0] || *m1 != MAGIC[1] || *m2 != MAGIC[2] || *m3 != MAGIC[3] {
         return None;
     }
-    if u16::from_le_bytes([*v0, *v1]) != FORMAT_VERSION || *kind != ModelKind::Int8 as u8 {
+    let version = u16::from_le_bytes([*v0, *v1]);
+    if version < OLDEST_READABLE || version > FORMAT_VERSION || *kind != ModelKind::Int8 as u8 {
         return None;
     }
     let payload_len = u32::from_le_bytes([*p0, *p1, *p2, *p3]) as usize;

@@ -205,7 +205,7 @@ pub fn random_int8_blob_with<'o>(
     // user units, which the model moves into its frame.
     let user = cloud.map(|p| [0, 1, 2].map(|k| p[k] / frame.scale + frame.centre[k]));
     let mut buf = [0i8; 3 * 4096];
-    let model = Int8Model::from_payload(payload.clone())?;
+    let model = Int8Model::from_payload(payload.clone(), None)?;
     let needed = model.scratch_len(1);
     let available = buf.len();
     let scratch = buf
@@ -216,7 +216,7 @@ pub fn random_int8_blob_with<'o>(
         *t = v as u8;
     }
     payload.template_feature = template;
-    let n = write_blob(ModelKind::Int8, &payload, out)?;
+    let n = write_blob(ModelKind::Int8, &payload, None, out)?;
     Ok(&out[..n])
 }
 
@@ -263,7 +263,7 @@ pub fn random_f32_blob_into<'o>(
         layers,
         template_feature: zeros,
     };
-    let model = crate::F32Model::from_payload(payload.clone())?;
+    let model = crate::F32Model::from_payload(payload.clone(), None)?;
     let mut scratch = [0f32; 3 * 4096];
     let needed = model.scratch_len();
     let available = scratch.len();
@@ -275,7 +275,7 @@ pub fn random_f32_blob_into<'o>(
         c.copy_from_slice(&v.to_le_bytes());
     }
     payload.template_feature = template;
-    let n = write_blob(ModelKind::F32, &payload, out)?;
+    let n = write_blob(ModelKind::F32, &payload, None, out)?;
     Ok(&out[..n])
 }
 

@@ -71,11 +71,10 @@ fn f32_blobs() -> Vec<Vec<u8>> {
     let plain = random_f32_blob_into(41, &[16, 32], &[32], &mut arena, &mut out)
         .unwrap()
         .to_vec();
-    let mut payload: F32Payload<'_> =
-        format::decode(format::open(&plain, ModelKind::F32).unwrap()).unwrap();
+    let mut payload: F32Payload<'_> = format::decode_model(&plain, ModelKind::F32).unwrap().0;
     payload.centre_source = true;
-    let mut centred = vec![0u8; format::blob_len(&payload).unwrap()];
-    format::write_blob(ModelKind::F32, &payload, &mut centred).unwrap();
+    let mut centred = vec![0u8; format::blob_len(&payload, None).unwrap()];
+    format::write_blob(ModelKind::F32, &payload, None, &mut centred).unwrap();
     vec![plain.clone(), centred]
 }
 

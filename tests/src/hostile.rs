@@ -45,9 +45,8 @@ fn wrapping_f32_head() -> anyhow::Result<Vec<u8>> {
     let (mut arena, mut out) = (vec![0u8; 1 << 20], vec![0u8; 1 << 20]);
     let small = random_f32_blob_into(9, &[8], &[], &mut arena, &mut out)
         .map_err(|e| anyhow::anyhow!("small f32 blob: {e:?}"))?;
-    let base: F32Payload<'_> =
-        format::decode(format::open(small, ModelKind::F32).map_err(|e| anyhow::anyhow!("{e:?}"))?)
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let (base, _): (F32Payload<'_>, _) =
+        format::decode_model(small, ModelKind::F32).map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let (f, h) = (FEATURE as usize, HEAD as usize);
     let floats = |n: usize| vec![0u8; 4 * n];
     let (enc_w, enc_b) = (floats(3 * f), floats(f));
@@ -67,8 +66,9 @@ fn wrapping_f32_head() -> anyhow::Result<Vec<u8>> {
         template_feature: &template_feature,
         ..base
     };
-    let mut blob = vec![0u8; format::blob_len(&payload).map_err(|e| anyhow::anyhow!("{e:?}"))?];
-    let n = format::write_blob(ModelKind::F32, &payload, &mut blob)
+    let mut blob =
+        vec![0u8; format::blob_len(&payload, None).map_err(|e| anyhow::anyhow!("{e:?}"))?];
+    let n = format::write_blob(ModelKind::F32, &payload, None, &mut blob)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     blob.truncate(n);
     Ok(blob)

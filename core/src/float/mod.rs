@@ -143,7 +143,8 @@ pub struct F32Model<'a> {
 impl<'a> F32Model<'a> {
     /// Parses and validates an f32 blob. Weights stay in `blob`.
     pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
-        Self::from_payload(format::decode(format::open(blob, ModelKind::F32)?)?)
+        let (payload, table) = format::decode_model(blob, ModelKind::F32)?;
+        Self::from_payload(payload, table)
     }
 
     /// The network (model frame).
@@ -233,8 +234,12 @@ impl<'a> F32Model<'a> {
             .network_pose_in(&self.frame, source, passes, tolerance, scratch)
     }
 
-    /// Validates an already decoded payload.
-    pub fn from_payload(p: F32Payload<'a>) -> Result<Self> {
+    /// Validates an already decoded payload and the template's
+    /// closest-point table, if any.
+    pub fn from_payload(
+        p: F32Payload<'a>,
+        table: Option<crate::format::NearestTable<'a>>,
+    ) -> Result<Self> {
         let mut layers = heapless::Vec::new();
         for l in &p.layers {
             check_bytes(l)?;
@@ -258,7 +263,7 @@ impl<'a> F32Model<'a> {
             network,
             passes: p.passes,
             frame: p.frame,
-            template: Template::new(p.template)?,
+            template: Template::new(p.template, table)?,
         })
     }
 }

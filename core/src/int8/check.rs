@@ -5,6 +5,7 @@ use super::Int8Model;
 use crate::arch::POSE_DIM;
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT};
+use crate::format::NearestTable;
 use crate::format::{
     Int8Layer, Int8Payload, check_frame, check_passes, expect_len, le_f32s, le_i32s,
 };
@@ -14,7 +15,10 @@ use crate::template::Template;
 impl<'a> Int8Model<'a> {
     /// Every check of [`Self::from_payload`]; returns the template.
     #[inline(never)]
-    pub(super) fn validate(p: &Int8Payload<'a>) -> Result<Template<'a>> {
+    pub(super) fn validate(
+        p: &Int8Payload<'a>,
+        table: Option<NearestTable<'a>>,
+    ) -> Result<Template<'a>> {
         let arch = &p.arch;
         arch.validate()?;
         if !(p.input_scale.is_finite() && p.input_scale > 0.0) {
@@ -53,7 +57,7 @@ impl<'a> Int8Model<'a> {
         )?;
         check_frame(&p.frame)?;
         check_passes(p.passes)?;
-        Template::new(p.template.clone())
+        Template::new(p.template.clone(), table)
     }
 }
 

@@ -80,8 +80,8 @@ impl<'a> Int8Model<'a> {
     /// program (the firmware example's `main` grew to 7.4 KB that way).
     #[inline(never)]
     pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
-        let payload: Int8Payload<'a> = format::decode(format::open(blob, ModelKind::Int8)?)?;
-        Self::from_payload(payload)
+        let (payload, table) = format::decode_model::<Int8Payload<'a>>(blob, ModelKind::Int8)?;
+        Self::from_payload(payload, table)
     }
 
     /// Parses a blob and checks that `scratch` can run it (one point per tile at least).
@@ -92,11 +92,14 @@ impl<'a> Int8Model<'a> {
     }
 
     /// Validates an already decoded payload (dimensions, parameter ranges,
-    /// accumulator bounds).
+    /// accumulator bounds) and the template's closest-point table, if any.
     #[inline(always)]
-    pub fn from_payload(p: Int8Payload<'a>) -> Result<Self> {
+    pub fn from_payload(
+        p: Int8Payload<'a>,
+        table: Option<format::NearestTable<'a>>,
+    ) -> Result<Self> {
         // Checked by reference, then moved once into the model.
-        let template = Self::validate(&p)?;
+        let template = Self::validate(&p, table)?;
         Ok(Int8Model { p, template })
     }
 

@@ -8,15 +8,23 @@
 //! a search never reads outside the blob and the cell bound it relies on is
 //! true.
 //!
+//! A format-4 blob also carries a closest-point table ([`NearestTable`],
+//! module `table`): where it covers a query, the search reads the
+//! query's cell's short list of candidates instead of walking the grid,
+//! and finds the same point.
+//!
 //! Distances are integers (squared int16 steps, `u64`), so the search gives
 //! the same neighbour on every target; ties keep the first point met in a
 //! fixed visiting order.
 
 use crate::error::{Error, Result};
-use crate::format::{Frame, TemplateCloud};
+use crate::format::{Frame, NearestTable, TemplateCloud};
 
 mod layout;
+mod table;
 pub use layout::{BuildOut, build, build_len};
+use table::Table;
+pub use table::{MAX_TABLE_CELLS, TableShape, build_table, table_len, table_work_len};
 
 /// Most cells per axis.
 pub const MAX_GRID: u8 = 32;
@@ -29,6 +37,7 @@ pub struct Template<'a> {
     cloud: TemplateCloud<'a>,
     len: usize,
     grid: i32,
+    table: Option<Table<'a>>,
 }
 
 /// The nearest template point to a query.
@@ -44,8 +53,9 @@ impl<'a> Template<'a> {
     /// Checks a blob's template cloud: at least one point, at most
     /// [`MAX_POINTS`], a grid of 1..=[`MAX_GRID`] cells per axis whose
     /// offsets ascend to the point count, every point inside its cell, a
-    /// finite positive step and finite unit turns.
-    pub fn new(cloud: TemplateCloud<'a>) -> Result<Self> {
+    /// finite positive step and finite unit turns; and its closest-point
+    /// table if there is one (see [`NearestTable`]).
+    pub fn new(cloud: TemplateCloud<'a>, table: Option<NearestTable<'a>>) -> Result<Self> {
         let bad = |what| Err(Error::InconsistentDimensions { what });
         if !cloud.points.len().is_multiple_of(6) {
             return bad("template points not a multiple of 6 bytes");
@@ -87,7 +97,13 @@ impl<'a> Template<'a> {
                 });
             }
         }
-        let t = Template { cloud, len, grid };
+        let table = table.map(|t| Table::new(t, len)).transpose()?;
+        let t = Template {
+            cloud,
+            len,
+            grid,
+            table,
+        };
         let mut start = 0usize;
         for c in 0..cells {
             let end = t.offset(c + 1);
@@ -105,6 +121,16 @@ impl<'a> Template<'a> {
             return bad("template cell offsets");
         }
         Ok(t)
+    }
+
+    /// The closest-point table, if the blob has one.
+    pub fn table(&self) -> Option<NearestTable<'a>> {
+        self.table.map(|t| t.stored())
+    }
+
+    /// The template as a blob stores it: its cloud.
+    pub fn cloud(&self) -> &TemplateCloud<'a> {
+        &self.cloud
     }
 
     /// Number of points.
@@ -233,10 +259,63 @@ impl<'a> Template<'a> {
     /// Of equally near points it returns the first it visits: the one in
     /// the nearest shell, then with the lowest index.
     ///
+    /// Where the closest-point table covers `q`, the candidates of its
+    /// cell are scanned instead ([`Self::nearest_listed`]): the same point.
+    ///
     /// All of it is i32 arithmetic but the squared distances (`SMULL` /
     /// `SMLAL` on a Cortex-M4): coordinates are int16, cell corners at most
     /// `32767 + 32 x 65535`.
     pub fn nearest(&self, q: [i16; 3], limit: u64) -> Option<Neighbour> {
+        match self.table.as_ref().and_then(|t| t.list(q)) {
+            Some(list) => self.nearest_listed(list, q, limit),
+            None => self.nearest_in_grid(q, limit),
+        }
+    }
+
+    /// The nearest of a table cell's candidates (u16 little-endian indices,
+    /// ascending) below `limit`. The list holds every point that can be
+    /// the nearest anywhere in the cell, ties included; a tie goes to the
+    /// point the grid search would meet first: the one in the nearer grid
+    /// shell around `q`'s cell, then the lower index (the list ascends).
+    fn nearest_listed(&self, list: &[u8], q: [i16; 3], limit: u64) -> Option<Neighbour> {
+        let mut best = Best {
+            index: usize::MAX,
+            bound: limit,
+        };
+        for entry in list.chunks_exact(2) {
+            let i = u16::from_le_bytes([entry[0], entry[1]]) as usize;
+            let d = distance_squared(self.point(i), q);
+            if d < best.bound
+                || (d == best.bound
+                    && best.index != usize::MAX
+                    && self.shell(i, q) < self.shell(best.index, q))
+            {
+                best = Best { index: i, bound: d };
+            }
+        }
+        (best.index != usize::MAX).then_some(Neighbour {
+            index: best.index,
+            distance_squared: best.bound,
+        })
+    }
+
+    /// The grid shell around `q`'s (clamped) cell that holds point `i`:
+    /// the Chebyshev distance of their cells.
+    fn shell(&self, i: usize, q: [i16; 3]) -> i32 {
+        let p = self.point(i);
+        let mut shell = 0;
+        for ((&pv, &qv), &origin) in p.iter().zip(&q).zip(&self.cloud.origin) {
+            let (a, b) = (
+                self.axis_cell(origin as i32, pv as i32),
+                self.axis_cell(origin as i32, qv as i32),
+            );
+            shell = shell.max((a - b).abs());
+        }
+        shell
+    }
+
+    /// [`Self::nearest`] by walking the grid.
+    fn nearest_in_grid(&self, q: [i16; 3], limit: u64) -> Option<Neighbour> {
         let ([x, y, z], [ox, oy, oz]) = (q, self.cloud.origin);
         let cell = self.cloud.cell as i32;
         let axis = |origin: i16, v: i16| Axis {
@@ -433,7 +512,7 @@ mod tests {
             cells: &mut cb,
         };
         let cloud = build(points, &normals, 1e-4, grid, &[], out).unwrap();
-        check(&Template::new(cloud).unwrap());
+        check(&Template::new(cloud, None).unwrap());
     }
 
     #[test]
@@ -522,7 +601,7 @@ mod tests {
             cells: &mut cb,
         };
         let cloud = build(&points, &normals, 1e-4, 2, &[[1.0, 0.0, 0.0, 0.0]], out).unwrap();
-        assert!(Template::new(cloud.clone()).is_ok());
+        assert!(Template::new(cloud.clone(), None).is_ok());
         // A point moved out of its cell.
         let mut moved = [0u8; 18];
         moved.copy_from_slice(cloud.points);
@@ -531,21 +610,21 @@ mod tests {
             points: &moved,
             ..cloud.clone()
         };
-        assert!(Template::new(bad).is_err());
+        assert!(Template::new(bad, None).is_err());
         let bad = TemplateCloud {
             step: f32::NAN,
             ..cloud.clone()
         };
-        assert!(Template::new(bad).is_err());
+        assert!(Template::new(bad, None).is_err());
         let zero = [0u8; 9];
         let bad = TemplateCloud {
             normals: &zero,
             ..cloud.clone()
         };
-        assert!(Template::new(bad).is_err());
+        assert!(Template::new(bad, None).is_err());
         let mut turns = heapless::Vec::new();
         let _ = turns.push([2.0, 0.0, 0.0, 0.0]);
         let bad = TemplateCloud { turns, ..cloud };
-        assert!(Template::new(bad).is_err());
+        assert!(Template::new(bad, None).is_err());
     }
 }

@@ -46,5 +46,5 @@ pub fn template_of(cloud: &[[f32; 3]], turns: &[[f32; 4]]) -> Template<'static> 
         cells: Box::leak(vec![0u8; nc].into_boxed_slice()),
     };
     let cloud = template::build(&q, &normals(cloud), STEP, 6, turns, out).unwrap();
-    Template::new(cloud).unwrap()
+    Template::new(cloud, None).unwrap()
 }

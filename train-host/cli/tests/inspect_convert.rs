@@ -25,7 +25,7 @@ fn inspect_writes_the_model_sizes_for_firmware() {
     let rust = run(&["inspect", "models/embedded-default-int8.pcrn", "--rust"]);
     let text = String::from_utf8_lossy(&rust.stdout);
     assert!(
-        text.contains("pub const BLOB_LEN: usize = 229602;"),
+        text.contains("pub const BLOB_LEN: usize = 272170;"),
         "{text}"
     );
     let f32 = run(&["inspect", "models/embedded-default-f32.pcrn", "--c-header"]);

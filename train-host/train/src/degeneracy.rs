@@ -33,7 +33,7 @@ pub fn source_degeneracy(
         refine::degeneracy(t, &subset, MIN_EXTENT)
     };
     if let Some(reference) = reference {
-        let t = Template::new(reference.cloud()).map_err(TemplateError::from)?;
+        let t = Template::new(reference.cloud(), reference.table()).map_err(TemplateError::from)?;
         return Ok(judge(&t, reference.frame));
     }
     let Some(blob) = blob else {

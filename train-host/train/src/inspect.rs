@@ -148,6 +148,30 @@ fn template_lines(
         template.turns().len(),
         1 + template.turns().len()
     );
+    match template.table() {
+        Some(t) => {
+            let cells: usize = t.dims.iter().map(|&d| d as usize).product();
+            let _ = writeln!(
+                s,
+                "  closest-point table: {} x {} x {} cells of {} steps, {} entries ({:.1} per cell): {} bytes of flash ({} offsets, {} entries)",
+                t.dims[0],
+                t.dims[1],
+                t.dims[2],
+                t.edge,
+                t.candidates.len() / 2,
+                t.candidates.len() as f64 / 2.0 / cells as f64,
+                t.offsets.len() + t.candidates.len(),
+                t.offsets.len(),
+                t.candidates.len()
+            );
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "  closest-point table: none (format 3, or exported without one): every search walks the grid; `pcrnet upgrade` adds one"
+            );
+        }
+    }
 }
 
 fn describe_f32(m: &F32Model<'_>, size: usize) -> String {

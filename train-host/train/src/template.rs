@@ -1,14 +1,15 @@
-//! What a blob records about its template (format v3), built on the host:
+//! What a blob records about its template (format 4), built on the host:
 //! the frame (how the template's units and axes map to the model frame),
-//! the subsampled template points with their search grid, the symmetry turns
-//! for flip resolution, and the template's feature. One place for all of it:
+//! the subsampled template points with their search grid and closest-point
+//! table, the symmetry turns for flip resolution, and the template's
+//! feature. One place for all of it:
 //! `export`, `quantize` and `register` with a template file go through
 //! [`Reference`] and [`bind`].
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use pcrnet_core::format::{
-    self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, TemplateCloud, write_blob,
+    self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, NearestTable, TemplateCloud, write_blob,
 };
 use pcrnet_core::template::{self, MAX_GRID};
 use pcrnet_core::{F32Model, Frame, Int8Model};
@@ -22,6 +23,34 @@ use pcrnet_io::sampling::farthest_point_sampling;
 pub const TEMPLATE_STEP: f32 = 1.0 / 16384.0;
 /// Template points stored by default: 6 bytes each (3 KB of flash).
 pub const DEFAULT_TEMPLATE_POINTS: usize = 512;
+
+/// How the exporter lays out the template's closest-point table
+/// ([`NearestTable`]): `across` cells over the template's widest side,
+/// `margin` more cells on every side, lists longer than `max_list` left
+/// to the grid search. Flash: 2 bytes per cell and per entry (`pcrnet
+/// inspect` reports both).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TableLayout {
+    /// Cells over the template's widest side.
+    pub across: u8,
+    /// Cells added on every side.
+    pub margin: u8,
+    /// Longest list kept.
+    pub max_list: usize,
+}
+
+/// The exporter's default table: 12 cells across, 4 cells of margin
+/// (queries up to a third of the template's size off its box), lists of up
+/// to 32 points. On the shipped template: 20 x 20 x 11 cells, 3.8 entries
+/// per cell, 42.5 KB of flash. Measured on the M4F (firmware example,
+/// default registration, 39.8 M instructions with this table): 16 cells
+/// across with 3 of margin 39.9 M (46.7 KB), 16 and 5 38.5 M (76 KB), 24
+/// and 4 39.1 M (104 KB), 8 and 5 43.2 M (38 KB); without a table 56.1 M.
+pub const DEFAULT_TABLE: TableLayout = TableLayout {
+    across: 12,
+    margin: 4,
+    max_list: 32,
+};
 
 /// Why a template cannot be recorded.
 #[derive(Debug, thiserror::Error)]
@@ -53,14 +82,68 @@ pub struct Reference {
     origin: [i16; 3],
     cell: u16,
     turns: Vec<[f32; 4]>,
+    table: Option<OwnedTable>,
+}
+
+/// A closest-point table's shape and owned bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OwnedTable {
+    shape: template::TableShape,
+    offsets: Vec<u8>,
+    candidates: Vec<u8>,
+}
+
+impl OwnedTable {
+    /// The table of `layout` for a stored template.
+    pub fn build(t: &template::Template<'_>, layout: TableLayout) -> Result<Self, TemplateError> {
+        let shape = template::TableShape::around(t, layout.across, layout.margin)?;
+        let mut work = vec![0u16; template::table_work_len(t.len())];
+        let (no, nc) = template::table_len(t, &shape, layout.max_list, &mut work)?;
+        let (mut offsets, mut candidates) = (vec![0u8; no], vec![0u8; nc]);
+        template::build_table(
+            t,
+            &shape,
+            layout.max_list,
+            &mut work,
+            &mut offsets,
+            &mut candidates,
+        )?;
+        Ok(OwnedTable {
+            shape,
+            offsets,
+            candidates,
+        })
+    }
+
+    /// The view a blob stores.
+    pub fn view(&self) -> NearestTable<'_> {
+        NearestTable {
+            origin: self.shape.origin,
+            edge: self.shape.edge,
+            dims: self.shape.dims,
+            offsets: &self.offsets,
+            candidates: &self.candidates,
+        }
+    }
 }
 
 impl Reference {
     /// Records `template` (user units): its frame, `stored` of its points
     /// (farthest-point subsampled in the model frame, from point 0) on the
     /// int16 grid with a search grid of about 2 points per cell, and the
-    /// half and quarter turns about its principal axes.
+    /// half and quarter turns about its principal axes, and the
+    /// [`DEFAULT_TABLE`] closest-point table.
     pub fn new(template: &[[f32; 3]], stored: usize) -> Result<Self, TemplateError> {
+        Self::with_table(template, stored, Some(DEFAULT_TABLE))
+    }
+
+    /// [`Self::new`] with the closest-point table laid out by `table`, or
+    /// none.
+    pub fn with_table(
+        template: &[[f32; 3]],
+        stored: usize,
+        table: Option<TableLayout>,
+    ) -> Result<Self, TemplateError> {
         if !(1..=template::MAX_POINTS).contains(&stored) {
             return Err(TemplateError::PointCount(stored));
         }
@@ -86,7 +169,7 @@ impl Reference {
             let c = template::build(&quantized, &normals, TEMPLATE_STEP, grid, &turns, out)?;
             (c.origin, c.cell)
         };
-        Ok(Reference {
+        let mut reference = Reference {
             frame,
             points: template.to_vec(),
             point_bytes,
@@ -96,7 +179,18 @@ impl Reference {
             origin,
             cell,
             turns,
-        })
+            table: None,
+        };
+        if let Some(layout) = table {
+            let t = template::Template::new(reference.cloud(), None)?;
+            reference.table = Some(OwnedTable::build(&t, layout)?);
+        }
+        Ok(reference)
+    }
+
+    /// The closest-point table a blob stores beside the cloud, if any.
+    pub fn table(&self) -> Option<NearestTable<'_>> {
+        self.table.as_ref().map(OwnedTable::view)
     }
 
     /// The view a payload stores.
@@ -228,7 +322,7 @@ pub fn int8_blob(
         template_feature: &zeros,
         ..payload.clone()
     };
-    let model = Int8Model::from_payload(draft.clone())?;
+    let model = Int8Model::from_payload(draft.clone(), reference.table())?;
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let feature: Vec<u8> = model
         .encode(&reference.points, &mut scratch)?
@@ -239,8 +333,9 @@ pub fn int8_blob(
         template_feature: &feature,
         ..draft
     };
-    let mut out = vec![0u8; format::blob_len(&done)?];
-    write_blob(ModelKind::Int8, &done, &mut out)?;
+    let table = reference.table();
+    let mut out = vec![0u8; format::blob_len(&done, table.as_ref())?];
+    write_blob(ModelKind::Int8, &done, table.as_ref(), &mut out)?;
     Int8Model::from_bytes(&out)?;
     Ok(out)
 }
@@ -254,7 +349,7 @@ pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u
         template_feature: &zeros,
         ..payload.clone()
     };
-    let model = F32Model::from_payload(draft.clone())?;
+    let model = F32Model::from_payload(draft.clone(), reference.table())?;
     let mut scratch = vec![0f32; model.tiled_scratch_len()];
     let feature: Vec<u8> = model
         .network()
@@ -266,8 +361,9 @@ pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u
         template_feature: &feature,
         ..draft
     };
-    let mut out = vec![0u8; format::blob_len(&done)?];
-    write_blob(ModelKind::F32, &done, &mut out)?;
+    let table = reference.table();
+    let mut out = vec![0u8; format::blob_len(&done, table.as_ref())?];
+    write_blob(ModelKind::F32, &done, table.as_ref(), &mut out)?;
     F32Model::from_bytes(&out)?;
     Ok(out)
 }
@@ -285,7 +381,7 @@ pub fn bind_reference(blob: &[u8], reference: &Reference) -> Result<Vec<u8>, Tem
     match Int8Model::from_bytes(blob) {
         Ok(m) => int8_blob(m.payload(), reference),
         Err(pcrnet_core::Error::WrongKind { .. }) => {
-            let payload: F32Payload<'_> = format::decode(format::open(blob, ModelKind::F32)?)?;
+            let (payload, _): (F32Payload<'_>, _) = format::decode_model(blob, ModelKind::F32)?;
             f32_blob(&payload, reference)
         }
         Err(e) => Err(e.into()),
@@ -306,7 +402,8 @@ mod tests {
             .collect();
         let r = Reference::new(&metres, 256).unwrap();
         assert!((r.frame.scale - 1.0 / 3.0).abs() < 1e-3, "{:?}", r.frame);
-        let t = template::Template::new(r.cloud()).unwrap();
+        let t = template::Template::new(r.cloud(), r.table()).unwrap();
+        assert!(t.table().is_some());
         assert_eq!(t.len(), 256);
         assert_eq!(t.turns().len(), PRINCIPAL_TURNS);
         // Stored points lie in the unit box of the model frame.

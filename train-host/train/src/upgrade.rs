@@ -1,5 +1,11 @@
-//! Upgrading a format-2 f32 blob (before frames and template points) to
-//! the current format: `pcrnet upgrade`.
+//! Upgrading older blobs to the current format: `pcrnet upgrade`.
+//!
+//! A format-3 blob of either kind differs from format 4 only in lacking
+//! the template's closest-point table ([`add_table`]): its payload is kept
+//! byte for byte and the table is built from its stored template.
+//!
+//! A format-2 f32 blob (before frames and template points) needs its
+//! template recorded afresh.
 //!
 //! A version-2 f32 blob holds every weight of the network, so nothing is
 //! lost: its weights are read, the template is recorded afresh
@@ -12,7 +18,8 @@ use serde::Deserialize;
 
 use pcrnet_core::Arch;
 use pcrnet_core::float::LeF32;
-use pcrnet_core::format::{self, F32Layer, ModelKind};
+use pcrnet_core::format::{self, F32Layer, F32Payload, Int8Payload, ModelKind, write_blob};
+use pcrnet_core::template::Template;
 
 use crate::net::F32Params;
 
@@ -30,9 +37,18 @@ struct F32PayloadV2<'a> {
 /// Why a blob cannot be upgraded.
 #[derive(Debug, thiserror::Error)]
 pub enum UpgradeError {
+    /// Already the current format.
+    #[error("the blob is already format {0}, the current one: nothing to upgrade")]
+    Current(u16),
+    /// A format-3 blob that does not decode.
+    #[error("not a sound format-3 blob")]
+    DamagedFormat3(#[source] pcrnet_core::Error),
+    /// Its template's closest-point table could not be built.
+    #[error("building the template's closest-point table")]
+    Table(#[source] crate::template::TemplateError),
     /// The blob is of another format.
     #[error(
-        "the blob is format {found}, not 2: only format-2 blobs need an upgrade (a format-3 blob is current)"
+        "the blob is format {found}, not 2: only format-2 f32 blobs are exported afresh (a format-3 blob gains its closest-point table; format 4 is current)"
     )]
     NotFormat2 {
         /// The format found.
@@ -70,6 +86,49 @@ pub fn read_v2_f32(blob: &[u8]) -> Result<(F32Params, bool), UpgradeError> {
     let zeros = vec![0u8; 4 * payload.arch.feature_dim()];
     let net = pcrnet_core::float::F32Network::new(payload.arch, layers, LeF32(&zeros))?;
     Ok((F32Params::from_network(&net), payload.centre_source))
+}
+
+/// The format-3 blob `blob` (int8 or f32) as format 4: the same payload
+/// and the template's [`crate::template::DEFAULT_TABLE`] closest-point
+/// table. Returns the kind and the new blob.
+pub fn add_table(blob: &[u8]) -> Result<(ModelKind, Vec<u8>), UpgradeError> {
+    let found = blob
+        .get(4..6)
+        .map_or(0, |v| u16::from_le_bytes([v[0], v[1]]));
+    if found == format::FORMAT_VERSION {
+        return Err(UpgradeError::Current(found));
+    }
+    let damaged = UpgradeError::DamagedFormat3;
+    let table = |cloud: &format::TemplateCloud<'_>| {
+        let t = Template::new(cloud.clone(), None).map_err(damaged)?;
+        crate::template::OwnedTable::build(&t, crate::template::DEFAULT_TABLE)
+            .map_err(UpgradeError::Table)
+    };
+    match format::open_version(blob, ModelKind::Int8, 3) {
+        Ok(body) => {
+            let p: Int8Payload<'_> = format::decode(body).map_err(damaged)?;
+            with_table(ModelKind::Int8, &p, &table(&p.template)?)
+        }
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            let body = format::open_version(blob, ModelKind::F32, 3).map_err(damaged)?;
+            let p: F32Payload<'_> = format::decode(body).map_err(damaged)?;
+            with_table(ModelKind::F32, &p, &table(&p.template)?)
+        }
+        Err(e) => Err(damaged(e)),
+    }
+}
+
+/// A current blob of `payload` and `table`.
+fn with_table(
+    kind: ModelKind,
+    payload: &impl serde::Serialize,
+    table: &crate::template::OwnedTable,
+) -> Result<(ModelKind, Vec<u8>), UpgradeError> {
+    let view = table.view();
+    let mut out =
+        vec![0u8; format::blob_len(payload, Some(&view)).map_err(UpgradeError::DamagedFormat3)?];
+    write_blob(kind, payload, Some(&view), &mut out).map_err(UpgradeError::DamagedFormat3)?;
+    Ok((kind, out))
 }
 
 #[cfg(test)]
@@ -137,7 +196,60 @@ mod tests {
         )
         .unwrap();
         let e = read_v2_f32(&shipped).unwrap_err();
-        assert!(matches!(e, UpgradeError::NotFormat2 { found: 3 }));
-        assert!(e.to_string().contains("format 3, not 2"), "{e}");
+        assert!(matches!(e, UpgradeError::NotFormat2 { found: 4 }));
+        assert!(e.to_string().contains("format 4, not 2"), "{e}");
+    }
+
+    /// The shipped blob under format 3's header (its payload alone).
+    fn as_format_3(blob: &[u8], kind: ModelKind) -> Vec<u8> {
+        let body = format::open_version(blob, kind, 4).unwrap();
+        let (payload_len, table_len) = match kind {
+            ModelKind::Int8 => {
+                let (_, rest) = postcard::take_from_bytes::<Int8Payload<'_>>(body).unwrap();
+                (body.len() - rest.len(), rest.len())
+            }
+            ModelKind::F32 => {
+                let (_, rest) = postcard::take_from_bytes::<F32Payload<'_>>(body).unwrap();
+                (body.len() - rest.len(), rest.len())
+            }
+        };
+        assert!(table_len > 1000, "the shipped blob carries a table");
+        let mut v3 = MAGIC.to_vec();
+        v3.extend_from_slice(&3u16.to_le_bytes());
+        v3.push(kind as u8);
+        v3.extend_from_slice(&(payload_len as u32).to_le_bytes());
+        v3.extend_from_slice(&body[..payload_len]);
+        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&v3);
+        v3.extend_from_slice(&crc.to_le_bytes());
+        v3
+    }
+
+    /// A format-3 blob of either kind gains the default table and nothing
+    /// else: the shipped blobs are exactly their format-3 forms upgraded.
+    #[test]
+    fn format_3_blobs_gain_their_table() {
+        let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+        for (name, kind) in [
+            ("embedded-default-int8.pcrn", ModelKind::Int8),
+            ("embedded-default-f32.pcrn", ModelKind::F32),
+        ] {
+            let shipped = std::fs::read(models.join(name)).unwrap();
+            let old = as_format_3(&shipped, kind);
+            let (found, upgraded) = add_table(&old).unwrap();
+            assert_eq!(found, kind);
+            assert!(
+                upgraded == shipped,
+                "{name}: upgrade differs from the shipped blob"
+            );
+            assert!(matches!(add_table(&shipped), Err(UpgradeError::Current(4))));
+            let mut damaged = old.clone();
+            damaged[HEADER_LEN + 5] ^= 1;
+            assert!(matches!(
+                add_table(&damaged),
+                Err(UpgradeError::DamagedFormat3(
+                    pcrnet_core::Error::BadCrc { .. }
+                ))
+            ));
+        }
     }
 }

@@ -51,12 +51,15 @@ pub(super) fn load_template(
 /// Arguments of `pcrnet upgrade`.
 #[derive(Debug, Clone, Args)]
 pub struct UpgradeArgs {
-    /// A format-2 f32 blob (it holds all the weights).
+    /// A format-3 blob of either kind (the closest-point table is added:
+    /// model-int8.pcrn or model-f32.pcrn in --out), or a format-2 f32 blob
+    /// (it holds all the weights: both blobs are exported afresh).
     #[arg(long)]
     pub model: PathBuf,
-    /// The template cloud to record (any format `pcrnet` reads, any units).
+    /// The template cloud to record (any format `pcrnet` reads, any units):
+    /// needed for a format-2 blob only.
     #[arg(long)]
-    pub template: PathBuf,
+    pub template: Option<PathBuf>,
     /// Points the template is reduced to, as in training.
     #[arg(long, default_value_t = 512, allow_negative_numbers = true)]
     pub points: usize,
@@ -80,14 +83,39 @@ pub struct UpgradeArgs {
     pub out: PathBuf,
 }
 
-/// Runs `pcrnet upgrade`: a format-2 f32 blob to current f32 and int8 blobs.
+/// Runs `pcrnet upgrade`: a format-3 blob gains its closest-point table; a
+/// format-2 f32 blob becomes current f32 and int8 blobs.
 pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
     let noise = parse_sigma(&args.noise, "--noise")?;
     let blob =
         std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
+    if blob.get(4..6) == Some(&3u16.to_le_bytes()[..]) {
+        let (kind, out) = crate::upgrade::add_table(&blob)
+            .with_context(|| format!("{}", args.model.display()))?;
+        let name = match kind {
+            pcrnet_core::format::ModelKind::Int8 => "model-int8.pcrn",
+            pcrnet_core::format::ModelKind::F32 => "model-f32.pcrn",
+        };
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("creating {}", args.out.display()))?;
+        let path = args.out.join(name);
+        std::fs::write(&path, out).with_context(|| format!("writing {}", path.display()))?;
+        println!(
+            "wrote {} (format {})",
+            path.display(),
+            pcrnet_core::format::FORMAT_VERSION
+        );
+        return Ok(());
+    }
     let (params, centre) =
         crate::upgrade::read_v2_f32(&blob).with_context(|| format!("{}", args.model.display()))?;
-    let reference = load_template(&args.template, args.points, args.template_points, args.seed)?;
+    let template = args.template.as_ref().ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: a format-2 blob needs --template (the cloud to record as its template)",
+            args.model.display()
+        )
+    })?;
+    let reference = load_template(template, args.points, args.template_points, args.seed)?;
     let pairs = data::PairConfig {
         noise: (noise[1] > 0.0).then_some(noise),
         centre,
