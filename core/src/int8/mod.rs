@@ -28,6 +28,7 @@
 
 mod check;
 mod encode;
+mod feature;
 mod head;
 mod prepared;
 

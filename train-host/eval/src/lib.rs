@@ -92,6 +92,10 @@ pub struct PairScore {
     /// turn, [`pcrnet_core::ambiguity`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambiguous: Option<bool>,
+    /// The relative feature distance of the device pipeline's pose
+    /// ([`pcrnet_core::Int8Model::feature_distance`], int8 blobs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub feature_distance: Option<f64>,
     /// The reported ambiguity explains the pose's error
     /// ([`symmetry::explains`]); `None` when none was reported.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -153,9 +157,17 @@ pub fn score(
     let one = |(index, p): (usize, &Pair)| -> Result<Scored, ScoreError> {
         progress.inc(1);
         let started = std::time::Instant::now();
-        let (pose, iterations, seconds, precision, check, failure) =
+        let (pose, iterations, seconds, precision, check, feature_distance, failure) =
             match methods::run(method, blob, Some(&p.template), &p.source) {
-                Ok(o) => (o.pose, o.iterations, o.seconds, o.precision, o.check, None),
+                Ok(o) => (
+                    o.pose,
+                    o.iterations,
+                    o.seconds,
+                    o.precision,
+                    o.check,
+                    o.feature_distance,
+                    None,
+                ),
                 Err(error @ methods::MethodError::NoModel(_)) => {
                     return Err(ScoreError {
                         index,
@@ -167,6 +179,7 @@ pub fn score(
                     Pose::IDENTITY,
                     0,
                     started.elapsed().as_secs_f64(),
+                    None,
                     None,
                     None,
                     Some(format!("pair {index}: {e}")),
@@ -186,6 +199,7 @@ pub fn score(
                     symmetry::add_s(&pose, &symmetry::truth(&p.r_gt, &p.t_gt), &p.template)
                         / symmetry::diameter(&p.template),
                 ),
+                feature_distance,
                 ambiguous: check.map(|c| c.ambiguity.is_ambiguous()),
                 explained: check
                     .filter(|c| c.ambiguity.is_ambiguous())

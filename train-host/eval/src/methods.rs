@@ -285,6 +285,9 @@ pub struct Outcome {
     pub trajectory: Option<Vec<Pose>>,
     /// The device pipeline's residual and flags.
     pub check: Option<pcrnet_core::Registration>,
+    /// The int8 device pipeline's pose checked in feature space
+    /// ([`pcrnet_core::Int8Model::feature_distance`]; not timed).
+    pub feature_distance: Option<f64>,
     /// The source's shape does not determine a pose (every point in one
     /// place, or on one line), judged for every method by the device's
     /// rule ([`pcrnet_core::refine::degeneracy`]) in the template's frame:
@@ -327,6 +330,7 @@ pub fn run(
     source: &[[f32; 3]],
 ) -> Result<Outcome, MethodError> {
     let start = Instant::now();
+    let mut untimed = std::time::Duration::ZERO;
     let model = || blob.ok_or(MethodError::NoModel(method.kind));
     // One reference for the degeneracy verdict and the bound blob: each
     // takes several milliseconds to build, as long as a network pass.
@@ -361,12 +365,16 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: Some(r.trajectory),
                 check: None,
+                feature_distance: None,
                 degenerate,
             }
         }
         MethodKind::Device => {
             let blob = bound(model()?)?;
             let (r, precision) = pipeline(&blob, None, source, &method.device_options())?;
+            let checking = Instant::now();
+            let feature_distance = feature_distance(&blob, source, &r.pose);
+            untimed = checking.elapsed();
             Outcome {
                 pose: r.pose,
                 iterations: r.passes,
@@ -374,6 +382,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: None,
                 check: Some(r),
+                feature_distance,
                 degenerate,
             }
         }
@@ -393,6 +402,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: Some(r.trajectory),
                 check: None,
+                feature_distance: None,
                 degenerate,
             }
         }
@@ -409,6 +419,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: None,
                 check: None,
+                feature_distance: None,
                 degenerate,
             }
         }
@@ -423,8 +434,19 @@ pub fn run(
         out.pose = out.pose.then(&r.pose);
         out.trajectory = None;
     }
-    out.seconds = start.elapsed().as_secs_f64();
+    out.seconds = start.elapsed().saturating_sub(untimed).as_secs_f64();
     Ok(out)
+}
+
+/// The feature-space check of an int8 blob's pose (`None` for an f32 blob
+/// or when it fails: it is a measurement beside the registration).
+fn feature_distance(blob: &[u8], source: &[[f32; 3]], pose: &Pose) -> Option<f64> {
+    let model = pcrnet_core::Int8Model::from_bytes(blob).ok()?;
+    let mut scratch = vec![0i8; model.host_scratch_len()];
+    model
+        .feature_distance(source, pose, &mut scratch)
+        .ok()
+        .map(f64::from)
 }
 
 /// What is wrong with running a blob trained for `trained` passes as

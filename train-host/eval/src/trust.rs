@@ -127,6 +127,7 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
             "Resampled: each source is made from the shape's points that the template did not keep (no point shared with the template, as with a real sensor).".into(),
             format!("Held-out classes: {} with `mn10-seen5-ipcrnet`, the generalisation experiment's i-PCRNet trained on the other five ModelNet10 classes (its blob records 8 passes, which the device pipeline runs; i-PCRNet alone: up to 20 passes).", UNSEEN.join(", ")),
             "Plane / point residual AUROC: the probability that a good pose has a lower plane (point-to-plane) / point (point-to-point) residual than a bad one; the verdict is judged on the plane residual; bad / good flagged: shares marked not reliable.".into(),
+            "Feature AUROC: the same for the feature-space check of the int8 device pipeline's pose (`Int8Model::feature_distance`: the relative distance between the encoder's feature of the source moved by the pose and the template's; one more encoder pass, not part of the verdict); plane + feature: ranked by the mean of the two ranks.".into(),
         ],
         vec![table],
         started,
@@ -151,6 +152,8 @@ pub(super) fn table(raw: &[(String, MethodScore)]) -> Table {
             "errors > 30°",
             "plane residual AUROC",
             "point residual AUROC",
+            "feature AUROC",
+            "plane + feature AUROC",
             "bad flagged",
             "good flagged",
             "ms mean",
@@ -182,10 +185,56 @@ fn row(set: &str, s: &MethodScore) -> Vec<String> {
         c.and_then(|c| c.auroc)
             .map_or("-".into(), |a| format!("{a:.3}")),
         point_auroc(s).map_or("-".into(), |a| format!("{a:.3}")),
+        feature_auroc(s, false).map_or("-".into(), |a| format!("{a:.3}")),
+        feature_auroc(s, true).map_or("-".into(), |a| format!("{a:.3}")),
         c.map_or("-".into(), |c| format!("{:.1}%", 100.0 * c.bad_flagged)),
         c.map_or("-".into(), |c| format!("{:.1}%", 100.0 * c.good_flagged)),
         m.time_ms.map_or("-".into(), |t| format!("{:.1}", t.mean)),
     ]
+}
+
+/// The AUROC of the feature-space check (issue 36, item 3) alone, or
+/// combined with the plane residual as the mean of the two ranks (no
+/// weight to fit). `None` without feature distances. A pair without one
+/// (a failed registration) counts as the worst.
+fn feature_auroc(s: &MethodScore, with_plane: bool) -> Option<f64> {
+    if s.pairs.iter().all(|p| p.feature_distance.is_none()) {
+        return None;
+    }
+    let rot: Vec<f64> = s.pairs.iter().map(|p| p.rot_deg).collect();
+    let worst = |v: Option<f64>| v.unwrap_or(f64::INFINITY);
+    let feature: Vec<f64> = s.pairs.iter().map(|p| worst(p.feature_distance)).collect();
+    let score = if with_plane {
+        let plane: Vec<f64> = s.pairs.iter().map(|p| worst(p.plane_residual)).collect();
+        ranks(&feature)
+            .iter()
+            .zip(ranks(&plane))
+            .map(|(a, b)| (a + b) / 2.0)
+            .collect()
+    } else {
+        feature
+    };
+    let reliable: Vec<bool> = s.pairs.iter().map(|p| p.reliable == Some(true)).collect();
+    Confidence::of(&rot, &score, &reliable, GOOD_BELOW_DEG).auroc
+}
+
+/// Each value's rank (0-based, ties the mean of their ranks).
+fn ranks(values: &[f64]) -> Vec<f64> {
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    let mut out = vec![0.0; values.len()];
+    let mut i = 0;
+    while i < order.len() {
+        let mut j = i;
+        while j + 1 < order.len() && values[order[j + 1]] == values[order[i]] {
+            j += 1;
+        }
+        for &k in &order[i..=j] {
+            out[k] = (i + j) as f64 / 2.0;
+        }
+        i = j + 1;
+    }
+    out
 }
 
 /// The AUROC the point-to-point residual would give, for comparison with
@@ -203,4 +252,16 @@ fn point_auroc(s: &MethodScore) -> Option<f64> {
         .collect();
     let reliable: Vec<bool> = s.pairs.iter().map(|p| p.reliable == Some(true)).collect();
     Confidence::of(&rot, &residual, &reliable, GOOD_BELOW_DEG).auroc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ranks;
+
+    #[test]
+    fn ranks_share_ties() {
+        assert_eq!(ranks(&[0.3, 0.1, 0.3, 0.2]), vec![2.5, 0.0, 2.5, 1.0]);
+        assert_eq!(ranks(&[]), Vec::<f64>::new());
+        assert_eq!(ranks(&[f64::INFINITY, 1.0]), vec![1.0, 0.0]);
+    }
 }
