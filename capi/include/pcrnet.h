@@ -679,6 +679,28 @@ PcrnetStatus pcrnet_network_pose(const PcrnetModel *model,
 const char *pcrnet_status_message(int32_t status);
 
 /*
+ How far the points moved by `pose` `[qw, qx, qy, qz, tx, ty, tz]`
+ (source units, as `PcrnetRegistration` gives it) lie from the template
+ in the network's feature space: the relative distance between the
+ encoder's feature of the moved points and the template's (0: the same
+ feature; see `Int8Model::feature_distance`). One encoder pass over every
+ point. Writes it to `out` on success; a pose that is not finite is
+ `PCRNET_ERROR_NON_FINITE_RESULT`.
+
+ # Safety
+ `model` as `pcrnet_register`; `points` must point to `3 * n_points`
+ readable floats, `pose` to 7, `scratch` to `scratch_len` writable
+ bytes, `out` to a writable float (each may be null: an error).
+ */
+PcrnetStatus pcrnet_feature_distance(const PcrnetModel *model,
+                                     const float *points,
+                                     size_t n_points,
+                                     const float *pose,
+                                     int8_t *scratch,
+                                     size_t scratch_len,
+                                     float *out);
+
+/*
  The label elements (`uint16_t`) `pcrnet_locate` needs for a
  `width x height` frame sampled every `step` pixels (0 for a step of 0).
  */

@@ -49,10 +49,12 @@
 use core::ffi::c_char;
 use core::mem::{align_of, size_of};
 
+mod feature;
 mod locate;
 mod prepared;
 mod track;
 mod types;
+pub use feature::pcrnet_feature_distance;
 pub use locate::{
     PcrnetDepthImage, PcrnetLocated, PcrnetSceneOptions, pcrnet_locate, pcrnet_scene_labels_len,
     pcrnet_scene_options_default,

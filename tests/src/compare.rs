@@ -46,6 +46,8 @@ pub struct DeviceRun {
     pub registrations: BTreeMap<(usize, usize), DeviceRegistration>,
     /// Tracking steps, per (case index, option set index, start name).
     pub tracks: BTreeMap<(usize, usize, String), DeviceTrack>,
+    /// Feature-space checks, per (case index, option set index).
+    pub features: BTreeMap<(usize, usize), crate::feature::DeviceFeature>,
     /// The scene path, per model index.
     pub scenes: crate::scene::Scenes,
     /// Load verdict per model (`ok int8`, `ok f32`, `error ...`; see
@@ -212,6 +214,11 @@ pub fn parse(stdout: &str) -> DeviceRun {
             ["case", c, "track", rest @ ..] => tracking::parse_line(c, rest).map(|(key, step)| {
                 run.tracks.insert(key, step);
             }),
+            ["case", c, "feature", rest @ ..] => {
+                crate::feature::parse_line(c, rest).map(|(key, check)| {
+                    run.features.insert(key, check);
+                })
+            }
             ["case", c, "reg", k, "ok", rest @ ..] => c
                 .parse()
                 .ok()

@@ -24,6 +24,7 @@
 pub mod c_example;
 pub mod compare;
 pub mod elf;
+pub mod feature;
 pub mod hostile;
 pub mod layers;
 pub mod plan;

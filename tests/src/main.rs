@@ -29,7 +29,7 @@ use pcrnet_qemu_tests::plan::{Plan, build_cases, models};
 use pcrnet_qemu_tests::vectors::{
     Case, TestModel, container, describe, expected, expected_iterative, expected_registrations,
 };
-use pcrnet_qemu_tests::{c_example, elf, layers, qemu, scene, tracking};
+use pcrnet_qemu_tests::{c_example, elf, feature, layers, qemu, scene, tracking};
 
 struct Args {
     mutate: bool,
@@ -87,11 +87,12 @@ fn run_plans(
             let blob = &models[c.model].blob;
             let registrations = expected_registrations(blob, c);
             let tracks = tracking::expected(blob, c, &registrations);
+            let features = feature::expected(blob, c, &registrations);
             (
                 expected(blob, c),
                 expected_iterative(blob, c),
                 registrations,
-                tracks,
+                (tracks, features),
             )
         })
         .collect();
@@ -141,9 +142,19 @@ fn run_plans(
     let (mut passed, mut failed) = (0usize, 0usize);
     let (mut registrations, mut registrations_differ) = (0usize, 0usize);
     let (mut tracks, mut tracks_differ) = (0usize, 0usize);
-    for (i, (case, (host, host_iterative, host_registrations, host_tracks))) in
+    let (mut features, mut features_differ) = (0usize, 0usize);
+    for (i, (case, (host, host_iterative, host_registrations, (host_tracks, host_features)))) in
         cases.iter().zip(&expect).enumerate()
     {
+        let feature_verdicts: Vec<String> = host_features
+            .iter()
+            .filter_map(|(k, h)| {
+                let d = device.features.get(&(i, *k)).map(|d| &d.result);
+                feature::difference(h, d).map(|why| format!("feature check #{k}: {why}"))
+            })
+            .collect();
+        features += host_features.len();
+        features_differ += feature_verdicts.len();
         let track_verdicts: Vec<String> = host_tracks
             .iter()
             .filter_map(|((k, start), h)| {
@@ -178,7 +189,8 @@ fn run_plans(
                 .and_then(|h| iterative_difference(h, device.iterative.get(&i)))
         })
         .or_else(|| register_verdicts.into_iter().flatten().next())
-        .or_else(|| track_verdicts.into_iter().next());
+        .or_else(|| track_verdicts.into_iter().next())
+        .or_else(|| feature_verdicts.into_iter().next());
         match verdict {
             None => passed += 1,
             Some(why) => {
@@ -248,9 +260,10 @@ fn run_plans(
         println!("device run incomplete (no `done`, or unparsed lines)");
     }
     println!(
-        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical; {scenes} scenes, {} identical",
+        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical; {features} feature checks, {} identical; {scenes} scenes, {} identical",
         registrations - registrations_differ,
         tracks - tracks_differ,
+        features - features_differ,
         scenes - scenes_differ
     );
     println!(
@@ -374,6 +387,15 @@ fn report_figures(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
     if let Some([_, _, registration, track]) = figures(512) {
         println!("default registration, 512 points: {registration} instructions");
         println!("tracking step, 256 points: {track} instructions");
+    }
+    let check = demo(512).and_then(|(i, c)| {
+        let k = c.registrations.iter().position(|r| *r == default)?;
+        Some(device.features.get(&(i, k))?.instructions)
+    });
+    if let Some(check) = check {
+        println!(
+            "feature-space check (Int8Model::feature_distance), 512 points: {check} instructions"
+        );
     }
     let shipped = models
         .iter()

@@ -297,6 +297,19 @@ fn main() -> ! {
                 let Ok(r) = result else {
                     continue;
                 };
+                // The feature-space check of the pose (the rule of the
+                // host's `feature::checked`: default options only).
+                if options == Options::default() {
+                    let f0 = counter.instructions();
+                    let checked = model.feature_distance(cloud, &r.pose, scratch);
+                    let f1 = counter.instructions();
+                    line.clear();
+                    let _ = match checked {
+                        Ok(d) => write!(line, "case {c} feature {k} ok {} {:08x}", f1 - f0, d.to_bits()),
+                        Err(e) => write!(line, "case {c} feature {k} error {} {e:?}", f1 - f0),
+                    };
+                    emit(&line);
+                }
                 // Tracking from the registered pose (held), and with the
                 // default options also from its constant-velocity
                 // prediction after the identity (mostly a fallback).

@@ -1,0 +1,55 @@
+//! The feature-space check of a pose: `pcrnet_feature_distance`.
+
+use PcrnetStatus::*;
+use pcrnet_core::Pose;
+
+use crate::types::PcrnetStatus;
+use crate::{PcrnetModel, cloud, scratch_mut, slice};
+
+/// How far the points moved by `pose` `[qw, qx, qy, qz, tx, ty, tz]`
+/// (source units, as `PcrnetRegistration` gives it) lie from the template
+/// in the network's feature space: the relative distance between the
+/// encoder's feature of the moved points and the template's (0: the same
+/// feature; see `Int8Model::feature_distance`). One encoder pass over every
+/// point. Writes it to `out` on success; a pose that is not finite is
+/// `PCRNET_ERROR_NON_FINITE_RESULT`.
+///
+/// # Safety
+/// `model` as `pcrnet_register`; `points` must point to `3 * n_points`
+/// readable floats, `pose` to 7, `scratch` to `scratch_len` writable
+/// bytes, `out` to a writable float (each may be null: an error).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_feature_distance(
+    model: *const PcrnetModel,
+    points: *const f32,
+    n_points: usize,
+    pose: *const f32,
+    scratch: *mut i8,
+    scratch_len: usize,
+    out: *mut f32,
+) -> PcrnetStatus {
+    let run = || -> Result<f32, PcrnetStatus> {
+        let m = crate::model(model)?;
+        if pose.is_null() || out.is_null() {
+            return Err(PCRNET_ERROR_NULL_POINTER);
+        }
+        // SAFETY: non-null; the caller's contract (7 floats); alignment checked.
+        let p = unsafe { slice(pose, 7)? };
+        let pose = Pose {
+            rotation: [p[0], p[1], p[2], p[3]],
+            translation: [p[4], p[5], p[6]],
+        };
+        // SAFETY: the caller's contract for `points` and `scratch`.
+        let (source, scratch) =
+            unsafe { (cloud(points, n_points)?, scratch_mut(scratch, scratch_len)?) };
+        Ok(m.feature_distance(source, &pose, scratch)?)
+    };
+    match run() {
+        Ok(d) => {
+            // SAFETY: checked non-null in `run`; the caller's contract.
+            unsafe { out.write(d) };
+            PCRNET_OK
+        }
+        Err(s) => s,
+    }
+}
