@@ -131,9 +131,12 @@ fn a_box_reports_the_half_turn_that_fits_as_well() {
     assert_eq!(found.axis, None, "a box has no free axis");
     let turn = found.turn.expect("a box's half turns fit as well");
     assert!(turn.degrees > 175.0, "{turn:?}");
-    // The other pose is the chosen one turned: the motion composes to it.
+    // The other pose is the chosen one turned: the motion composes to it
+    // (up to f32 rounding: near 1 the dot product's ulp is 0.03 degrees of
+    // `acos`, and composing rounds a few ulps).
     let rival = r.rival.unwrap();
-    assert!(angle_deg(&r.pose.then(&turn.motion), &rival.pose) < 0.01);
+    let apart = angle_deg(&r.pose.then(&turn.motion), &rival.pose);
+    assert!(apart < 0.2, "{apart}");
     // The turn is one of the box's symmetries: about one of its axes.
     let [_, x, y, z] = turn.motion.rotation;
     let largest = x.abs().max(y.abs()).max(z.abs());

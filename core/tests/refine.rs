@@ -139,16 +139,3 @@ fn degenerate_sources_are_flagged() {
         assert_eq!(refine::degeneracy(&t, &subset, 1e-3), expected);
     }
 }
-
-/// Screening thins the used points by half, never below 32 of them.
-#[test]
-fn screening_subsets_keep_enough_points() {
-    let cloud = vec![[0.0f32; 3]; 512];
-    let count = |s: &Subset<'_>| cloud.len().div_ceil(s.stride);
-    let used = Subset::new(&cloud, Frame::IDENTITY, 256);
-    assert_eq!((count(&used), count(&used.thinned())), (256, 128));
-    let few = Subset::new(&cloud, Frame::IDENTITY, 40);
-    assert_eq!(few.thinned().stride, few.stride);
-    let tiny = Subset::new(&cloud[..5], Frame::IDENTITY, 256);
-    assert_eq!(tiny.thinned().stride, 1);
-}

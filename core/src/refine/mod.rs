@@ -40,15 +40,6 @@ pub struct Subset<'s> {
 /// this many points of at most 2^15 steps.
 pub const MAX_SUBSET: usize = 65_535;
 
-/// Turned starts are screened on every this-many-th used point
-/// ([`Subset::thinned`]): a wrong turn's fit is as poor on half the points
-/// as on all of them, and screening is most of a registration's search
-/// (see [`resolve`] for the measurements).
-pub const SCREEN_THIN: usize = 2;
-
-/// Screening keeps at least this many points (all, when there are fewer).
-pub const MIN_SCREEN_POINTS: usize = 32;
-
 impl<'s> Subset<'s> {
     /// Every point if the cloud has at most `max_points`, else a stride
     /// that keeps at most `max_points` (1..=[`MAX_SUBSET`]) of them.
@@ -58,19 +49,6 @@ impl<'s> Subset<'s> {
             source,
             frame,
             stride: div_ceil(source.len(), max).max(1),
-        }
-    }
-
-    /// The subset turned starts are screened on: every [`SCREEN_THIN`]-th
-    /// of these points, or fewer thinned so that at least
-    /// [`MIN_SCREEN_POINTS`] remain (all of them when there are fewer).
-    pub fn thinned(&self) -> Self {
-        let stride = NonZeroUsize::new(self.stride).unwrap_or(NonZeroUsize::MIN);
-        let used = div_ceil(self.source.len(), stride);
-        let thin = (used / MIN_SCREEN_POINTS).clamp(1, SCREEN_THIN);
-        Subset {
-            stride: stride.get().saturating_mul(thin),
-            ..*self
         }
     }
 

@@ -134,28 +134,11 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
         }
     }
 
-    /// `r`'s pose scored again on every used point, no further ICP.
-    fn rescore(&self, r: Resolved) -> Result<Resolved> {
-        let none = IcpSettings {
-            iterations: 0,
-            ..self.rest
-        };
-        let again = self.refine(r.pose, r.hypothesis, &none, self.subset)?;
-        Ok(Resolved {
-            icp_iterations: r.icp_iterations,
-            ..again
-        })
-    }
-
-    /// A finalist continues ICP on every used point; one whose screening
-    /// stopped on its own (converged, or too few pairs) is only scored on
-    /// them again if it was screened on fewer.
-    fn finish(&self, r: Resolved, screened_on_all: bool) -> Result<Resolved> {
+    /// A finalist continues ICP; one whose screening stopped on its own
+    /// (converged, or too few pairs) is done.
+    fn finish(&self, r: Resolved) -> Result<Resolved> {
         if self.rest.iterations == 0 || r.icp_iterations < self.first.iterations {
-            if screened_on_all {
-                return Ok(r);
-            }
-            return self.rescore(r);
+            return Ok(r);
         }
         let more = self.refine(r.pose, r.hypothesis, &self.rest, self.subset)?;
         Ok(Resolved {
@@ -164,17 +147,15 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
         })
     }
 
-    /// Screens every `(hypothesis, start)` on the thinned points; the one
-    /// with the lowest residual (the first on a tie) finishes.
+    /// Screens every `(hypothesis, start)`; the one with the lowest
+    /// residual (the first on a tie) finishes.
     fn best_of(&self, starts: impl IntoIterator<Item = (usize, Pose)>) -> Result<Option<Screened>> {
-        let thin = self.subset.thinned();
-        let all = thin.stride == self.subset.stride;
         // The lowest residuals so far, ascending (ties keep the earlier
         // start), at most one per fit: a start that ends near a kept one
         // (not [`apart`]) replaces it only if lower.
         let mut kept: [Option<Resolved>; KEPT] = [None; KEPT];
         for (hypothesis, from) in starts {
-            let r = self.refine(from, hypothesis, &self.first, &thin)?;
+            let r = self.refine(from, hypothesis, &self.first, self.subset)?;
             let same = kept
                 .iter()
                 .position(|k| k.is_some_and(|k| !apart(&k.pose, &r.pose)));
@@ -207,7 +188,7 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
             .find(|r| apart(&best.pose, &r.pose));
         Ok(Some(Screened {
             screened_residual: best.fit.residual,
-            best: self.finish(best, all)?,
+            best: self.finish(best)?,
             rival,
         }))
     }
@@ -226,26 +207,25 @@ struct Screened {
 
 /// Flip resolution. Starts are `start` (the network's pose) and `start`
 /// followed by each of the first `hypotheses - 1` template turns. The
-/// network's start gets `screen` ICP iterations on every used point; each
-/// turned start gets them on half the points ([`Subset::thinned`]). The
-/// network's start and the best-scoring turned start then continue
-/// ICP on every used point up to `icp.iterations` in all and are scored
-/// again (a turned start whose screening converged is only scored again).
+/// network's start and each turned start get `screen` ICP iterations. The
+/// network's start and the best-scoring turned start then continue ICP up
+/// to `icp.iterations` in all.
 /// The best turned pose wins only if its residual is below
 /// [`FLIP_MARGIN`] times the network's: the network's answer stands unless
 /// the template's points clearly favour a turn; the finalist that loses is
 /// the result's [`Resolved::rival`]. With
 /// `screen >= icp.iterations` every start gets the full ICP.
 ///
-/// Screening on half the points: measured with the shipped model on the
-/// `trust` experiment's pairs, the default registration on the Cortex-M4F
-/// takes 55.7 M instructions instead of 80.7 M (the firmware example),
-/// with ModelNet10 AUC 0.9967 (0.9967 before), resampled 0.9889 (0.9889)
-/// and unseen airplanes 0.9974 (0.9975), the same verdict rates. A quarter
-/// of the points (43 M) misranked a desk's right turn (AUC 0.9952, one
-/// pose 55 deg off). Two finalist turns gave 0.9973, but a second
-/// finalist that does not converge grinds through the whole ICP budget
-/// (K = 4: 64 M instead of 46 M), so one it is.
+/// Turned starts are screened on every used point. Screening them on half
+/// the points (sessions 40 to 42) took the default registration on the
+/// Cortex-M4F from 80.7 M to 55.7 M instructions with the same ModelNet10,
+/// resampled and airplane rows of the `trust` experiment, but the held-out
+/// classes' row (i-PCRNet trained on five other classes) fell from AUC
+/// 0.975 to 0.960 (three more poses above 30 degrees), which was not
+/// measured then: with the closest-point table, all points cost 49.9 M
+/// (half of them 39.8 M). Two finalist turns gave 0.9973 on ModelNet10,
+/// but a second finalist that does not converge grinds through the whole
+/// ICP budget (K = 4: 64 M instead of 46 M, before the table), so one it is.
 pub fn resolve(
     template: &Template<'_>,
     subset: &Subset<'_>,
@@ -258,7 +238,7 @@ pub fn resolve(
     let search = Search::new(template, subset, screen, icp_settings, max_distance);
     let turns = template.turns();
     let count = hypotheses.min(turns.len().saturating_add(1)).max(1);
-    let network = search.finish(search.refine(start, 0, &search.first, subset)?, true)?;
+    let network = search.finish(search.refine(start, 0, &search.first, subset)?)?;
     let turned = turns
         .iter()
         .enumerate()
@@ -286,9 +266,8 @@ pub fn resolve(
 }
 
 /// The best of `starts` (model frame, numbered by their hypothesis): each
-/// gets `screen` ICP iterations on half the used points
-/// ([`Subset::thinned`]), the one with the lowest residual continues on
-/// every used point up to `icp.iterations` in all. The best start that
+/// gets `screen` ICP iterations, the one with the lowest residual
+/// continues up to `icp.iterations` in all. The best start that
 /// ended elsewhere ([`RIVAL_MIN_TURN_COS`]) gets `screen` more iterations
 /// on every used point when its screened residual is within
 /// [`RIVAL_SCREEN_RATIO`] of the best's: it is the result's
