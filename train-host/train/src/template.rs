@@ -43,7 +43,8 @@ pub struct TableLayout {
 /// (queries up to a third of the template's size off its box), lists of up
 /// to 32 points. On the shipped template: 20 x 20 x 11 cells, 3.8 entries
 /// per cell, 42.5 KB of flash. Measured on the M4F (firmware example,
-/// default registration, 39.8 M instructions with this table): 16 cells
+/// default registration with turned starts screened on half their points
+/// as then, 39.8 M instructions with this table): 16 cells
 /// across with 3 of margin 39.9 M (46.7 KB), 16 and 5 38.5 M (76 KB), 24
 /// and 4 39.1 M (104 KB), 8 and 5 43.2 M (38 KB); without a table 56.1 M.
 pub const DEFAULT_TABLE: TableLayout = TableLayout {
