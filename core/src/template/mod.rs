@@ -260,7 +260,7 @@ impl<'a> Template<'a> {
     /// the nearest shell, then with the lowest index.
     ///
     /// Where the closest-point table covers `q`, the candidates of its
-    /// cell are scanned instead ([`Self::nearest_listed`]): the same point.
+    /// cell are scanned instead: the same point, ties broken alike.
     ///
     /// All of it is i32 arithmetic but the squared distances (`SMULL` /
     /// `SMLAL` on a Cortex-M4): coordinates are int16, cell corners at most
