@@ -4,23 +4,12 @@
 
 mod common;
 
-use common::{angle_deg, rotation};
+use common::{angle_deg, rotation, template};
 use pcrnet_core::pose::Pose;
 use pcrnet_core::testing::SplitMix64;
 use pcrnet_core::{Error, Int8Model};
 
 const MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
-const TEMPLATE: &str = include_str!("../../models/embedded-default-template.xyz");
-
-fn template() -> Vec<[f32; 3]> {
-    TEMPLATE
-        .lines()
-        .map(|l| {
-            let v: Vec<f32> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
-}
 
 #[test]
 fn the_true_pose_is_near_the_template_feature_a_wrong_one_is_not() {

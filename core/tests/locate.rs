@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{angle_deg, rotation};
+use common::{angle_deg, rotation, template};
 use pcrnet_core::locate;
 use pcrnet_core::pose::Pose;
 use pcrnet_core::scene::{self, DepthImage, SceneOptions};
@@ -13,21 +13,10 @@ use pcrnet_core::testing::scene::{Block, DEPTH_SCALE, Placed, Tabletop};
 use pcrnet_core::{Int8Model, Options};
 
 const MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
-const TEMPLATE: &str = include_str!("../../models/embedded-default-template.xyz");
 const W: usize = 224;
 const H: usize = 172;
 /// Camera to table, the template's units (the "L" is about 0.8 across).
 const DISTANCE: f32 = 2.5;
-
-fn template() -> Vec<[f32; 3]> {
-    TEMPLATE
-        .lines()
-        .map(|l| {
-            let v: Vec<f32> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
-}
 
 /// The template turned `deg` about the view axis and lying on a table
 /// `DISTANCE` below a camera looking straight down: its largest z (the

@@ -5,24 +5,13 @@
 
 mod common;
 
-use common::{angle_deg, rotation};
+use common::{angle_deg, rotation, template};
 use pcrnet_core::format::{self, CRC_LEN, HEADER_LEN, Int8Payload, MAGIC, ModelKind};
 use pcrnet_core::pose::Pose;
 use pcrnet_core::testing::SplitMix64;
 use pcrnet_core::{Int8Model, Options};
 
 const MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
-const TEMPLATE: &str = include_str!("../../models/embedded-default-template.xyz");
-
-fn template() -> Vec<[f32; 3]> {
-    TEMPLATE
-        .lines()
-        .map(|l| {
-            let v: Vec<f32> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
-}
 
 /// The shipped blob with its payload and no table: format 4 (`version`
 /// 4) or the format-3 header (`version` 3, written by hand as format 3's

@@ -5,23 +5,12 @@
 
 mod common;
 
-use common::{angle_deg, rotation};
+use common::{angle_deg, rotation, template};
 use pcrnet_core::pose::{self, Pose};
 use pcrnet_core::testing::SplitMix64;
 use pcrnet_core::{Error, Int8Model, Options, TrackOutcome};
 
 const MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
-const TEMPLATE: &str = include_str!("../../models/embedded-default-template.xyz");
-
-fn template() -> Vec<[f32; 3]> {
-    TEMPLATE
-        .lines()
-        .map(|l| {
-            let v: Vec<f32> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect()
-}
 
 /// A rotation of `deg` degrees about `axis`, then `translation`.
 fn posed(axis: [f32; 3], deg: f32, translation: [f32; 3]) -> Pose {

@@ -305,7 +305,12 @@ fn main() -> ! {
                     let f1 = counter.instructions();
                     line.clear();
                     let _ = match checked {
-                        Ok(d) => write!(line, "case {c} feature {k} ok {} {:08x}", f1 - f0, d.to_bits()),
+                        Ok(d) => write!(
+                            line,
+                            "case {c} feature {k} ok {} {:08x}",
+                            f1 - f0,
+                            d.to_bits()
+                        ),
                         Err(e) => write!(line, "case {c} feature {k} error {} {e:?}", f1 - f0),
                     };
                     emit(&line);
