@@ -273,9 +273,23 @@ pub struct ResultsArgs {
     /// Folder with the experiment reports.
     #[arg(long, default_value = "results")]
     pub results: PathBuf,
-    /// The Markdown file to write.
-    #[arg(long, default_value = "RESULTS.md")]
-    pub out: PathBuf,
+    /// The Markdown file to write (default: `RESULTS.md` beside the
+    /// reports' folder, so that `--results /tmp/run` writes
+    /// `/tmp/RESULTS.md`, never the repository's page).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+impl ResultsArgs {
+    /// Where the page goes: `--out`, or `RESULTS.md` beside `--results`.
+    pub fn out_path(&self) -> PathBuf {
+        self.out.clone().unwrap_or_else(|| {
+            self.results
+                .parent()
+                .unwrap_or(std::path::Path::new(""))
+                .join("RESULTS.md")
+        })
+    }
 }
 
 /// Runs `pcrnet pairs`.
@@ -450,7 +464,27 @@ pub fn experiment(args: ExperimentArgs) -> anyhow::Result<()> {
 /// Runs `pcrnet results`.
 pub fn results(args: ResultsArgs) -> anyhow::Result<()> {
     let md = experiments::render_results(&args.results)?;
-    std::fs::write(&args.out, md).with_context(|| format!("writing {}", args.out.display()))?;
-    eprintln!("wrote {}", args.out.display());
+    let out = args.out_path();
+    std::fs::write(&out, md).with_context(|| format!("writing {}", out.display()))?;
+    eprintln!("wrote {}", out.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_results_page_goes_beside_its_reports() {
+        let page = |results: &str, out: Option<&str>| {
+            ResultsArgs {
+                results: results.into(),
+                out: out.map(PathBuf::from),
+            }
+            .out_path()
+        };
+        assert_eq!(page("results", None), PathBuf::from("RESULTS.md"));
+        assert_eq!(page("/tmp/run", None), PathBuf::from("/tmp/RESULTS.md"));
+        assert_eq!(page("/tmp/run", Some("x.md")), PathBuf::from("x.md"));
+    }
 }
