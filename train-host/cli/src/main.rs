@@ -77,9 +77,10 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         head: Option<Vec<u16>>,
     },
-    /// Train PCRNet / i-PCRNet in f32 on ModelNet-style data or generated
-    /// shapes; writes checkpoints, a JSON-lines log and, at the end, both
-    /// blobs (f32 and int8, as `export`) into --out.
+    /// Train PCRNet / i-PCRNet / PointNetLK in f32 on ModelNet-style data
+    /// or generated shapes; writes checkpoints, a JSON-lines log and, at
+    /// the end, both blobs (f32 and int8, as `export`; none yet for
+    /// PointNetLK) into --out.
     Train(Box<pcrnet_train::cli::TrainArgs>),
     /// Export a training checkpoint to the f32 and int8 blobs, with the
     /// template's feature embedded.

@@ -181,6 +181,30 @@ const SEEN5_MORE: &[&str] = &[
     "20",
 ];
 
+/// PointNetLK trained as the paper trains it (issue 36, item 1): the
+/// generalisation experiment's five classes, the encoder learned through
+/// 10 Lucas-Kanade iterations (the PointNetLK reference's count) with the
+/// pose loss (PointNetLK's). No blobs: see [`lk_model`].
+pub const LK_RECIPE: Recipe = Recipe {
+    name: "mn10-seen5-pointnetlk",
+    input: Input::Data("ModelNet10"),
+    args: &[
+        EMBEDDED_ARGS,
+        &[
+            "--classes",
+            "bathtub,bed,chair,desk,dresser",
+            "--model",
+            "pointnetlk",
+            "--iterations",
+            "10",
+            "--loss",
+            "pose",
+            "--epochs",
+            "20",
+        ],
+    ],
+};
+
 /// Issue 11, item 6: the generalisation experiment's five-class model
 /// (`mn10-seen5-ipcrnet`) with every other shape of the data root added
 /// (the ModelNet40 airplanes and 1,000 generated shapes), for as many
@@ -219,6 +243,7 @@ impl Recipe {
         RECIPES
             .iter()
             .chain(std::iter::once(&PARTIAL_RECIPE))
+            .chain(std::iter::once(&LK_RECIPE))
             .chain(HELDOUT_RECIPES.iter())
             .chain(OBJECT_RECIPES.iter())
     }
@@ -276,19 +301,25 @@ struct TrainCommand {
     args: pcrnet_train::cli::TrainArgs,
 }
 
+/// Trains model `name` into `dir` by its [`Recipe`] (resuming a
+/// checkpoint there).
+fn train(ctx: &Context, name: &str, dir: &Path) -> anyhow::Result<()> {
+    let recipe = Recipe::named(name).with_context(|| format!("no recipe for model {name}"))?;
+    let args = recipe.command(&ctx.data, dir);
+    eprintln!("training {name}: pcrnet train {}", args.join(" "));
+    let cmd = TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))?;
+    let mut train_args = cmd.args;
+    train_args.resume = dir.join(pcrnet_train::CHECKPOINT_FILE).is_file();
+    pcrnet_train::cli::train(train_args)
+}
+
 /// Loads model `name` from `<work>/models/`, training it first (by its
 /// [`Recipe`]) when its blobs are missing.
 pub(super) fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
-    let recipe = Recipe::named(name).with_context(|| format!("no recipe for model {name}"))?;
     let dir = ctx.work.join("models").join(name);
     let (i8p, f32p) = (dir.join(INT8_BLOB), dir.join(F32_BLOB));
     if !(i8p.is_file() && f32p.is_file()) {
-        let args = recipe.command(&ctx.data, &dir);
-        eprintln!("training {name}: pcrnet train {}", args.join(" "));
-        let cmd = TrainCommand::try_parse_from(std::iter::once("train".to_string()).chain(args))?;
-        let mut train_args = cmd.args;
-        train_args.resume = dir.join(pcrnet_train::CHECKPOINT_FILE).is_file();
-        pcrnet_train::cli::train(train_args)?;
+        train(ctx, name, &dir)?;
     }
     let read = |p: &Path| std::fs::read(p).with_context(|| format!("reading {}", p.display()));
     Ok(Model {
@@ -298,17 +329,73 @@ pub(super) fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
     })
 }
 
+/// A trained PointNetLK model: an f32 blob of its parameters made in
+/// memory, for `--method pointnetlk` on the host only.
+pub struct LkModel {
+    name: String,
+    f32: Vec<u8>,
+}
+
+impl LkModel {
+    pub(super) fn f32(&self) -> Option<NamedBlob<'_>> {
+        Some((&self.name, &self.f32))
+    }
+}
+
+/// Loads PointNetLK model `name` from its checkpoint in `<work>/models/`,
+/// training it first (by its [`Recipe`]) until the checkpoint is finished.
+/// `pcrnet train` writes no blobs for PointNetLK (the format has no place
+/// for its Jacobian yet, and a device would run the untrained head), so
+/// the f32 blob is made here, in memory, and never written: its template
+/// (a generated shape) and its head are placeholders, since PointNetLK
+/// binds each pair's template and runs the encoder alone
+/// ([`crate::register::register_pointnetlk`]).
+pub(super) fn lk_model(ctx: &Context, name: &str) -> anyhow::Result<LkModel> {
+    let dir = ctx.work.join("models").join(name);
+    let path = dir.join(pcrnet_train::CHECKPOINT_FILE);
+    if !(path.is_file() && pcrnet_train::Checkpoint::load(&path)?.finished()) {
+        train(ctx, name, &dir)?;
+    }
+    let ck = pcrnet_train::Checkpoint::load(&path)?;
+    anyhow::ensure!(
+        matches!(ck.config.model, pcrnet_train::ModelKind::PointNetLk { .. }),
+        "{name} is not a PointNetLK model"
+    );
+    let placeholder = pcrnet_train::shapes::sample(pcrnet_train::shapes::Shape::Ell, 512, 1);
+    let reference = pcrnet_train::template::Reference::with_table(&placeholder, 512, None)?;
+    let trained = pcrnet_train::TrainedFor {
+        centre_source: ck.config.pairs.centre,
+        passes: 1,
+    };
+    Ok(LkModel {
+        name: name.to_string(),
+        f32: ck.params().to_f32_blob(&reference, trained)?,
+    })
+}
+
 impl Recorder<'_> {
     /// Loads model `name` ([`model`]) and records it with its training
     /// command in the report's provenance.
     pub(crate) fn model(&mut self, name: &str) -> anyhow::Result<Model> {
         let m = model(self.ctx, name)?;
+        self.provenance(name);
+        Ok(m)
+    }
+
+    /// Loads PointNetLK model `name` ([`lk_model`]) and records it as
+    /// [`Self::model`] does.
+    pub(crate) fn lk_model(&mut self, name: &str) -> anyhow::Result<LkModel> {
+        let m = lk_model(self.ctx, name)?;
+        self.provenance(name);
+        Ok(m)
+    }
+
+    fn provenance(&mut self, name: &str) {
         if let Some(r) = Recipe::named(name) {
             let cmd = r.command(&self.ctx.data, &self.ctx.work.join("models").join(name));
             self.models
                 .push((name.to_string(), format!("pcrnet train {}", cmd.join(" "))));
         }
-        Ok(m)
     }
 }
 

@@ -194,7 +194,7 @@ pub fn register_pointnetlk(
         .map(|i| stored.point(i).map(|v| v as f32 * stored.step()))
         .collect();
     let s: Vec<[f32; 3]> = source.iter().map(|&p| frame.to_model(p)).collect();
-    let lk = PointNetLk::new(&params, &t, 1e-2)?;
+    let lk = PointNetLk::new(&params, &t)?;
     let result = lk.register(&s, iterations, 1e-7)?;
     Ok(LkResult {
         pose: frame.pose_to_user(&result.pose),

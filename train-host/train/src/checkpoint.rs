@@ -86,6 +86,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 }
 
 impl Checkpoint {
+    /// Whether the run it saves has trained all its epochs.
+    pub fn finished(&self) -> bool {
+        self.progress.epoch >= self.config.epochs
+    }
+
     /// The parameters.
     pub fn params(&self) -> F32Params {
         F32Params {

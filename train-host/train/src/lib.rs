@@ -50,6 +50,7 @@ pub mod degeneracy;
 pub mod export;
 pub mod geometry;
 pub mod inspect;
+pub mod lk;
 pub mod loss;
 pub mod metrics;
 pub mod model;

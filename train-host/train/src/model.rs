@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use super::geometry::{
     self, IDENTITY, Mat3, compose, mat_mul, pose_from_raw, pose_from_raw_backward, transpose,
 };
+use super::lk;
 use super::loss::{self, LossKind};
 use super::ops;
 use crate::F32Params;
@@ -42,14 +43,23 @@ pub enum ModelKind {
         /// Passes per registration.
         iterations: usize,
     },
+    /// PointNetLK ([`crate::lk`]): the encoder trained through this many
+    /// Lucas-Kanade iterations (the PointNetLK reference trains with 10);
+    /// the head is not used.
+    PointNetLk {
+        /// LK iterations per registration.
+        iterations: usize,
+    },
 }
 
 impl ModelKind {
-    /// Number of passes.
+    /// Number of passes (LK iterations for PointNetLK).
     pub fn iterations(self) -> usize {
         match self {
             ModelKind::Pcrnet => 1,
-            ModelKind::Ipcrnet { iterations } => iterations.max(1),
+            ModelKind::Ipcrnet { iterations } | ModelKind::PointNetLk { iterations } => {
+                iterations.max(1)
+            }
         }
     }
 }
@@ -363,6 +373,9 @@ pub fn predict(
     b: usize,
     n: usize,
 ) -> Vec<(Mat3, [f32; 3])> {
+    if let ModelKind::PointNetLk { iterations } = model {
+        return lk::predict(params, iterations, template, source, b, n);
+    }
     run_passes(params, model.iterations(), template, source, b, n, false).2
 }
 
@@ -375,6 +388,9 @@ pub fn loss_and_grad(
     loss_kind: LossKind,
     batch: &Batch,
 ) -> StepOutput {
+    if let ModelKind::PointNetLk { iterations } = model {
+        return lk::loss_and_grad(params, iterations, loss_kind, batch);
+    }
     let (b, n) = (batch.size, batch.points);
     let (tc, cur, acc) = run_passes(
         params,

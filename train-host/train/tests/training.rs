@@ -136,6 +136,47 @@ fn training_learns() {
     }
 }
 
+/// PointNetLK trained through its LK layer (issue 36): a few dozen steps on
+/// generated shapes lower the pose loss and the validation rotation error
+/// of the LK iterations, on shapes it was not trained on.
+#[test]
+fn pointnetlk_learns() {
+    let train = Dataset::generated(6, 64, 7);
+    let val = Dataset::generated(4, 64, 8);
+    let cfg = TrainConfig {
+        encoder: vec![16, 32, 64],
+        head: vec![16],
+        model: ModelKind::PointNetLk { iterations: 5 },
+        batch: 8,
+        epochs: 1,
+        steps_per_epoch: Some(60),
+        lr: 3e-3,
+        schedule: Schedule::Constant,
+        loss: LossKind::Pose,
+        pairs: PairConfig {
+            max_deg: 30.0,
+            max_t: 0.3,
+            ..PairConfig::default()
+        },
+        val_pairs: 32,
+        ..TrainConfig::default()
+    };
+    let mut t = Trainer::new(cfg, train, val).unwrap();
+    let before = t.validate();
+    let first: f32 = (0..5).map(|_| t.step().loss).sum();
+    for _ in 0..50 {
+        t.step();
+    }
+    let last: f32 = (0..5).map(|_| t.step().loss).sum();
+    let after = t.validate();
+    // Measured: loss 0.059 -> 0.003, mean rotation error 3.2 -> 0.8 deg.
+    assert!(last < 0.3 * first, "loss {first} -> {last}");
+    assert!(
+        after.rotation_deg.mean < 0.5 * before.rotation_deg.mean,
+        "rotation error {before:?} -> {after:?}"
+    );
+}
+
 /// Regression test for the run that never learned rotation: with the
 /// paper's translations (`U[-1, 1]` per axis, larger than the unit-box
 /// shape), an uncentred source made the network's features translation-

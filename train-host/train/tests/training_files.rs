@@ -232,3 +232,41 @@ fn a_model_with_non_finite_weights_is_not_written() {
     assert!(e.to_string().contains("layer 1"), "{e}");
     assert!(!dir.join(export::F32_BLOB).exists());
 }
+
+/// A PointNetLK run ends with its checkpoint and log but no blobs (the
+/// format has no place for its Jacobian yet), and `pcrnet export` refuses
+/// its checkpoint with a typed error saying so, before reading anything
+/// else.
+#[test]
+fn a_pointnetlk_checkpoint_has_no_blobs() {
+    let (train, val) = data_sets(64);
+    let cfg = TrainConfig {
+        model: ModelKind::PointNetLk { iterations: 2 },
+        ..small_config()
+    };
+    let dir = tmp_dir("pointnetlk");
+    let mut t = Trainer::new(cfg, train, val).unwrap();
+    t.run(&RunOptions {
+        out_dir: Some(dir.clone()),
+        ..RunOptions::default()
+    })
+    .unwrap();
+    let ck = dir.join(pcrnet_train::CHECKPOINT_FILE);
+    assert!(Checkpoint::load(&ck).unwrap().finished());
+    let err = pcrnet_train::cli::export(pcrnet_train::cli::ExportArgs {
+        checkpoint: ck,
+        template: dir.join("no-such-template.ply"),
+        points: None,
+        template_points: 512,
+        out: dir.clone(),
+    })
+    .unwrap_err();
+    assert_eq!(
+        err.downcast_ref::<pcrnet_train::cli::NoBlob>(),
+        Some(&pcrnet_train::cli::NoBlob::PointNetLk),
+        "{err:#}"
+    );
+    assert!(format!("{err}").contains("Jacobian"), "{err}");
+    assert!(!dir.join(export::F32_BLOB).exists());
+    assert!(!dir.join(export::INT8_BLOB).exists());
+}

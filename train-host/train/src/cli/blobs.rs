@@ -128,21 +128,36 @@ pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
     write_blobs(&params, &reference, &pairs, args.seed, trained, &args.out)
 }
 
+/// Why a checkpoint has no blobs.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NoBlob {
+    /// A PointNetLK checkpoint: the blob format does not carry the
+    /// template's feature Jacobian yet, and without it a device would run
+    /// the untrained head.
+    #[error(
+        "PointNetLK checkpoints have no blobs yet: the device format does not carry the template's feature Jacobian (issue 36, item 2), and a blob without it would run an untrained head. The checkpoint and the log's validation errors are kept; train with --model pcrnet or ipcrnet for a blob"
+    )]
+    PointNetLk,
+}
+
 /// How a training configuration's network should be run: centred
-/// sources as its pairs were, and i-PCRNet's passes.
-pub(super) fn trained_for(config: &super::TrainConfig) -> crate::TrainedFor {
-    crate::TrainedFor {
+/// sources as its pairs were, and i-PCRNet's passes; an error for a model
+/// no blob can hold.
+pub(super) fn trained_for(config: &super::TrainConfig) -> Result<crate::TrainedFor, NoBlob> {
+    Ok(crate::TrainedFor {
         centre_source: config.pairs.centre,
         passes: match config.model {
             ModelKind::Pcrnet => 1,
             ModelKind::Ipcrnet { iterations } => u16::try_from(iterations).unwrap_or(u16::MAX),
+            ModelKind::PointNetLk { .. } => return Err(NoBlob::PointNetLk),
         },
-    }
+    })
 }
 
 /// Runs `pcrnet export`.
 pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ck = Checkpoint::load(&args.checkpoint)?;
+    let trained = trained_for(&ck.config)?;
     let points = args.points.unwrap_or(ck.config.points);
     let reference = load_template(&args.template, points, args.template_points, ck.config.seed)?;
     write_blobs(
@@ -150,7 +165,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         &reference,
         &ck.config.pairs,
         ck.config.seed,
-        trained_for(&ck.config),
+        trained,
         &args.out,
     )
 }

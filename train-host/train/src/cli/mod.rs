@@ -4,7 +4,7 @@
 
 mod blobs;
 mod object;
-pub use blobs::{ExportArgs, UpgradeArgs, export, upgrade};
+pub use blobs::{ExportArgs, NoBlob, UpgradeArgs, export, upgrade};
 use blobs::{load_template, trained_for, write_blobs};
 
 use std::path::PathBuf;
@@ -26,6 +26,10 @@ pub enum ModelArg {
     Pcrnet,
     /// Iterative (see --iterations).
     Ipcrnet,
+    /// PointNetLK: the encoder trained through --iterations Lucas-Kanade
+    /// iterations (the PointNetLK reference uses 10). Checkpoints only:
+    /// no blobs yet.
+    Pointnetlk,
 }
 
 /// Loss on the command line.
@@ -89,7 +93,7 @@ pub struct TrainArgs {
     /// Single-pass or iterative network.
     #[arg(long, value_enum, default_value_t = ModelArg::Pcrnet)]
     pub model: ModelArg,
-    /// i-PCRNet passes.
+    /// i-PCRNet passes, or PointNetLK's Lucas-Kanade iterations.
     #[arg(long, default_value_t = 8, allow_negative_numbers = true)]
     pub iterations: usize,
     /// Points per cloud.
@@ -313,6 +317,9 @@ fn config_from(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             ModelArg::Ipcrnet => ModelKind::Ipcrnet {
                 iterations: args.iterations,
             },
+            ModelArg::Pointnetlk => ModelKind::PointNetLk {
+                iterations: args.iterations,
+            },
         },
         loss: match args.loss {
             LossArg::Chamfer => LossKind::Chamfer,
@@ -533,6 +540,13 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         eprintln!("stopped before the end (--max-steps): no export");
         return Ok(());
     }
+    let trained = match trained_for(&trainer.config) {
+        Ok(t) => t,
+        Err(no_blob) => {
+            eprintln!("no export: {no_blob}");
+            return Ok(());
+        }
+    };
     let reference = match args.template.as_ref().or(args.object.as_ref()) {
         Some(p) => load_template(p, trainer.train_data().points, args.template_points, seed)?,
         None => Reference::new(&trainer.train_data().clouds[0], args.template_points)?,
@@ -543,7 +557,7 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         &reference,
         &trainer.config.pairs,
         trainer.config.seed,
-        trained_for(&trainer.config),
+        trained,
         &args.out,
     )
 }
