@@ -12,6 +12,7 @@
 //! All take and return user units: the frame is the blob's (or the bound
 //! template's), `p_template = R p_source + t`.
 
+use pcrnet_core::pose::{self, Centring};
 use pcrnet_core::{F32Model, Int8Model, Options, Pose, Registration};
 
 use crate::pointnetlk::{LkResult, PointNetLk};
@@ -176,8 +177,11 @@ pub fn network(
 
 /// Registers `source` onto `template` with PointNetLK on the encoder of an
 /// **f32** blob (Jacobian by finite differences on the template, up to
-/// `iterations` Lucas-Kanade steps), in the template's frame. The pose and
-/// its trajectory are in user units.
+/// `iterations` Lucas-Kanade steps), in the template's frame. A blob whose
+/// network was trained on centred sources (every shipped and recipe model)
+/// has the source centred on its centroid first, as in training and as the
+/// PointNetLK reference centres both clouds; the LK poses are composed after
+/// that move. The pose and its trajectory are in user units.
 pub fn register_pointnetlk(
     blob: &[u8],
     template: Option<&[[f32; 3]]>,
@@ -193,17 +197,23 @@ pub fn register_pointnetlk(
     let t: Vec<[f32; 3]> = (0..stored.len())
         .map(|i| stored.point(i).map(|v| v as f32 * stored.step()))
         .collect();
-    let s: Vec<[f32; 3]> = source.iter().map(|&p| frame.to_model(p)).collect();
+    let centring = if model.centres_source() {
+        Centring::Centroid {
+            radius: f32::INFINITY,
+        }
+    } else {
+        Centring::None
+    };
+    let start = pose::centring(source, centring, &frame)?;
+    let map = pose::PointMap::new(frame, &start);
+    let s: Vec<[f32; 3]> = source.iter().map(|&p| map.apply(p)).collect();
     let lk = PointNetLk::new(&params, &t)?;
     let result = lk.register(&s, iterations, 1e-7)?;
+    let to_user = |p: &Pose| frame.pose_to_user(&start.then(p));
     Ok(LkResult {
-        pose: frame.pose_to_user(&result.pose),
+        pose: to_user(&result.pose),
         iterations: result.iterations,
-        trajectory: result
-            .trajectory
-            .iter()
-            .map(|p| frame.pose_to_user(p))
-            .collect(),
+        trajectory: result.trajectory.iter().map(to_user).collect(),
     })
 }
 

@@ -141,6 +141,7 @@ pub(crate) fn noise(ctx: &Context) -> anyhow::Result<Report> {
     let mut rec = Recorder::new(ctx, "noise");
     let pc = rec.model("mn10-pcrnet")?;
     let ipc = rec.model("mn10-ipcrnet")?;
+    let trained_lk = rec.lk_model("mn10-pointnetlk")?;
     let sigmas = [0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06];
     let sets: Vec<SweepSet> = sigmas
         .iter()
@@ -156,12 +157,13 @@ pub(crate) fn noise(ctx: &Context) -> anyhow::Result<Report> {
             }
         })
         .collect();
-    let methods = modelnet10_methods(&pc, &ipc);
+    let mut methods = modelnet10_methods(&pc, &ipc).to_vec();
+    methods.insert(2, (lk(), trained_lk.f32()));
     let report = SweepReport {
         title: "Gaussian noise on the source",
         notes: vec![
             "ModelNet10 test split (all 10 classes), the same templates and transforms at every noise level; noise N(0, sigma^2) per coordinate.".into(),
-            "Networks trained on ModelNet10 with sigma ~ U[0, 0.04]. PointNetLK uses mn10-ipcrnet's f32 encoder.".into(),
+            "Networks trained on ModelNet10 with sigma ~ U[0, 0.04]. PointNetLK twice: on mn10-ipcrnet's f32 encoder, and trained as PointNetLK (mn10-pointnetlk: 10 Lucas-Kanade iterations, pose loss; f32 on the host).".into(),
         ],
         subject: "Gaussian noise on the source",
         x_label: "noise standard deviation",
