@@ -297,6 +297,15 @@ impl<'a> LastStep<'a> {
     }
 }
 
+/// Every pair's source (`n` points each) moved by its pose.
+fn moved(poses: &[Rigid64], source: &[[f32; 3]], n: usize) -> Vec<[f32; 3]> {
+    poses
+        .par_iter()
+        .zip(source.par_chunks(n))
+        .flat_map_iter(|(g, s)| g.apply(s))
+        .collect()
+}
+
 /// Runs `iterations` LK iterations on every pair without gradient; returns
 /// the template encodings, the solvers and the poses.
 fn iterate(
@@ -313,12 +322,7 @@ fn iterate(
     let solvers = solvers(&tc, b, f);
     let mut poses = vec![Rigid64::IDENTITY; b];
     for _ in 0..iterations {
-        let moved: Vec<[f32; 3]> = poses
-            .par_iter()
-            .zip(source.par_chunks(n))
-            .flat_map_iter(|(g, s)| g.apply(s))
-            .collect();
-        let sc = encode(params, moved.as_flattened(), b, n, false);
+        let sc = encode(params, moved(&poses, source, n).as_flattened(), b, n, false);
         poses.par_iter_mut().enumerate().for_each(|(i, g)| {
             let r = residual(feature_of(&sc, i, f), feature_of(&tc, 7 * i, f));
             *g = Rigid64::exp(&solvers[i].step(&r)).inverse().after(g);
@@ -402,12 +406,13 @@ pub fn loss_and_grad(
         n,
         true,
     );
-    let moved: Vec<[f32; 3]> = before
-        .par_iter()
-        .zip(batch.source.par_chunks(n))
-        .flat_map_iter(|(g, s)| g.apply(s))
-        .collect();
-    let sc = encode(params, moved.as_flattened(), b, n, true);
+    let sc = encode(
+        params,
+        moved(&before, &batch.source, n).as_flattened(),
+        b,
+        n,
+        true,
+    );
     let scale = 1.0 / b as f64;
     // Per pair: loss, pose, the gradients on the source's feature and on
     // the template's seven features.

@@ -96,6 +96,23 @@ fn training_is_deterministic() {
     assert_ne!(a, run(6));
 }
 
+/// Sixty steps of `cfg`: the summed loss of the first and of the last
+/// five, and the validation before and after.
+fn sixty_steps(
+    cfg: TrainConfig,
+    train: Dataset,
+    val: Dataset,
+) -> (f32, f32, pcrnet_train::Summary, pcrnet_train::Summary) {
+    let mut t = Trainer::new(cfg, train, val).unwrap();
+    let before = t.validate();
+    let first: f32 = (0..5).map(|_| t.step().loss).sum();
+    for _ in 0..50 {
+        t.step();
+    }
+    let last: f32 = (0..5).map(|_| t.step().loss).sum();
+    (first, last, before, t.validate())
+}
+
 /// A few dozen steps on one generated shape lower the loss and the
 /// validation rotation error (both losses).
 #[test]
@@ -120,14 +137,7 @@ fn training_learns() {
             val_pairs: 32,
             ..TrainConfig::default()
         };
-        let mut t = Trainer::new(cfg, train, val).unwrap();
-        let before = t.validate();
-        let first: f32 = (0..5).map(|_| t.step().loss).sum();
-        for _ in 0..50 {
-            t.step();
-        }
-        let last: f32 = (0..5).map(|_| t.step().loss).sum();
-        let after = t.validate();
+        let (first, last, before, after) = sixty_steps(cfg, train, val);
         assert!(last < 0.7 * first, "{loss:?}: loss {first} -> {last}");
         assert!(
             after.rotation_deg.mean < before.rotation_deg.mean,
@@ -161,14 +171,7 @@ fn pointnetlk_learns() {
         val_pairs: 32,
         ..TrainConfig::default()
     };
-    let mut t = Trainer::new(cfg, train, val).unwrap();
-    let before = t.validate();
-    let first: f32 = (0..5).map(|_| t.step().loss).sum();
-    for _ in 0..50 {
-        t.step();
-    }
-    let last: f32 = (0..5).map(|_| t.step().loss).sum();
-    let after = t.validate();
+    let (first, last, before, after) = sixty_steps(cfg, train, val);
     // Measured: loss 0.059 -> 0.003, mean rotation error 3.2 -> 0.8 deg.
     assert!(last < 0.3 * first, "loss {first} -> {last}");
     assert!(
