@@ -195,7 +195,8 @@ const LK_ARGS: &[&str] = &[
     "20",
 ];
 
-/// PointNetLK models (no blobs: see [`lk_model`]): on the generalisation
+/// PointNetLK models (no blobs: the experiments make an f32 blob in memory
+/// from the checkpoint, for the host only): on the generalisation
 /// experiment's five classes, and on all of ModelNet10 with noise as
 /// `mn10-ipcrnet` (the noise experiment).
 pub const LK_RECIPES: [Recipe; 2] = [
