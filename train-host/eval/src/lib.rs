@@ -93,7 +93,8 @@ pub struct PairScore {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambiguous: Option<bool>,
     /// The relative feature distance of the device pipeline's pose
-    /// ([`pcrnet_core::Int8Model::feature_distance`], int8 blobs).
+    /// ([`pcrnet_core::Int8Model::feature_distance`], int8 blobs), or
+    /// PointNetLK's at its final pose.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub feature_distance: Option<f64>,
     /// The reported ambiguity explains the pose's error

@@ -285,8 +285,9 @@ pub struct Outcome {
     pub trajectory: Option<Vec<Pose>>,
     /// The device pipeline's residual and flags.
     pub check: Option<pcrnet_core::Registration>,
-    /// The int8 device pipeline's pose checked in feature space
-    /// ([`pcrnet_core::Int8Model::feature_distance`]; not timed).
+    /// The pose checked in feature space: the int8 device pipeline's
+    /// ([`pcrnet_core::Int8Model::feature_distance`]) or PointNetLK's own
+    /// residual at its final pose; not timed.
     pub feature_distance: Option<f64>,
     /// The source's shape does not determine a pose (every point in one
     /// place, or on one line), judged for every method by the device's
@@ -395,6 +396,7 @@ pub fn run(
                     e => e.into(),
                 },
             )?;
+            untimed = std::time::Duration::from_secs_f64(r.check_seconds);
             Outcome {
                 pose: r.pose,
                 iterations: r.iterations,
@@ -402,7 +404,7 @@ pub fn run(
                 seconds: 0.0,
                 trajectory: Some(r.trajectory),
                 check: None,
-                feature_distance: None,
+                feature_distance: Some(r.feature_distance),
                 degenerate,
             }
         }

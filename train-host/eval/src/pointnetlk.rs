@@ -29,6 +29,14 @@ pub struct LkResult {
     pub iterations: usize,
     /// The pose after each iteration.
     pub trajectory: Vec<Pose>,
+    /// The relative feature distance at the final pose, `||phi(G S) -
+    /// phi(T)|| / ||phi(T)||`: what LK minimises, as a confidence (issue 36,
+    /// item 3; [`pcrnet_core::Int8Model::feature_distance`] is the device
+    /// pipeline's).
+    pub feature_distance: f64,
+    /// Seconds spent on `feature_distance` (one more encoder pass), for
+    /// callers that time the registration alone.
+    pub check_seconds: f64,
 }
 
 /// PointNetLK for one template: its feature and its solver.
@@ -82,10 +90,15 @@ impl<'a> PointNetLk<'a> {
                 break;
             }
         }
+        let checking = std::time::Instant::now();
+        let apart = feature(self.params, &g.apply(source))? - &self.template_feature;
+        let feature_distance = apart.norm() / self.template_feature.norm();
         Ok(LkResult {
             pose: pose_of(&g),
             iterations,
             trajectory,
+            feature_distance,
+            check_seconds: checking.elapsed().as_secs_f64(),
         })
     }
 }

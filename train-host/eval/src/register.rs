@@ -212,8 +212,8 @@ pub fn register_pointnetlk(
     let to_user = |p: &Pose| frame.pose_to_user(&start.then(p));
     Ok(LkResult {
         pose: to_user(&result.pose),
-        iterations: result.iterations,
         trajectory: result.trajectory.iter().map(to_user).collect(),
+        ..result
     })
 }
 

@@ -9,12 +9,13 @@ mod timing;
 pub(super) use sweeps::{noise, partial, sparse};
 pub(super) use timing::{iterations, speed};
 
-use super::MethodScore;
 use super::methods::{Method, MethodKind};
+use super::{GOOD_BELOW_DEG, MethodScore};
 use crate::report::{
     Context, Recorder, Report, Run, SEEN, Table, UNSEEN, label, modelnet10, pair_set, success_chart,
 };
 use pcrnet_train::data::PairConfig;
+use pcrnet_train::metrics::Confidence;
 
 /// The summary table's header.
 fn summary_header(first: &str) -> Vec<String> {
@@ -116,6 +117,7 @@ pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
         "test set",
         &rec.runs,
     );
+    let confidence = lk_confidence(&rec.raw);
     rec.finish(
         "Generalisation to unseen categories",
         vec![
@@ -123,7 +125,42 @@ pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
             format!("Seen: {}. Unseen: {}.", SEEN.join(", "), UNSEEN.join(", ")),
             "i-PCRNet: up to 20 passes, stopping at ||dT - I||_F < 1e-7. PointNetLK (up to 20 steps) twice: on mn10-seen5-ipcrnet's f32 encoder, and on mn10-seen5-pointnetlk's, trained as PointNetLK on the same classes (10 Lucas-Kanade iterations, pose loss, gradient through the last iteration; f32 on the host: no blob carries its Jacobian yet).".into(),
         ],
-        vec![table],
+        vec![table, confidence],
         started,
     )
+}
+
+/// How well PointNetLK's own residual at its final pose (the relative
+/// feature distance) separates good registrations (rotation error below
+/// [`GOOD_BELOW_DEG`]) from bad ones: the AUROC per set and model (issue
+/// 36, item 3).
+fn lk_confidence(raw: &[(String, MethodScore)]) -> Table {
+    let rows = raw
+        .iter()
+        .filter(|(_, s)| s.pairs.iter().any(|p| p.feature_distance.is_some()))
+        .map(|(set, s)| {
+            let rot: Vec<f64> = s.pairs.iter().map(|p| p.rot_deg).collect();
+            let distance: Vec<f64> = s
+                .pairs
+                .iter()
+                .map(|p| p.feature_distance.unwrap_or(f64::INFINITY))
+                .collect();
+            let c = Confidence::of(&rot, &distance, &vec![false; rot.len()], GOOD_BELOW_DEG);
+            vec![
+                set.clone(),
+                label(&s.method, s.model.as_deref()),
+                format!("{} / {}", c.good, c.bad),
+                c.auroc.map_or("-".into(), |a| format!("{a:.3}")),
+            ]
+        })
+        .collect();
+    Table {
+        caption: format!(
+            "PointNetLK's feature distance at its final pose as a confidence: AUROC for a rotation error below {GOOD_BELOW_DEG}° (these clean sources are the template's own points moved, so a right pose's distance is near zero: the easy case; sources sampled apart from the template, issue 36's target, are not measured for PointNetLK yet)"
+        ),
+        header: ["test set", "method", "good / bad", "AUROC"]
+            .map(String::from)
+            .to_vec(),
+        rows,
+    }
 }
