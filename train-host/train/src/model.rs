@@ -22,7 +22,6 @@ use serde::{Deserialize, Serialize};
 use super::geometry::{
     self, IDENTITY, Mat3, compose, mat_mul, pose_from_raw, pose_from_raw_backward, transpose,
 };
-use super::lk;
 use super::loss::{self, LossKind};
 use super::ops;
 use crate::F32Params;
@@ -363,38 +362,33 @@ fn run_passes(
     (tc, cur, acc)
 }
 
-/// Estimated poses (source onto template) for `b` pairs of `n` points, no
-/// gradient.
+/// Estimated poses (source onto template) for `b` pairs of `n` points
+/// after `passes` network passes (at least 1), no gradient.
 pub fn predict(
     params: &F32Params,
-    model: ModelKind,
+    passes: usize,
     template: &[[f32; 3]],
     source: &[[f32; 3]],
     b: usize,
     n: usize,
 ) -> Vec<(Mat3, [f32; 3])> {
-    if let ModelKind::PointNetLk { iterations } = model {
-        return lk::predict(params, iterations, template, source, b, n);
-    }
-    run_passes(params, model.iterations(), template, source, b, n, false).2
+    run_passes(params, passes.max(1), template, source, b, n, false).2
 }
 
-/// Forward and backward of one batch: mean loss over the pairs, its
-/// gradient, and the estimated poses. See the module docs for how
-/// gradients pass through i-PCRNet's iterations.
+/// Forward and backward of one batch with `passes` network passes (at
+/// least 1): mean loss over the pairs, its gradient, and the estimated
+/// poses. See the module docs for how gradients pass through i-PCRNet's
+/// iterations.
 pub fn loss_and_grad(
     params: &F32Params,
-    model: ModelKind,
+    passes: usize,
     loss_kind: LossKind,
     batch: &Batch,
 ) -> StepOutput {
-    if let ModelKind::PointNetLk { iterations } = model {
-        return lk::loss_and_grad(params, iterations, loss_kind, batch);
-    }
     let (b, n) = (batch.size, batch.points);
     let (tc, cur, acc) = run_passes(
         params,
-        model.iterations() - 1,
+        passes.max(1) - 1,
         &batch.template,
         &batch.source,
         b,

@@ -19,7 +19,7 @@ use crate::dataset::Dataset;
 use crate::loss::LossKind;
 use crate::metrics::{Summary, rotation_error_deg, translation_error};
 use crate::model::{Batch, ModelKind};
-use crate::{adam, data, model};
+use crate::{adam, data, forward};
 
 /// Scale applied to the initial output-layer weights (see the module docs).
 pub const OUTPUT_INIT_SCALE: f32 = 0.01;
@@ -338,7 +338,7 @@ impl Trainer {
         let batch = self.batch_at(self.progress.epoch, self.progress.step_in_epoch);
         let lr = self.learning_rate();
         let mut out =
-            model::loss_and_grad(&self.params, self.config.model, self.config.loss, &batch);
+            forward::loss_and_grad(&self.params, self.config.model, self.config.loss, &batch);
         let grad_norm = match self.config.clip_norm {
             Some(c) => adam::clip_grad_norm(&mut out.grads, c),
             None => adam::grad_norm(&out.grads),
@@ -489,7 +489,7 @@ pub fn evaluate(params: &F32Params, model: ModelKind, batches: &[Batch]) -> Summ
     let mut rot = Vec::new();
     let mut trans = Vec::new();
     for b in batches {
-        let poses = model::predict(params, model, &b.template, &b.source, b.size, b.points);
+        let poses = forward::predict(params, model, &b.template, &b.source, b.size, b.points);
         for (i, (r, t)) in poses.iter().enumerate() {
             // Translations of the poses between the clouds as made, not
             // of the centred frame the network sees.

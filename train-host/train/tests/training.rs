@@ -7,6 +7,7 @@ mod common;
 use common::{bits, data_sets, small_config};
 use pcrnet_core::{Arch, F32Model, Pose};
 use pcrnet_train::TrainedFor;
+use pcrnet_train::forward;
 use pcrnet_train::geometry::{apply, quat_to_mat};
 use pcrnet_train::model::{self, ModelKind};
 use pcrnet_train::template::Reference;
@@ -68,7 +69,7 @@ fn batched_forward_matches_core() {
         let m = F32Model::from_bytes(&blob).unwrap();
         let mut s = vec![0.0; m.scratch_len()];
         let (pose, _): (Pose, usize) = m.network().network_pose(src, 1, 0.0, &mut s).unwrap();
-        let ours = model::predict(&params, ModelKind::Pcrnet, tpl, src, 1, n)[0];
+        let ours = forward::predict(&params, ModelKind::Pcrnet, tpl, src, 1, n)[0];
         assert!(rotation_error_deg(&ours.0, &quat_to_mat(pose.rotation)) < 1e-2);
         for k in 0..3 {
             assert!((ours.1[k] - pose.translation[k]).abs() < 1e-4);

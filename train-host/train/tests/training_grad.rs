@@ -2,11 +2,12 @@
 
 use pcrnet_core::Arch;
 use pcrnet_train::F32Params;
+use pcrnet_train::forward;
 use pcrnet_train::geometry::{
     Mat3, pose_from_raw, pose_from_raw_backward, transform_points, transform_points_backward,
 };
 use pcrnet_train::loss::{chamfer, chamfer_value, pose_loss};
-use pcrnet_train::model::{self, Batch, ModelKind};
+use pcrnet_train::model::{Batch, ModelKind};
 use pcrnet_train::{Dataset, LossKind, PairConfig, initial_params, ops};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -271,16 +272,16 @@ fn whole_network_gradient() {
                 (params, tiny_batch(seed, 2, 8))
             })
             .find(|(p, b)| {
-                let poses = model::predict(p, ModelKind::Pcrnet, &b.template, &b.source, 2, 8);
+                let poses = forward::predict(p, ModelKind::Pcrnet, &b.template, &b.source, 2, 8);
                 loss == LossKind::Pose || min_nn_gap(b, &poses) > 5e-3
             })
             .unwrap();
-        let out = model::loss_and_grad(&params, ModelKind::Pcrnet, loss, &batch);
+        let out = forward::loss_and_grad(&params, ModelKind::Pcrnet, loss, &batch);
         let an = flat(&out.grads);
         let mut probe = params.clone();
         agrees_with_differences(&format!("{loss:?}"), &an, &mut flat(&params), &mut |v| {
             unflat(&mut probe, v);
-            model::loss_and_grad(&probe, ModelKind::Pcrnet, loss, &batch).loss as f64
+            forward::loss_and_grad(&probe, ModelKind::Pcrnet, loss, &batch).loss as f64
         });
         assert!(an.iter().filter(|g| g.abs() > 1e-4).count() > an.len() / 2);
     }
@@ -354,9 +355,9 @@ fn pointnetlk_gradient() {
     let n = LK_POINTS;
     let (params, batch) = (20..)
         .map(|seed| (initial_params(arch.clone(), seed), tiny_batch(seed, 2, n)))
-        .find(|(p, b)| min_nn_gap(b, &model::predict(p, lk, &b.template, &b.source, 2, n)) > 1e-4)
+        .find(|(p, b)| min_nn_gap(b, &forward::predict(p, lk, &b.template, &b.source, 2, n)) > 1e-4)
         .unwrap();
-    let out = model::loss_and_grad(&params, lk, LossKind::Chamfer, &batch);
+    let out = forward::loss_and_grad(&params, lk, LossKind::Chamfer, &batch);
     let an = flat(&out.grads);
     assert!(an[encoder_len..].iter().all(|&g| g == 0.0), "head gradient");
     let live = an[..encoder_len].iter().filter(|g| g.abs() > 1e-5).count();
@@ -365,7 +366,7 @@ fn pointnetlk_gradient() {
     let mut probe = params.clone();
     let mut f = |v: &[f32]| {
         unflat(&mut probe, v);
-        model::loss_and_grad(&probe, lk, LossKind::Chamfer, &batch).loss as f64
+        forward::loss_and_grad(&probe, lk, LossKind::Chamfer, &batch).loss as f64
     };
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     for direction in 0..4 {
@@ -392,7 +393,7 @@ fn pointnetlk_gradient() {
         );
     }
     // The loss is the pose's, and the poses are predict's.
-    let poses = model::predict(&params, lk, &batch.template, &batch.source, 2, n);
+    let poses = forward::predict(&params, lk, &batch.template, &batch.source, 2, n);
     assert_eq!(poses, out.poses);
 }
 
@@ -404,19 +405,19 @@ fn pointnetlk_gradient_is_last_iteration() {
     let params = initial_params(arch, 5);
     let batch = tiny_batch(5, 2, 8);
     let one = ModelKind::PointNetLk { iterations: 1 };
-    let two = model::loss_and_grad(
+    let two = forward::loss_and_grad(
         &params,
         ModelKind::PointNetLk { iterations: 2 },
         LossKind::Chamfer,
         &batch,
     );
-    let first = model::predict(&params, one, &batch.template, &batch.source, 2, 8);
+    let first = forward::predict(&params, one, &batch.template, &batch.source, 2, 8);
     let mut moved = batch.clone();
     for (i, (r, t)) in first.iter().enumerate() {
         let pts = transform_points(r, t, &batch.source[i * 8..(i + 1) * 8]);
         moved.source[i * 8..(i + 1) * 8].copy_from_slice(&pts);
     }
-    let last = model::loss_and_grad(&params, one, LossKind::Chamfer, &moved);
+    let last = forward::loss_and_grad(&params, one, LossKind::Chamfer, &moved);
     assert!(
         (two.loss - last.loss).abs() <= 1e-4 * (1.0 + last.loss.abs()),
         "{} {}",
@@ -435,8 +436,8 @@ fn ipcrnet_gradient_is_last_pass() {
     let arch = Arch::new(&[4, 5], &[6]).unwrap();
     let params = initial_params(arch, 3);
     let batch = tiny_batch(3, 2, 8);
-    let a = model::loss_and_grad(&params, ModelKind::Pcrnet, LossKind::Chamfer, &batch);
-    let b = model::loss_and_grad(
+    let a = forward::loss_and_grad(&params, ModelKind::Pcrnet, LossKind::Chamfer, &batch);
+    let b = forward::loss_and_grad(
         &params,
         ModelKind::Ipcrnet { iterations: 1 },
         LossKind::Chamfer,
@@ -445,13 +446,13 @@ fn ipcrnet_gradient_is_last_pass() {
     assert_eq!(flat(&a.grads), flat(&b.grads));
     // Two passes = PCRNet's gradient on the batch whose sources were moved
     // by the first pass.
-    let two = model::loss_and_grad(
+    let two = forward::loss_and_grad(
         &params,
         ModelKind::Ipcrnet { iterations: 2 },
         LossKind::Chamfer,
         &batch,
     );
-    let first = model::predict(
+    let first = forward::predict(
         &params,
         ModelKind::Pcrnet,
         &batch.template,
@@ -464,7 +465,7 @@ fn ipcrnet_gradient_is_last_pass() {
         let pts = transform_points(r, t, &batch.source[i * 8..(i + 1) * 8]);
         moved.source[i * 8..(i + 1) * 8].copy_from_slice(&pts);
     }
-    let last = model::loss_and_grad(&params, ModelKind::Pcrnet, LossKind::Chamfer, &moved);
+    let last = forward::loss_and_grad(&params, ModelKind::Pcrnet, LossKind::Chamfer, &moved);
     assert!((two.loss - last.loss).abs() < 1e-6);
     for (g1, g2) in flat(&two.grads).iter().zip(flat(&last.grads)) {
         assert!((g1 - g2).abs() <= 1e-5 * (1.0 + g2.abs()));
