@@ -31,8 +31,10 @@
 //! closed-form map, step [`TWIST_STEP`]).
 //!
 //! The original PointNetLK backpropagates through every iteration; with
-//! the last one only, memory and time per step are those of one iteration
-//! (eight encodings of each pair: the template, its six moves, the source).
+//! the last one only, the activations kept are those of one iteration
+//! (eight encodings of each pair: the template, its six moves, the source),
+//! and each earlier iteration costs one more encoding of the source,
+//! without gradient.
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 use rayon::prelude::*;
