@@ -336,7 +336,7 @@ impl<P: Params> F32Network<P> {
 
     /// How the source is placed for the network: the f32 path has no input
     /// range, so a centred source is centred on the centroid of every point.
-    fn centring(&self) -> Centring {
+    pub fn centring(&self) -> Centring {
         if self.centre_source {
             Centring::Centroid {
                 radius: f32::INFINITY,

@@ -52,6 +52,11 @@ fn feature(params: &F32Params, cloud: &[[f32; 3]]) -> pcrnet_core::Result<DVecto
 }
 
 impl<'a> PointNetLk<'a> {
+    /// `phi(G S) - phi(T)`.
+    fn residual(&self, g: &Rigid64, source: &[[f32; 3]]) -> pcrnet_core::Result<DVector<f64>> {
+        Ok(feature(self.params, &g.apply(source))? - &self.template_feature)
+    }
+
     /// Prepares a template: 7 encodings (the template and its 6 moves of
     /// [`pcrnet_train::lk::JACOBIAN_STEP`]) and the solver of their
     /// Jacobian, as PointNetLK is trained ([`pcrnet_train::lk`]).
@@ -82,8 +87,7 @@ impl<'a> PointNetLk<'a> {
         let mut iterations = 0;
         for _ in 0..max_iterations {
             iterations += 1;
-            let residual = feature(self.params, &g.apply(source))? - &self.template_feature;
-            let step = self.solver.step(&residual);
+            let step = self.solver.step(&self.residual(&g, source)?);
             g = Rigid64::exp(&step).inverse().after(&g);
             trajectory.push(pose_of(&g));
             if step.norm() < tolerance {
@@ -91,8 +95,7 @@ impl<'a> PointNetLk<'a> {
             }
         }
         let checking = std::time::Instant::now();
-        let apart = feature(self.params, &g.apply(source))? - &self.template_feature;
-        let feature_distance = apart.norm() / self.template_feature.norm();
+        let feature_distance = self.residual(&g, source)?.norm() / self.template_feature.norm();
         Ok(LkResult {
             pose: pose_of(&g),
             iterations,

@@ -12,7 +12,7 @@
 //! All take and return user units: the frame is the blob's (or the bound
 //! template's), `p_template = R p_source + t`.
 
-use pcrnet_core::pose::{self, Centring};
+use pcrnet_core::pose;
 use pcrnet_core::{F32Model, Int8Model, Options, Pose, Registration};
 
 use crate::pointnetlk::{LkResult, PointNetLk};
@@ -197,14 +197,7 @@ pub fn register_pointnetlk(
     let t: Vec<[f32; 3]> = (0..stored.len())
         .map(|i| stored.point(i).map(|v| v as f32 * stored.step()))
         .collect();
-    let centring = if model.centres_source() {
-        Centring::Centroid {
-            radius: f32::INFINITY,
-        }
-    } else {
-        Centring::None
-    };
-    let start = pose::centring(source, centring, &frame)?;
+    let start = pose::centring(source, model.network().centring(), &frame)?;
     let map = pose::PointMap::new(frame, &start);
     let s: Vec<[f32; 3]> = source.iter().map(|&p| map.apply(p)).collect();
     let lk = PointNetLk::new(&params, &t)?;
