@@ -200,6 +200,17 @@ enum PcrnetStatus
    */
   PCRNET_ERROR_INVALID_FRAME = -42,
   /*
+   A network pass was asked of a blob without a head (a model trained
+   as PointNetLK): set `passes` to 0 and `lk_iterations` to its
+   trained count.
+   */
+  PCRNET_ERROR_NO_HEAD = -43,
+  /*
+   `lk_iterations` was set for a blob without PointNetLK's solver:
+   export the model with `pcrnet export --lk`, or set it to 0.
+   */
+  PCRNET_ERROR_NO_LK_SOLVER = -44,
+  /*
    An error this version of the C API has no code for (a newer core).
    */
   PCRNET_ERROR_OTHER = -99,
@@ -228,11 +239,12 @@ typedef struct {
  */
 typedef struct {
   /*
-   Network passes (1: PCRNet; more: i-PCRNet).
+   Network passes (1: PCRNet; more: i-PCRNet; 0 for a blob without a
+   head, a model trained as PointNetLK).
    */
   uint32_t passes;
   /*
-   i-PCRNet stops once a pass moves the pose by less than this (0: never).
+   Passes and LK steps stop once one moves the pose by less than this (0: never).
    */
   float tolerance;
   /*
@@ -271,6 +283,12 @@ typedef struct {
    `reliable` when the relative plane residual is at most this.
    */
   float max_residual;
+  /*
+   PointNetLK steps after the network's passes (0: none; needs a blob
+   with PointNetLK's solver). Refine by LK: this with `icp_iterations`
+   0 and one hypothesis; LK then ICP: both.
+   */
+  uint32_t lk_iterations;
 } PcrnetOptions;
 
 /*
@@ -319,6 +337,10 @@ typedef struct {
    Network passes run.
    */
   uint32_t passes;
+  /*
+   PointNetLK steps run after them.
+   */
+  uint32_t lk_iterations;
   /*
    ICP iterations from the winning start.
    */

@@ -65,6 +65,13 @@ pub enum PcrnetStatus {
     /// scale not finite and positive, a grid step of 0 or one of more cells
     /// than its labels can number.
     PCRNET_ERROR_INVALID_FRAME = -42,
+    /// A network pass was asked of a blob without a head (a model trained
+    /// as PointNetLK): set `passes` to 0 and `lk_iterations` to its
+    /// trained count.
+    PCRNET_ERROR_NO_HEAD = -43,
+    /// `lk_iterations` was set for a blob without PointNetLK's solver:
+    /// export the model with `pcrnet export --lk`, or set it to 0.
+    PCRNET_ERROR_NO_LK_SOLVER = -44,
     /// An error this version of the C API has no code for (a newer core).
     PCRNET_ERROR_OTHER = -99,
 }
@@ -91,6 +98,8 @@ impl From<Error> for PcrnetStatus {
             Error::InvalidOption { .. } => PCRNET_ERROR_INVALID_OPTION,
             Error::InvalidPose => PCRNET_ERROR_INVALID_POSE,
             Error::InvalidFrame { .. } => PCRNET_ERROR_INVALID_FRAME,
+            Error::NoHead => PCRNET_ERROR_NO_HEAD,
+            Error::NoLkSolver => PCRNET_ERROR_NO_LK_SOLVER,
             _ => PCRNET_ERROR_OTHER,
         }
     }
@@ -107,9 +116,10 @@ pub const PCRNET_METRIC_POINT_TO_PLANE: u32 = 1;
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PcrnetOptions {
-    /// Network passes (1: PCRNet; more: i-PCRNet).
+    /// Network passes (1: PCRNet; more: i-PCRNet; 0 for a blob without a
+    /// head, a model trained as PointNetLK).
     pub passes: u32,
-    /// i-PCRNet stops once a pass moves the pose by less than this (0: never).
+    /// Passes and LK steps stop once one moves the pose by less than this (0: never).
     pub tolerance: f32,
     /// Starting poses of flip resolution, 1 up to 1 + the blob's turns.
     pub hypotheses: u32,
@@ -129,6 +139,10 @@ pub struct PcrnetOptions {
     pub max_points: u32,
     /// `reliable` when the relative plane residual is at most this.
     pub max_residual: f32,
+    /// PointNetLK steps after the network's passes (0: none; needs a blob
+    /// with PointNetLK's solver). Refine by LK: this with `icp_iterations`
+    /// 0 and one hypothesis; LK then ICP: both.
+    pub lk_iterations: u32,
 }
 
 impl From<Options> for PcrnetOptions {
@@ -149,6 +163,7 @@ impl From<Options> for PcrnetOptions {
             inlier_distance: o.inlier_distance,
             max_points: count(o.max_points),
             max_residual: o.max_residual,
+            lk_iterations: count(o.lk_iterations),
         }
     }
 }
@@ -164,6 +179,7 @@ impl TryFrom<&PcrnetOptions> for Options {
         };
         Ok(Options {
             passes: o.passes as usize,
+            lk_iterations: o.lk_iterations as usize,
             tolerance: o.tolerance,
             hypotheses: o.hypotheses as usize,
             screen_iterations: o.screen_iterations as usize,
@@ -211,6 +227,8 @@ pub struct PcrnetRegistration {
     pub hypothesis: u32,
     /// Network passes run.
     pub passes: u32,
+    /// PointNetLK steps run after them.
+    pub lk_iterations: u32,
     /// ICP iterations from the winning start.
     pub icp_iterations: u32,
     /// int8 values that reached the top of their range.
@@ -266,6 +284,7 @@ impl From<&Registration> for PcrnetRegistration {
             inlier_rmse: r.inlier_rmse,
             hypothesis: count(r.hypothesis),
             passes: count(r.passes),
+            lk_iterations: count(r.lk_iterations),
             icp_iterations: count(r.icp_iterations),
             saturated: r.saturated,
             out_of_range: r.out_of_range,

@@ -109,6 +109,13 @@ pub enum Error {
         /// What is wrong, and what to change.
         what: &'static str,
     },
+    /// A network pass was asked of a blob without a head: a model trained
+    /// as PointNetLK, whose pose comes from its LK steps
+    /// ([`crate::Options::lk_iterations`], with `passes` 0).
+    NoHead,
+    /// LK steps were asked of a blob without PointNetLK's solver: export
+    /// the model with `pcrnet export --lk`.
+    NoLkSolver,
 }
 
 impl fmt::Display for Error {
@@ -191,6 +198,14 @@ impl fmt::Display for Error {
                 "the previous pose is not finite or its rotation is not a unit quaternion: pass the pose a registration or tracking step returned, or register afresh"
             ),
             Error::InvalidFrame { what } => write!(f, "invalid sensor frame: {what}"),
+            Error::NoHead => write!(
+                f,
+                "this blob has no head (a model trained as PointNetLK): set passes to 0 and lk_iterations to its trained count (`pcrnet inspect` prints it)"
+            ),
+            Error::NoLkSolver => write!(
+                f,
+                "LK steps need PointNetLK's solver in the blob: export the model with `pcrnet export --lk`, or set lk_iterations to 0"
+            ),
         }
     }
 }

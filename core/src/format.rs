@@ -3,11 +3,12 @@
 //! ```text
 //! offset  size  field
 //! 0       4     magic  b"PCRN"
-//! 4       2     format version, u16 little-endian (currently 4; 3 is read too)
+//! 4       2     format version, u16 little-endian (currently 5; 3 and 4 are read too)
 //! 6       1     kind: 0 = int8 (device), 1 = f32 (host reference)
 //! 7       4     payload length P, u32 little-endian
 //! 11      P     payload: postcard encoding of Int8Payload or F32Payload,
-//!               then (format 4) of Option<NearestTable>
+//!               then (format 4) of Option<NearestTable>,
+//!               then (format 5) of Option<LkSolver>
 //! 11+P    4     CRC-32 (ISO-HDLC, as zlib) of bytes 0 .. 11+P, little-endian
 //! ```
 //!
@@ -16,6 +17,12 @@
 //! makes ICP several times cheaper); a format-3 blob reads as one without a
 //! table and gives the same results, more slowly. `pcrnet upgrade` adds the
 //! table to a format-3 blob.
+//!
+//! Format 5 adds, after the table, PointNetLK's solver ([`LkSolver`]): the
+//! template's side of the Lucas-Kanade step ([`crate::lk`]), for refining a
+//! pose in feature space ([`crate::Options::lk_iterations`]). A blob of a
+//! model trained as PointNetLK has it and no head (the payload's head and
+//! output layer are empty). Blobs of formats 3 and 4 read as having none.
 //!
 //! The payload starts with the architecture ([`Arch`]), the template's
 //! [`Frame`] and [`TemplateCloud`] and, for int8, the quantization
@@ -153,6 +160,40 @@ pub struct NearestTable<'a> {
     pub candidates: &'a [u8],
 }
 
+/// PointNetLK's solver for the blob's template ([`crate::lk`]): the damped
+/// pseudo-inverse `P = (J^T J + lambda I)^-1 J^T` of the template feature's
+/// Jacobian `J` (`F x 6`, forward differences of step `jacobian_step`
+/// about the template), so that a step's twist is `P r` for the feature
+/// residual `r`.
+///
+/// In an int8 blob `r` is the int8 difference `q_S - q_T` and `J` is in
+/// the same int8 steps, computed by the int8 encoder itself (the template
+/// and its six moves), so that `P` and the device's residuals come from
+/// the same arithmetic. In an f32 blob both are the f32 encoder's.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LkSolver<'a> {
+    /// Step of the Jacobian's forward differences (twist units: radians and
+    /// model units): informational.
+    pub jacobian_step: f32,
+    /// Damping `lambda` relative to the mean diagonal of `J^T J`: informational.
+    pub damping: f32,
+    /// `P`, `6 x F` f32 little-endian, row-major by twist component
+    /// (rotation vector, then translation).
+    pub rows: &'a [u8],
+}
+
+/// What follows the payload: the closest-point table (format 4) and
+/// PointNetLK's solver (format 5), each optional.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Trailer<'a> {
+    /// The template's closest-point table.
+    #[serde(borrow)]
+    pub table: Option<NearestTable<'a>>,
+    /// PointNetLK's solver.
+    #[serde(borrow)]
+    pub lk: Option<LkSolver<'a>>,
+}
+
 /// One quantized hidden layer (encoder or head).
 ///
 /// `y = clamp(requantize(bias[o] + sum_i w[o][i] * x[i], multiplier[o], shift[o]) + out_zero_point, act_min, 127)`
@@ -251,24 +292,26 @@ pub struct F32Payload<'a> {
 }
 
 /// Checks a model blob's envelope (magic, a version this build reads, kind,
-/// length, CRC) and decodes its payload and, from format 4, the template's
-/// closest-point table. The payload and table must use every payload byte.
+/// length, CRC) and decodes its payload and [`Trailer`] (from format 4 the
+/// template's closest-point table, from format 5 PointNetLK's solver). The
+/// payload and trailer must use every payload byte.
 pub fn decode_model<'a, T: Deserialize<'a>>(
     blob: &'a [u8],
     expected: ModelKind,
-) -> Result<(T, Option<NearestTable<'a>>)> {
+) -> Result<(T, Trailer<'a>)> {
     let (version, body) = envelope(blob, expected, |v| {
         (OLDEST_READABLE..=FORMAT_VERSION).contains(&v)
     })?;
     let (payload, rest) = postcard::take_from_bytes::<T>(body).map_err(|_| Error::Malformed)?;
-    if version < 4 {
-        return if rest.is_empty() {
-            Ok((payload, None))
-        } else {
-            Err(Error::Malformed)
-        };
-    }
-    Ok((payload, decode(rest)?))
+    let trailer = match version {
+        3 => decode::<()>(rest).map(|()| Trailer::default())?,
+        4 => Trailer {
+            table: decode(rest)?,
+            lk: None,
+        },
+        _ => decode(rest)?,
+    };
+    Ok((payload, trailer))
 }
 
 /// Checks the envelope of a blob of format `version` exactly and returns
@@ -344,8 +387,8 @@ pub fn decode<'a, T: Deserialize<'a>>(payload: &'a [u8]) -> Result<T> {
     }
 }
 
-/// Bytes a blob of this payload and table takes.
-pub fn blob_len<T: Serialize>(payload: &T, table: Option<&NearestTable<'_>>) -> Result<usize> {
+/// Bytes a blob of this payload and trailer takes.
+pub fn blob_len<T: Serialize>(payload: &T, trailer: &Trailer<'_>) -> Result<usize> {
     let size =
         |bytes: core::result::Result<usize, postcard::Error>| bytes.map_err(|_| Error::Malformed);
     let p = size(postcard::serialize_with_flavor(
@@ -353,21 +396,21 @@ pub fn blob_len<T: Serialize>(payload: &T, table: Option<&NearestTable<'_>>) -> 
         postcard::ser_flavors::Size::default(),
     ))?;
     let t = size(postcard::serialize_with_flavor(
-        &table,
+        trailer,
         postcard::ser_flavors::Size::default(),
     ))?;
     Ok(HEADER_LEN + p + t + CRC_LEN)
 }
 
-/// Writes a blob of the current format (header, payload, table, CRC) into
-/// `out`, returning its length.
+/// Writes a blob of the current format (header, payload, trailer, CRC)
+/// into `out`, returning its length.
 pub fn write_blob<T: Serialize>(
     kind: ModelKind,
     payload: &T,
-    table: Option<&NearestTable<'_>>,
+    trailer: &Trailer<'_>,
     out: &mut [u8],
 ) -> Result<usize> {
-    let needed = blob_len(payload, table)?;
+    let needed = blob_len(payload, trailer)?;
     let available = out.len();
     let out = out
         .get_mut(..needed)
@@ -382,7 +425,7 @@ pub fn write_blob<T: Serialize>(
     let used = postcard::to_slice(payload, body)
         .map_err(|_| Error::Malformed)?
         .len();
-    postcard::to_slice(&table, &mut body[used..]).map_err(|_| Error::Malformed)?;
+    postcard::to_slice(trailer, &mut body[used..]).map_err(|_| Error::Malformed)?;
     let crc = CRC32.checksum(&out[..needed - CRC_LEN]);
     out[needed - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
     Ok(needed)

@@ -14,6 +14,7 @@
 //! | encode | [`Int8Model::encode`] | per-point MLP, streamed in tiles, running max-pool -> int8 feature |
 //! | head | [`Int8Model::head`] | FC layers over (template feature, source feature) -> 7 i32 |
 //! | pose | [`Pose::from_head_output`] | unit quaternion + translation (f32, `libm`) |
+//! | (PointNetLK) | [`lk`] | instead of or after the head: Lucas-Kanade steps in feature space, a solver stored in the blob |
 //! | check/refine | [`registration`], [`refine`] | flip hypotheses, ICP against the template's points, residual -> [`Registration`] |
 //!
 //! The model is a blob ([`format`]) whose weights are used in place (flash),
@@ -94,6 +95,7 @@ pub mod format;
 mod header;
 pub mod int8;
 mod kernel;
+pub mod lk;
 pub mod locate;
 pub mod pose;
 pub mod random;

@@ -253,6 +253,7 @@ mod tests {
             relative_plane_residual: 0.005,
             hypothesis: 0,
             passes: 0,
+            lk_iterations: 0,
             icp_iterations: 3,
             saturated: 0,
             out_of_range: 0,

@@ -5,6 +5,7 @@
 //! source (user units)
 //!   -> frame (blob)         p_model = scale (p - centre)
 //!   -> network passes       PCRNet: 1; i-PCRNet: up to `passes`, composed
+//!   -> LK steps             PointNetLK: up to `lk_iterations`, composed (blobs with a solver)
 //!   -> hypotheses           the network's pose, then it followed by each template turn
 //!   -> ICP                  point-to-point against the template's points, each hypothesis
 //!   -> residuals            lowest point-to-point residual wins; the
@@ -30,9 +31,18 @@ use crate::template::Template;
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Options {
-    /// Network passes (1: PCRNet; more: i-PCRNet, composing the estimates).
+    /// Network passes (1: PCRNet; more: i-PCRNet, composing the estimates;
+    /// 0 for a PointNetLK blob, which has no head: [`Error::NoHead`] otherwise).
     pub passes: usize,
-    /// i-PCRNet stops once a pass's `||dT - I||_F` is below this (0: never).
+    /// PointNetLK steps after the network's passes ([`crate::lk`]): each an
+    /// encoder pass and the Lucas-Kanade update, composed (0: none). Needs a
+    /// blob with an LK solver ([`Error::NoLkSolver`] otherwise): blobs of
+    /// models trained as PointNetLK have one, `pcrnet export --lk` adds one
+    /// to any model. Refine by ICP: 0 (the default); by LK: `icp_iterations`
+    /// 0 and one hypothesis; LK then ICP: both.
+    pub lk_iterations: usize,
+    /// Network passes and LK steps stop once a step's `||dT - I||_F` is
+    /// below this (0: never).
     pub tolerance: f32,
     /// Starting poses tried by flip resolution: 1 (the network's pose only)
     /// up to 1 + the turns stored in the blob (clamped).
@@ -64,6 +74,7 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             passes: 1,
+            lk_iterations: 0,
             tolerance: 0.0,
             hypotheses: 10,
             screen_iterations: 10,
@@ -100,8 +111,8 @@ impl Options {
 
     pub(crate) fn validate(&self) -> Result<()> {
         let bad = |what| Err(Error::InvalidOption { what });
-        if self.passes == 0 {
-            return bad("passes must be at least 1");
+        if self.passes == 0 && self.lk_iterations == 0 {
+            return bad("passes and lk_iterations cannot both be 0");
         }
         if self.hypotheses == 0 {
             return bad("hypotheses must be at least 1");
@@ -155,6 +166,8 @@ pub struct Registration {
     pub hypothesis: usize,
     /// Network passes run.
     pub passes: usize,
+    /// PointNetLK steps run after them.
+    pub lk_iterations: usize,
     /// ICP iterations run from the winning start.
     pub icp_iterations: usize,
     /// int8 values that reached the top of their range (feature entries and
@@ -175,6 +188,28 @@ pub struct Registration {
     /// Not degenerate, and the relative plane residual is at most the
     /// option's `max_residual`.
     pub reliable: bool,
+}
+
+/// What a model's step closure runs on the moved source: a network pass
+/// (the head's estimate) or a PointNetLK step ([`crate::lk`]). Either
+/// returns the step's pose in the model frame, composed onto the pose so far.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Step {
+    /// Encoder and head.
+    Network,
+    /// Encoder and the Lucas-Kanade update.
+    Lk,
+}
+
+/// What the pose stage ran and counted, for [`Registration`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Stage {
+    /// Network passes run.
+    pub passes: usize,
+    /// LK steps run.
+    pub lk_iterations: usize,
+    /// What their encoder passes counted.
+    pub counts: PassCounts,
 }
 
 /// What one network pass counted (the int8 path; the f32 path has no range).
@@ -216,15 +251,15 @@ pub(crate) fn check<'s>(
     Ok(Checked { subset, degenerate })
 }
 
-/// Runs the pipeline with `pass`, one network pass on the source moved by a
-/// [`PointMap`], returning the pass's pose (model frame) and its saturation count.
+/// Runs the pipeline with `pass`, one [`Step`] on the source moved by a
+/// [`PointMap`], returning the step's pose (model frame) and its counts.
 pub(crate) fn run(
     frame: &Frame,
     centring: Centring,
     template: &Template<'_>,
     source: &[[f32; 3]],
     options: &Options,
-    pass: impl FnMut(&PointMap) -> Result<(Pose, PassCounts)>,
+    pass: impl FnMut(&PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     let checked = check(frame, template, source, options)?;
     run_checked(frame, centring, template, &checked, options, pass)
@@ -237,19 +272,19 @@ pub(crate) fn run_checked(
     template: &Template<'_>,
     checked: &Checked<'_>,
     options: &Options,
-    mut pass: impl FnMut(&PointMap) -> Result<(Pose, PassCounts)>,
+    mut pass: impl FnMut(&PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
-    let (mut saturated, mut out_of_range) = (0u32, 0u32);
-    let (network, passes) = network_passes(
+    let mut counts = PassCounts::default();
+    let (network, passes, lk_iterations) = pose_steps(
         frame,
         centring,
         checked.subset.source,
-        options.passes,
+        (options.passes, options.lk_iterations),
         options.tolerance,
-        |map| {
-            let (delta, counts) = pass(map)?;
-            saturated = saturated.saturating_add(counts.saturated);
-            out_of_range = out_of_range.max(counts.out_of_range);
+        |map, step| {
+            let (delta, c) = pass(map, step)?;
+            counts.saturated = counts.saturated.saturating_add(c.saturated);
+            counts.out_of_range = counts.out_of_range.max(c.out_of_range);
             Ok(delta)
         },
     )?;
@@ -262,11 +297,12 @@ pub(crate) fn run_checked(
         &options.icp_settings(),
         options.inlier_distance,
     )?;
-    let counts = PassCounts {
-        saturated,
-        out_of_range,
+    let stage = Stage {
+        passes,
+        lk_iterations,
+        counts,
     };
-    conclude(frame, template, checked, &r, passes, counts, options)
+    conclude(frame, template, checked, &r, stage, options)
 }
 
 /// [`Error::NonFiniteCoordinate`] for the first point with a NaN or
@@ -304,8 +340,7 @@ pub(crate) fn run_swept(
         template,
         &checked,
         &r,
-        0,
-        PassCounts::default(),
+        Stage::default(),
         options,
     )
 }
@@ -354,8 +389,7 @@ pub(crate) fn refine_from(
         template,
         checked,
         &refined,
-        0,
-        PassCounts::default(),
+        Stage::default(),
         options,
     );
     (pose, registration)
@@ -369,8 +403,7 @@ pub(crate) fn conclude(
     template: &Template<'_>,
     checked: &Checked<'_>,
     r: &Resolved,
-    passes: usize,
-    counts: PassCounts,
+    stage: Stage,
     options: &Options,
 ) -> Result<Registration> {
     let degenerate = checked.degenerate;
@@ -391,10 +424,11 @@ pub(crate) fn conclude(
         plane_residual,
         relative_plane_residual: r.fit.plane_residual,
         hypothesis: r.hypothesis,
-        passes,
+        passes: stage.passes,
+        lk_iterations: stage.lk_iterations,
         icp_iterations: r.icp_iterations,
-        saturated: counts.saturated,
-        out_of_range: counts.out_of_range,
+        saturated: stage.counts.saturated,
+        out_of_range: stage.counts.out_of_range,
         degenerate,
         ambiguity: ambiguity::assess(
             frame,
@@ -408,10 +442,37 @@ pub(crate) fn conclude(
     })
 }
 
-/// The network's passes from where registration starts ([`pose::centring`]),
-/// each on the source moved by the pose so far ([`pose::iterate`]): the pose
-/// in the model frame and the passes run. A non-finite pose is an error.
-fn network_passes(
+/// The pose stage from where registration starts ([`pose::centring`]):
+/// `counts.0` network passes, then `counts.1` LK steps, each on the source
+/// moved by the pose so far ([`pose::iterate`]; each run stops on
+/// `tolerance`): the pose in the model frame, the passes and the LK steps
+/// run. A non-finite pose is an error.
+fn pose_steps(
+    frame: &Frame,
+    centring: Centring,
+    source: &[[f32; 3]],
+    counts: (usize, usize),
+    tolerance: f32,
+    mut pass: impl FnMut(&PointMap, Step) -> Result<Pose>,
+) -> Result<(Pose, usize, usize)> {
+    let start = pose::centring(source, centring, frame)?;
+    let (network, passes) = pose::iterate(start, counts.0, tolerance, |current| {
+        pass(&PointMap::new(*frame, current), Step::Network)
+    })?;
+    let (pose, lk) = pose::iterate(network, counts.1, tolerance, |current| {
+        pass(&PointMap::new(*frame, current), Step::Lk)
+    })?;
+    if pose.is_finite() {
+        Ok((pose, passes, lk))
+    } else {
+        Err(Error::NonFiniteResult)
+    }
+}
+
+/// The network's passes alone ([`pose_steps`] without LK), with the pose
+/// in user units, as `Int8Model::network_pose` and `F32Model::network_pose`
+/// give it.
+pub(crate) fn network_pose(
     frame: &Frame,
     centring: Centring,
     source: &[[f32; 3]],
@@ -419,28 +480,9 @@ fn network_passes(
     tolerance: f32,
     mut pass: impl FnMut(&PointMap) -> Result<Pose>,
 ) -> Result<(Pose, usize)> {
-    let start = pose::centring(source, centring, frame)?;
-    let (pose, n) = pose::iterate(start, passes, tolerance, |current| {
-        pass(&PointMap::new(*frame, current))
+    let (pose, n, _) = pose_steps(frame, centring, source, (passes, 0), tolerance, |map, _| {
+        pass(map)
     })?;
-    if pose.is_finite() {
-        Ok((pose, n))
-    } else {
-        Err(Error::NonFiniteResult)
-    }
-}
-
-/// [`network_passes`] with the pose in user units: the network alone, as
-/// `Int8Model::network_pose` and `F32Model::network_pose` give it.
-pub(crate) fn network_pose(
-    frame: &Frame,
-    centring: Centring,
-    source: &[[f32; 3]],
-    passes: usize,
-    tolerance: f32,
-    pass: impl FnMut(&PointMap) -> Result<Pose>,
-) -> Result<(Pose, usize)> {
-    let (pose, n) = network_passes(frame, centring, source, passes, tolerance, pass)?;
     let pose = frame.pose_to_user(&pose);
     if pose.is_finite() {
         Ok((pose, n))

@@ -8,10 +8,11 @@ use crate::arch::{Arch, MAX_LAYERS, POSE_DIM};
 use crate::error::{Error, Result};
 use crate::fixed::quantize_multiplier;
 use crate::format::{
-    F32Layer, F32Payload, Frame, Int8Layer, Int8Output, Int8Payload, ModelKind, TemplateCloud,
-    write_blob,
+    F32Layer, F32Payload, Frame, Int8Layer, Int8Output, Int8Payload, LkSolver, ModelKind,
+    TemplateCloud, Trailer, decode_model, write_blob,
 };
 use crate::int8::Int8Model;
+use crate::lk::TWIST_DIM;
 use crate::template;
 
 pub use crate::random::SplitMix64;
@@ -205,7 +206,7 @@ pub fn random_int8_blob_with<'o>(
     // user units, which the model moves into its frame.
     let user = cloud.map(|p| [0, 1, 2].map(|k| p[k] / frame.scale + frame.centre[k]));
     let mut buf = [0i8; 3 * 4096];
-    let model = Int8Model::from_payload(payload.clone(), None)?;
+    let model = Int8Model::from_payload(payload.clone(), Trailer::default())?;
     let needed = model.scratch_len(1);
     let available = buf.len();
     let scratch = buf
@@ -216,7 +217,60 @@ pub fn random_int8_blob_with<'o>(
         *t = v as u8;
     }
     payload.template_feature = template;
-    let n = write_blob(ModelKind::Int8, &payload, None, out)?;
+    let n = write_blob(ModelKind::Int8, &payload, &Trailer::default(), out)?;
+    Ok(&out[..n])
+}
+
+/// Bound of a random LK solver's entries times the feature width `F`: the
+/// entries are uniform in `+-RANDOM_LK_SPREAD / F`, so that a twist
+/// component (a sum of `F` int8 feature differences of some tens) stays a
+/// fraction of a radian or model unit, steps moderate.
+pub const RANDOM_LK_SPREAD: f32 = 0.125;
+
+/// Writes the int8 model `blob` again with a random PointNetLK solver
+/// ([`LkSolver`], entries uniform in `+-RANDOM_LK_SPREAD / F`; no
+/// Jacobian behind them, so its steps check that devices agree, not that
+/// LK converges) and, if `headless`, without its head (no hidden head
+/// layer and an empty output layer: the shape of a model trained as
+/// PointNetLK). The payload is otherwise unchanged and the closest-point
+/// table kept; the solver's rows go into `arena`. The result is checked
+/// as `Int8Model::from_bytes` checks a blob.
+pub fn with_random_lk_solver<'o>(
+    blob: &[u8],
+    seed: u64,
+    headless: bool,
+    arena: &mut [u8],
+    out: &'o mut [u8],
+) -> Result<&'o [u8]> {
+    let (mut payload, trailer) = decode_model::<Int8Payload<'_>>(blob, ModelKind::Int8)?;
+    if headless {
+        payload.arch.head.clear();
+        payload.head.clear();
+        payload.output = Int8Output {
+            weights: &[],
+            bias: &[],
+            scale: &[],
+        };
+    }
+    let f = payload.arch.feature_dim();
+    let mut arena = arena;
+    let rows = take(&mut arena, 4 * TWIST_DIM * f)?;
+    let bound = RANDOM_LK_SPREAD / f as f32;
+    let mut rng = SplitMix64(seed);
+    for c in rows.chunks_exact_mut(4) {
+        c.copy_from_slice(&rng.uniform(-bound, bound).to_le_bytes());
+    }
+    let trailer = Trailer {
+        table: trailer.table,
+        // No forward differences or damping made these rows.
+        lk: Some(LkSolver {
+            jacobian_step: 0.0,
+            damping: 0.0,
+            rows,
+        }),
+    };
+    Int8Model::from_payload(payload.clone(), trailer)?;
+    let n = write_blob(ModelKind::Int8, &payload, &trailer, out)?;
     Ok(&out[..n])
 }
 
@@ -263,7 +317,7 @@ pub fn random_f32_blob_into<'o>(
         layers,
         template_feature: zeros,
     };
-    let model = crate::F32Model::from_payload(payload.clone(), None)?;
+    let model = crate::F32Model::from_payload(payload.clone(), Trailer::default())?;
     let mut scratch = [0f32; 3 * 4096];
     let needed = model.scratch_len();
     let available = scratch.len();
@@ -275,7 +329,7 @@ pub fn random_f32_blob_into<'o>(
         c.copy_from_slice(&v.to_le_bytes());
     }
     payload.template_feature = template;
-    let n = write_blob(ModelKind::F32, &payload, None, out)?;
+    let n = write_blob(ModelKind::F32, &payload, &Trailer::default(), out)?;
     Ok(&out[..n])
 }
 
@@ -313,5 +367,51 @@ pub fn describe_ambiguity(
             )
         }
         None => write!(out, "none"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::registration::Options;
+
+    /// A headless blob with a random solver loads, registers by LK alone
+    /// and refuses a network pass; one with its head keeps it.
+    #[test]
+    fn random_lk_solvers_load_and_run() {
+        let (mut arena, mut out) = (std::vec![0u8; 1 << 20], std::vec![0u8; 1 << 20]);
+        let base = random_int8_blob_into(7, &[16, 32, 64], &[64, 32], &mut arena, &mut out)
+            .unwrap()
+            .to_vec();
+        let mut lk_out = std::vec![0u8; 1 << 20];
+        let mut scratch = std::vec![0i8; 64 * 1024];
+        let cloud: [[f32; 3]; 100] = random_cloud(&mut SplitMix64(3));
+        let lk = Options {
+            passes: 0,
+            lk_iterations: 5,
+            hypotheses: 1,
+            icp_iterations: 0,
+            ..Options::default()
+        };
+        let headless = with_random_lk_solver(&base, 1, true, &mut arena, &mut lk_out).unwrap();
+        let m = Int8Model::from_bytes(headless).unwrap();
+        assert!(!m.has_head());
+        assert_eq!(m.lk_solver().map(|s| s.features()), Some(64));
+        let r = m.register(&cloud, &lk, &mut scratch).unwrap();
+        assert_eq!((r.passes, r.lk_iterations), (0, 5));
+        assert!(r.pose.is_finite());
+        assert_eq!(
+            m.register(&cloud, &Options::default(), &mut scratch),
+            Err(Error::NoHead)
+        );
+        let headed = with_random_lk_solver(&base, 1, false, &mut arena, &mut out).unwrap();
+        let m = Int8Model::from_bytes(headed).unwrap();
+        assert!(m.has_head() && m.lk_solver().is_some());
+        let both = Options {
+            lk_iterations: 3,
+            ..Options::default()
+        };
+        let r = m.register(&cloud, &both, &mut scratch).unwrap();
+        assert_eq!((r.passes, r.lk_iterations), (1, 3));
     }
 }

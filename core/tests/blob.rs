@@ -174,50 +174,50 @@ fn inconsistent_payloads_are_rejected() {
     let mut p = model.payload().clone();
     p.template_feature = &p.template_feature[1..];
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InconsistentDimensions { .. })
     ));
     let mut p = model.payload().clone();
     p.encoder[0].shift = &bad_shift;
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InvalidParameter { .. })
     ));
     let mut p = model.payload().clone();
     p.encoder[0].bias = &huge_bias;
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InvalidParameter { .. })
     ));
     let mut p = model.payload().clone();
     p.input_scale = f32::NAN;
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InvalidParameter { .. })
     ));
     let mut p = model.payload().clone();
     p.arch.encoder[0] = 9;
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InconsistentDimensions { .. })
     ));
     // Format 3: frame, trained passes and the template's points.
     let mut p = model.payload().clone();
     p.frame.scale = 0.0;
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InvalidParameter { .. })
     ));
     let mut p = model.payload().clone();
     p.passes = 0;
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InvalidParameter { .. })
     ));
     let mut p = model.payload().clone();
     p.template.points = &p.template.points[6..];
     assert!(matches!(
-        Int8Model::from_payload(p, None),
+        Int8Model::from_payload(p, format::Trailer::default()),
         Err(Error::InconsistentDimensions { .. })
     ));
     assert_eq!(model.trained_passes(), 1);
@@ -231,14 +231,17 @@ fn write_then_read_round_trips() {
     let n = format::write_blob(
         ModelKind::Int8,
         model.payload(),
-        model.template().table().as_ref(),
+        &format::Trailer {
+            table: model.template().table(),
+            lk: model.lk_solver().map(|s| s.stored()),
+        },
         &mut out,
     )
     .unwrap();
     assert_eq!(&out[..n], &good[..]);
     let mut short = vec![0u8; good.len() - 1];
     assert_eq!(
-        format::write_blob(ModelKind::Int8, model.payload(), None, &mut short).err(),
+        format::write_blob(ModelKind::Int8, model.payload(), &format::Trailer::default(), &mut short).err(),
         Some(Error::BufferTooSmall {
             needed: good.len(),
             available: good.len() - 1

@@ -13,16 +13,16 @@ use pcrnet_core::{Int8Model, Options};
 
 const MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
 
-/// The shipped blob with its payload and no table: format 4 (`version`
-/// 4) or the format-3 header (`version` 3, written by hand as format 3's
+/// The shipped blob (format 4) with its payload and no table: the current
+/// format (`version` [`format::FORMAT_VERSION`]) or the format-3 header (`version` 3, written by hand as format 3's
 /// exporter did: header, payload, CRC).
 fn without_table(version: u16) -> Vec<u8> {
     let (payload, table): (Int8Payload<'_>, _) =
         format::decode_model(MODEL, ModelKind::Int8).unwrap();
-    assert!(table.is_some(), "the shipped blob carries a table");
+    assert!(table.table.is_some(), "the shipped blob carries a table");
     if version == format::FORMAT_VERSION {
-        let mut out = vec![0u8; format::blob_len(&payload, None).unwrap()];
-        let n = format::write_blob(ModelKind::Int8, &payload, None, &mut out).unwrap();
+        let mut out = vec![0u8; format::blob_len(&payload, &format::Trailer::default()).unwrap()];
+        let n = format::write_blob(ModelKind::Int8, &payload, &format::Trailer::default(), &mut out).unwrap();
         assert_eq!(n, out.len());
         return out;
     }
@@ -73,7 +73,7 @@ fn sources(count: usize) -> Vec<Vec<[f32; 3]>> {
 
 #[test]
 fn the_table_changes_no_result() {
-    let plain4 = without_table(4);
+    let plain4 = without_table(format::FORMAT_VERSION);
     let plain3 = without_table(3);
     let tabled = Int8Model::from_bytes(MODEL).unwrap();
     let models = [

@@ -107,8 +107,8 @@ fn hex_bits(s: &str) -> Option<u32> {
 }
 
 /// `instructions stack qw qx qy qz tx ty tz residual relative fitness rmse
-/// hypothesis passes icp_iterations saturated out_of_range degenerate reliable
-/// axis turn`.
+/// plane relative_plane hypothesis passes lk_iterations icp_iterations
+/// saturated out_of_range degenerate reliable axis turn`.
 pub fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
     let [
         instructions,
@@ -128,6 +128,7 @@ pub fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
         relative_plane,
         hypothesis,
         passes,
+        lk,
         icp,
         saturated,
         out_of_range,
@@ -154,6 +155,7 @@ pub fn parse_registration(rest: &[&str]) -> Option<DeviceRegistration> {
             relative_plane_residual: hex_bits(relative_plane)?,
             hypothesis: hypothesis.parse().ok()?,
             passes: passes.parse().ok()?,
+            lk_iterations: lk.parse().ok()?,
             icp_iterations: icp.parse().ok()?,
             saturated: saturated.parse().ok()?,
             out_of_range: out_of_range.parse().ok()?,
@@ -342,6 +344,7 @@ pub fn registration_difference(
             })
             .or_else(|| int_difference("hypothesis", h.hypothesis, d.hypothesis))
             .or_else(|| int_difference("passes", h.passes, d.passes))
+            .or_else(|| int_difference("lk_iterations", h.lk_iterations, d.lk_iterations))
             .or_else(|| int_difference("icp_iterations", h.icp_iterations, d.icp_iterations))
             .or_else(|| int_difference("saturated", h.saturated, d.saturated))
             .or_else(|| int_difference("out_of_range", h.out_of_range, d.out_of_range))
@@ -410,7 +413,7 @@ mod tests {
         let out = "calibration 2000000 2000000\nstatic_ram 65600\n\
                    case 0 ok 100 250 512 feature 7f80ff00 head 1 -2 3 4 5 6 7 pose 3f800000 0 0 0 0 0 0\n\
                    case 0 iter ok 3 3f800000 0 0 0 0 0 1\n\
-                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 1 1 7 12 2 none true none none\n\
+                   case 0 reg 0 ok 1000 600 3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 1 1 5 7 12 2 none true none none\n\
                    case 1 error false EmptyCloud\ncase 1 iter error EmptyCloud\n\
                    case 1 reg 0 error 20 100 InvalidOption { what: \"hypotheses must be at least 1\" }\n\
                    case 1 reg 1 error 20 100 EmptyCloud\ndone\n";
@@ -460,6 +463,7 @@ mod tests {
             relative_plane_residual: 0x3c23_d70a,
             hypothesis: 1,
             passes: 1,
+            lk_iterations: 5,
             icp_iterations: 7,
             saturated: 12,
             out_of_range: 2,
@@ -476,6 +480,12 @@ mod tests {
         assert_eq!(
             registration_difference(&Ok(other), Some(&reg.outcome)).as_deref(),
             Some("icp_iterations: host 8 device 7")
+        );
+        let mut other = host.clone();
+        other.lk_iterations = 4;
+        assert_eq!(
+            registration_difference(&Ok(other), Some(&reg.outcome)).as_deref(),
+            Some("lk_iterations: host 4 device 5")
         );
         let mut other = host;
         other.degenerate = "Line".into();

@@ -67,8 +67,8 @@ fn wrapping_f32_head() -> anyhow::Result<Vec<u8>> {
         ..base
     };
     let mut blob =
-        vec![0u8; format::blob_len(&payload, None).map_err(|e| anyhow::anyhow!("{e:?}"))?];
-    let n = format::write_blob(ModelKind::F32, &payload, None, &mut blob)
+        vec![0u8; format::blob_len(&payload, &format::Trailer::default()).map_err(|e| anyhow::anyhow!("{e:?}"))?];
+    let n = format::write_blob(ModelKind::F32, &payload, &format::Trailer::default(), &mut blob)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     blob.truncate(n);
     Ok(blob)

@@ -61,6 +61,9 @@ fn unusual_options() -> Options {
         inlier_distance: 0.1,
         max_points: 64,
         max_residual: 0.05,
+        // LK steps need a blob with PointNetLK's solver: the LK models'
+        // own option sets run them.
+        lk_iterations: 0,
     }
 }
 

@@ -117,7 +117,7 @@ mod tests {
 
     #[test]
     fn parses_and_compares_tracking_lines() {
-        let fields = "3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 0 0 3 0 0 none true none none";
+        let fields = "3f800000 0 0 0 0 0 0 3c23d70a 3c23d70a 3f800000 0 3c23d70a 3c23d70a 0 0 0 3 0 0 none true none none";
         let ok = format!("case 4 track 1 held ok 900 500 {fields} Kept");
         let words: Vec<&str> = ok.split_whitespace().collect();
         let ((c, k, start), step) = parse_line(words[1], &words[3..]).unwrap();

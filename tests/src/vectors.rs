@@ -1,6 +1,6 @@
 //! Test models, clouds and the container the device reads.
 
-use pcrnet_core::testing::{SplitMix64, random_int8_blob_with};
+use pcrnet_core::testing::{SplitMix64, random_int8_blob_with, with_random_lk_solver};
 use pcrnet_core::{Frame, Int8Model, Metric, Options, POSE_DIM, Registration};
 
 /// Container format version (the device checks it).
@@ -11,7 +11,7 @@ pub const SCRATCH_LEN: usize = 64 * 1024;
 /// u32 words per case in the container's table.
 const CASE_WORDS: usize = 7;
 /// u32 words per [`Options`] in the container.
-pub const OPTIONS_WORDS: usize = 11;
+pub const OPTIONS_WORDS: usize = 12;
 
 /// A named int8 model blob.
 pub struct TestModel {
@@ -58,6 +58,8 @@ pub struct RegistrationBits {
     pub hypothesis: usize,
     /// Network passes run.
     pub passes: usize,
+    /// PointNetLK steps run after them.
+    pub lk_iterations: usize,
     /// ICP iterations run from the winning start.
     pub icp_iterations: usize,
     /// Saturated int8 values.
@@ -84,6 +86,7 @@ impl From<&Registration> for RegistrationBits {
             relative_plane_residual: r.relative_plane_residual.to_bits(),
             hypothesis: r.hypothesis,
             passes: r.passes,
+            lk_iterations: r.lk_iterations,
             icp_iterations: r.icp_iterations,
             saturated: r.saturated,
             out_of_range: r.out_of_range,
@@ -143,9 +146,31 @@ pub fn describe(o: &Options) -> String {
     {
         return format!("K={} + ICP {}", o.hypotheses, o.icp_iterations);
     }
+    if *o
+        == (Options {
+            passes: 0,
+            lk_iterations: o.lk_iterations,
+            ..Options::network_only()
+        })
+    {
+        return format!("LK only ({} steps)", o.lk_iterations);
+    }
+    if *o
+        == (Options {
+            passes: o.passes,
+            lk_iterations: o.lk_iterations,
+            ..d
+        })
+    {
+        return format!(
+            "{} passes + {} LK steps + K={} + ICP {}",
+            o.passes, o.lk_iterations, o.hypotheses, o.icp_iterations
+        );
+    }
     format!(
-        "{} passes (tol {}), K={}, ICP {} {:?} (screen {}, tol {}, {}), inlier {}, {} points, max residual {}",
+        "{} passes + {} LK steps (tol {}), K={}, ICP {} {:?} (screen {}, tol {}, {}), inlier {}, {} points, max residual {}",
         o.passes,
+        o.lk_iterations,
         o.tolerance,
         o.hypotheses,
         o.icp_iterations,
@@ -234,6 +259,19 @@ pub fn random_model_with(
     )
     .expect("random model parameters are valid")
     .to_vec();
+    TestModel {
+        name: name.into(),
+        blob,
+    }
+}
+
+/// `model` with a random PointNetLK solver (`pcrnet-core`'s seeded
+/// [`with_random_lk_solver`]), without its head if `headless`, renamed.
+pub fn with_lk_solver(model: &TestModel, name: &str, seed: u64, headless: bool) -> TestModel {
+    let (mut arena, mut out) = (vec![0u8; 1 << 20], vec![0u8; model.blob.len() + (1 << 20)]);
+    let blob = with_random_lk_solver(&model.blob, seed, headless, &mut arena, &mut out)
+        .expect("test models take a solver")
+        .to_vec();
     TestModel {
         name: name.into(),
         blob,
@@ -354,7 +392,7 @@ fn align4(buf: &mut Vec<u8>) {
 
 /// An option set as the container's words: `passes tolerance hypotheses
 /// screen_iterations icp_iterations metric icp_tolerance icp_distance
-/// inlier_distance max_points max_residual` (counts as u32, f32 as their
+/// inlier_distance max_points max_residual lk_iterations` (counts as u32, f32 as their
 /// bits, metric 0 point-to-point / 1 point-to-plane). Every field: a field added to `Options` fails to compile here.
 pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
     let Options {
@@ -369,6 +407,7 @@ pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
         inlier_distance,
         max_points,
         max_residual,
+        lk_iterations,
     } = *o;
     Ok([
         u32::try_from(passes)?,
@@ -385,6 +424,7 @@ pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
         inlier_distance.to_bits(),
         u32::try_from(max_points)?,
         max_residual.to_bits(),
+        u32::try_from(lk_iterations)?,
     ])
 }
 
@@ -406,6 +446,7 @@ pub fn options_from_words(w: &[u32; OPTIONS_WORDS]) -> Options {
         inlier_distance: f32::from_bits(w[8]),
         max_points: w[9] as usize,
         max_residual: f32::from_bits(w[10]),
+        lk_iterations: w[11] as usize,
     }
 }
 

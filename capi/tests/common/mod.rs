@@ -60,6 +60,7 @@ pub fn sentinel() -> PcrnetRegistration {
         inlier_rmse: 7.0,
         hypothesis: 7,
         passes: 7,
+        lk_iterations: 7,
         icp_iterations: 7,
         saturated: 7,
         out_of_range: 7,

@@ -10,9 +10,10 @@
 
 use crate::arch::{Arch, F32_TILE, INPUT_DIM, POSE_DIM, ping_pong, prefix};
 use crate::error::{Error, Result};
-use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, expect_len};
+use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, Trailer, expect_len};
+use crate::lk::Solver;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, Options, PassCounts, Registration};
+use crate::registration::{self, Options, PassCounts, Registration, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -138,13 +139,14 @@ pub struct F32Model<'a> {
     passes: u16,
     frame: Frame,
     template: Template<'a>,
+    lk: Option<Solver<'a>>,
 }
 
 impl<'a> F32Model<'a> {
     /// Parses and validates an f32 blob. Weights stay in `blob`.
     pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
-        let (payload, table) = format::decode_model(blob, ModelKind::F32)?;
-        Self::from_payload(payload, table)
+        let (payload, trailer) = format::decode_model(blob, ModelKind::F32)?;
+        Self::from_payload(payload, trailer)
     }
 
     /// The network (model frame).
@@ -157,9 +159,42 @@ impl<'a> F32Model<'a> {
         &self.frame
     }
 
-    /// Network passes the model was trained for (1: PCRNet; more: i-PCRNet).
+    /// Network passes the model was trained for (1: PCRNet; more: i-PCRNet;
+    /// for a model trained as PointNetLK, its LK iterations).
     pub fn trained_passes(&self) -> usize {
         self.passes as usize
+    }
+
+    /// PointNetLK's solver, if the blob has one ([`crate::lk`]).
+    pub fn lk_solver(&self) -> Option<&Solver<'a>> {
+        self.lk.as_ref()
+    }
+
+    /// One step on the source moved by `map`: a network pass or a
+    /// PointNetLK step (`exp(P r)^-1` for the f32 feature residual).
+    fn step(
+        &self,
+        source: &[[f32; 3]],
+        map: &PointMap,
+        step: Step,
+        scratch: &mut [f32],
+    ) -> Result<(Pose, PassCounts)> {
+        let net = &self.network;
+        let pose = match step {
+            Step::Network => net.pass(source, map, scratch)?,
+            Step::Lk => {
+                let solver = self.lk.as_ref().ok_or(Error::NoLkSolver)?;
+                let (feature, work) = net.split(scratch)?;
+                net.encode_into(source, map, feature, work)?;
+                finite(feature)?;
+                let template = net.template;
+                solver.step(|j| match feature.get(j) {
+                    Some(&s) => s - template.get(j),
+                    None => 0.0,
+                })?
+            }
+        };
+        Ok((pose, PassCounts::default()))
     }
 
     /// The template's points (model frame).
@@ -197,7 +232,7 @@ impl<'a> F32Model<'a> {
             &self.template,
             source,
             options,
-            |map| Ok((net.pass(source, map, scratch)?, PassCounts::default())),
+            |map, step| self.step(source, map, step, scratch),
         )
     }
 
@@ -218,7 +253,7 @@ impl<'a> F32Model<'a> {
             source,
             previous,
             options,
-            |map| Ok((net.pass(source, map, scratch)?, PassCounts::default())),
+            |map, step| self.step(source, map, step, scratch),
         )
     }
 
@@ -234,12 +269,9 @@ impl<'a> F32Model<'a> {
             .network_pose_in(&self.frame, source, passes, tolerance, scratch)
     }
 
-    /// Validates an already decoded payload and the template's
-    /// closest-point table, if any.
-    pub fn from_payload(
-        p: F32Payload<'a>,
-        table: Option<crate::format::NearestTable<'a>>,
-    ) -> Result<Self> {
+    /// Validates an already decoded payload and its trailer (the
+    /// template's closest-point table and PointNetLK's solver, if any).
+    pub fn from_payload(p: F32Payload<'a>, trailer: Trailer<'a>) -> Result<Self> {
         let mut layers = heapless::Vec::new();
         for l in &p.layers {
             check_bytes(l)?;
@@ -259,11 +291,21 @@ impl<'a> F32Model<'a> {
         crate::format::check_passes(p.passes)?;
         let network = F32Network::new(p.arch, layers, LeF32(p.template_feature))?
             .with_centring(p.centre_source);
+        let lk = trailer
+            .lk
+            .map(|s| Solver::new(s, network.arch.feature_dim()))
+            .transpose()?;
+        if !network.has_head() && lk.is_none() {
+            return Err(Error::InconsistentDimensions {
+                what: "a blob without a head needs PointNetLK's solver",
+            });
+        }
         Ok(F32Model {
             network,
             passes: p.passes,
             frame: p.frame,
-            template: Template::new(p.template, table)?,
+            template: Template::new(p.template, trailer.table)?,
+            lk,
         })
     }
 }
@@ -284,6 +326,9 @@ const LAYER_COUNT: Error = Error::InconsistentDimensions {
 impl<P: Params> F32Network<P> {
     /// Builds a network from its layers (encoder first, then head, output
     /// last) and the template feature, checking every size against `arch`.
+    /// A network without hidden head layers may also come without its
+    /// output layer: an encoder alone (a model trained as PointNetLK;
+    /// [`Self::head`] is then [`Error::NoHead`]).
     pub fn new(
         arch: Arch,
         layers: heapless::Vec<Layer<P>, { 2 * crate::arch::MAX_LAYERS + 1 }>,
@@ -291,7 +336,9 @@ impl<P: Params> F32Network<P> {
     ) -> Result<Self> {
         arch.validate()?;
         let shapes = arch.encoder_layers().chain(arch.head_layers());
-        if arch.encoder_layers().count() + arch.head_layers().count() != layers.len() {
+        let encoder = arch.encoder_layers().count();
+        let headless = arch.head.is_empty() && layers.len() == encoder;
+        if encoder + arch.head_layers().count() != layers.len() && !headless {
             return Err(LAYER_COUNT);
         }
         for (s, l) in shapes.zip(layers.iter()) {
@@ -320,6 +367,11 @@ impl<P: Params> F32Network<P> {
     /// The network shape.
     pub fn arch(&self) -> &Arch {
         &self.arch
+    }
+
+    /// Whether the network has a head (an encoder alone otherwise).
+    pub fn has_head(&self) -> bool {
+        self.layers.len() > self.arch.encoder.len()
     }
 
     /// Sets whether the network expects the source centred on its centroid
@@ -436,6 +488,23 @@ impl<P: Params> F32Network<P> {
         Ok(feature)
     }
 
+    /// Encodes `source` as [`Self::encode`] does (centred first if the
+    /// network says so), then moved by `motion`: the exporter's encodings
+    /// of the template's six small moves for PointNetLK's Jacobian.
+    pub fn encode_moved<'s>(
+        &self,
+        source: &[[f32; 3]],
+        motion: &Pose,
+        scratch: &'s mut [f32],
+    ) -> Result<&'s [f32]> {
+        let (feature, work) = self.split(scratch)?;
+        let centring = pose::centring(source, self.centring(), &Frame::IDENTITY)?;
+        let map = PointMap::new(Frame::IDENTITY, &centring.then(motion));
+        self.encode_into(source, &map, feature, work)?;
+        finite(feature)?;
+        Ok(feature)
+    }
+
     fn split<'s>(&self, scratch: &'s mut [f32]) -> Result<(&'s mut [f32], &'s mut [f32])> {
         let needed = self.scratch_len();
         let available = scratch.len();
@@ -505,6 +574,9 @@ impl<P: Params> F32Network<P> {
     /// Runs the head on a source feature, returning the raw 7 outputs
     /// ([`Error::NonFiniteResult`] if one overflows f32).
     pub fn head(&self, source_feature: &[f32], work: &mut [f32]) -> Result<[f32; POSE_DIM]> {
+        if !self.has_head() {
+            return Err(Error::NoHead);
+        }
         let f = self.arch.feature_dim();
         if source_feature.len() != f {
             return Err(Error::InconsistentDimensions {

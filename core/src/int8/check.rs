@@ -5,20 +5,21 @@ use super::Int8Model;
 use crate::arch::POSE_DIM;
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT};
-use crate::format::NearestTable;
 use crate::format::{
-    Int8Layer, Int8Payload, check_frame, check_passes, expect_len, le_f32s, le_i32s,
+    Int8Layer, Int8Payload, Trailer, check_frame, check_passes, expect_len, le_f32s, le_i32s,
 };
+use crate::lk::Solver;
 use crate::kernel::rows;
 use crate::template::Template;
 
 impl<'a> Int8Model<'a> {
-    /// Every check of [`Self::from_payload`]; returns the template.
+    /// Every check of [`Self::from_payload`]; returns the template and
+    /// PointNetLK's solver, if the blob has one.
     #[inline(never)]
     pub(super) fn validate(
         p: &Int8Payload<'a>,
-        table: Option<NearestTable<'a>>,
-    ) -> Result<Template<'a>> {
+        trailer: Trailer<'a>,
+    ) -> Result<(Template<'a>, Option<Solver<'a>>)> {
         let arch = &p.arch;
         arch.validate()?;
         if !(p.input_scale.is_finite() && p.input_scale > 0.0) {
@@ -38,17 +39,17 @@ impl<'a> Int8Model<'a> {
         for (shape, layer) in arch.head_layers().zip(p.head.iter()) {
             check_layer(layer, shape.inputs, shape.outputs, 128)?;
         }
-        let out = &p.output;
-        let out_in = arch.head_layers().last().map_or(0, |l| l.inputs);
-        expect_len(out.weights, POSE_DIM, out_in, "output weights")?;
-        expect_len(out.bias, POSE_DIM, 4, "output bias")?;
-        expect_len(out.scale, POSE_DIM, 4, "output scale")?;
-        if le_f32s(out.scale).any(|s| !s.is_finite()) {
-            return Err(Error::InvalidParameter {
-                what: "output scale",
+        let lk = trailer
+            .lk
+            .map(|s| Solver::new(s, arch.feature_dim()))
+            .transpose()?;
+        if !headless(p) {
+            check_output(p)?;
+        } else if lk.is_none() {
+            return Err(Error::InconsistentDimensions {
+                what: "a blob without a head needs PointNetLK's solver",
             });
         }
-        check_accumulator(out.weights, out.bias, out_in, 128)?;
         expect_len(
             p.template_feature,
             arch.feature_dim(),
@@ -57,8 +58,30 @@ impl<'a> Int8Model<'a> {
         )?;
         check_frame(&p.frame)?;
         check_passes(p.passes)?;
-        Template::new(p.template.clone(), table)
+        Ok((Template::new(p.template.clone(), trailer.table)?, lk))
     }
+}
+
+/// Whether the payload has no head: no hidden head layer and an empty
+/// output layer (a model trained as PointNetLK).
+pub(super) fn headless(p: &Int8Payload<'_>) -> bool {
+    let out = &p.output;
+    p.arch.head.is_empty() && out.weights.is_empty() && out.bias.is_empty() && out.scale.is_empty()
+}
+
+/// The output layer's sizes, scales and accumulator bound.
+fn check_output(p: &Int8Payload<'_>) -> Result<()> {
+    let out = &p.output;
+    let out_in = p.arch.head_layers().last().map_or(0, |l| l.inputs);
+    expect_len(out.weights, POSE_DIM, out_in, "output weights")?;
+    expect_len(out.bias, POSE_DIM, 4, "output bias")?;
+    expect_len(out.scale, POSE_DIM, 4, "output scale")?;
+    if le_f32s(out.scale).any(|s| !s.is_finite()) {
+        return Err(Error::InvalidParameter {
+            what: "output scale",
+        });
+    }
+    check_accumulator(out.weights, out.bias, out_in, 128)
 }
 
 fn check_layer(layer: &Int8Layer<'_>, inputs: usize, outputs: usize, xmax: i64) -> Result<()> {

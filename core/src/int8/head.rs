@@ -30,6 +30,9 @@ impl Int8Model<'_> {
         work: &mut [i8],
         folded: Option<&[u8]>,
     ) -> Result<([i32; POSE_DIM], u32)> {
+        if !self.has_head() {
+            return Err(Error::NoHead);
+        }
         let f = self.p.arch.feature_dim();
         let mut saturated = count_saturated(source_feature);
         if source_feature.len() != f {
@@ -144,7 +147,7 @@ impl Int8Model<'_> {
 }
 
 /// Values at `i8::MAX`, the top of the activation range.
-fn count_saturated(values: &[i8]) -> u32 {
+pub(super) fn count_saturated(values: &[i8]) -> u32 {
     values.iter().filter(|&&v| v == i8::MAX).count() as u32
 }
 

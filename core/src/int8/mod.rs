@@ -24,7 +24,8 @@
 //!
 //! The stages live apart: `check` (what loading proves about a blob),
 //! `encode` (points -> quantize -> encoder -> max-pooled feature) and
-//! `head` (template and source features -> head -> pose).
+//! `head` (template and source features -> head -> pose). A PointNetLK
+//! step takes the feature to a pose by [`crate::lk`] instead of the head.
 
 mod check;
 mod encode;
@@ -37,11 +38,12 @@ pub use prepared::Prepared;
 use crate::arch::{Arch, MAX_TILE, POSE_DIM};
 use crate::error::{Error, Result};
 use crate::fixed::INPUT_QMAX;
-use crate::format::{self, Int8Layer, Int8Payload, ModelKind};
+use crate::format::{self, Int8Layer, Int8Payload, ModelKind, Trailer};
 use crate::kernel::{Requant, bytes_of};
+use crate::lk::Solver;
 use crate::locate::Start;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, Options, PassCounts, Registration};
+use crate::registration::{self, Options, PassCounts, Registration, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -50,6 +52,7 @@ use crate::track::{self, Tracking};
 pub struct Int8Model<'a> {
     p: Int8Payload<'a>,
     template: Template<'a>,
+    lk: Option<Solver<'a>>,
 }
 
 /// Everything one inference produces besides the pose.
@@ -81,8 +84,8 @@ impl<'a> Int8Model<'a> {
     /// program (the firmware example's `main` grew to 7.4 KB that way).
     #[inline(never)]
     pub fn from_bytes(blob: &'a [u8]) -> Result<Self> {
-        let (payload, table) = format::decode_model::<Int8Payload<'a>>(blob, ModelKind::Int8)?;
-        Self::from_payload(payload, table)
+        let (payload, trailer) = format::decode_model::<Int8Payload<'a>>(blob, ModelKind::Int8)?;
+        Self::from_payload(payload, trailer)
     }
 
     /// Parses a blob and checks that `scratch` can run it (one point per tile at least).
@@ -93,15 +96,24 @@ impl<'a> Int8Model<'a> {
     }
 
     /// Validates an already decoded payload (dimensions, parameter ranges,
-    /// accumulator bounds) and the template's closest-point table, if any.
+    /// accumulator bounds) and its trailer: the template's closest-point
+    /// table and PointNetLK's solver, if any.
     #[inline(always)]
-    pub fn from_payload(
-        p: Int8Payload<'a>,
-        table: Option<format::NearestTable<'a>>,
-    ) -> Result<Self> {
+    pub fn from_payload(p: Int8Payload<'a>, trailer: Trailer<'a>) -> Result<Self> {
         // Checked by reference, then moved once into the model.
-        let template = Self::validate(&p, table)?;
-        Ok(Int8Model { p, template })
+        let (template, lk) = Self::validate(&p, trailer)?;
+        Ok(Int8Model { p, template, lk })
+    }
+
+    /// Whether the blob has a head (PCRNet, i-PCRNet); a model trained as
+    /// PointNetLK has none and takes its pose from LK steps alone.
+    pub fn has_head(&self) -> bool {
+        !check::headless(&self.p)
+    }
+
+    /// PointNetLK's solver, if the blob has one ([`crate::lk`]).
+    pub fn lk_solver(&self) -> Option<&Solver<'a>> {
+        self.lk.as_ref()
     }
 
     /// The template's points (model frame) used to check and refine poses.
@@ -114,7 +126,8 @@ impl<'a> Int8Model<'a> {
         &self.p.frame
     }
 
-    /// Network passes the model was trained for (1: PCRNet; more: i-PCRNet).
+    /// Network passes the model was trained for (1: PCRNet; more: i-PCRNet;
+    /// for a model trained as PointNetLK, its LK iterations).
     pub fn trained_passes(&self) -> usize {
         self.p.passes as usize
     }
@@ -192,7 +205,7 @@ impl<'a> Int8Model<'a> {
             &self.template,
             source,
             options,
-            |map| self.pass(source, map, tile, scratch, ready),
+            |map, step| self.pass(source, map, step, tile, scratch, ready),
         )
     }
 
@@ -220,7 +233,7 @@ impl<'a> Int8Model<'a> {
             source,
             previous,
             options,
-            |map| self.pass(source, map, tile, scratch, Ready::default()),
+            |map, step| self.pass(source, map, step, tile, scratch, Ready::default()),
         )
     }
 
@@ -354,14 +367,36 @@ impl<'a> Int8Model<'a> {
             source,
             passes,
             tolerance,
-            |map| Ok(self.pass(source, map, tile, scratch, ready)?.0),
+            |map| Ok(self.pass(source, map, Step::Network, tile, scratch, ready)?.0),
         )
     }
 
-    /// One network pass on the source moved by `map`: the pose (model
-    /// frame), the saturation count and the points left out. `ready` says
-    /// what [`Self::prepare`] left in the scratch.
+    /// One step on the source moved by `map`, a network pass or a
+    /// PointNetLK step: the pose (model frame), the saturation count and
+    /// the points left out. `ready` says what [`Self::prepare`] left in the
+    /// scratch.
     fn pass(
+        &self,
+        source: &[[f32; 3]],
+        map: &PointMap,
+        step: Step,
+        tile: usize,
+        scratch: &mut [i8],
+        ready: Ready,
+    ) -> Result<(Pose, PassCounts)> {
+        match step {
+            Step::Network => {
+                let (_, head, counts) = self.encode_and_head(source, map, tile, scratch, ready)?;
+                Ok((self.pose(&head)?, counts))
+            }
+            Step::Lk => self.lk_step(source, map, tile, scratch, ready),
+        }
+    }
+
+    /// One PointNetLK step ([`crate::lk`]): the encoder on the source moved
+    /// by `map`, then `exp(P r)^-1` for the int8 feature residual
+    /// `r = q_S - q_T` (the feature's scale is folded into `P`).
+    fn lk_step(
         &self,
         source: &[[f32; 3]],
         map: &PointMap,
@@ -369,8 +404,40 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
         ready: Ready,
     ) -> Result<(Pose, PassCounts)> {
-        let (_, head, counts) = self.encode_and_head(source, map, tile, scratch, ready)?;
-        Ok((self.pose(&head)?, counts))
+        let solver = self.lk.as_ref().ok_or(Error::NoLkSolver)?;
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        let (block, _) = self.split_host(extra);
+        let out_of_range = self.encode_into(source, map, tile, feature, work, block, ready)?;
+        let template = self.p.template_feature;
+        let residual = |j: usize| match (feature.get(j), template.get(j)) {
+            (Some(&s), Some(&t)) => (s as i32 - t as i8 as i32) as f32,
+            _ => 0.0,
+        };
+        let counts = PassCounts {
+            saturated: head::count_saturated(feature),
+            out_of_range,
+        };
+        Ok((solver.step(residual)?, counts))
+    }
+
+    /// Encodes `source` as [`Self::encode`] does (centred first if the
+    /// model says so), then moved by `motion` (model frame), into its int8
+    /// global feature (a view into `scratch`): how the exporter encodes the
+    /// template's six small moves for PointNetLK's Jacobian, as a device LK
+    /// step encodes a moved source.
+    pub fn encode_moved<'s>(
+        &self,
+        source: &[[f32; 3]],
+        motion: &Pose,
+        scratch: &'s mut [i8],
+    ) -> Result<&'s [i8]> {
+        let tile = self.tile_for(scratch.len())?;
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        let (block, _) = self.split_host(extra);
+        let (centring, _) = self.centred(source)?;
+        let map = PointMap::new(self.p.frame, &centring.then(motion));
+        self.encode_into(source, &map, tile, feature, work, block, Ready::default())?;
+        Ok(feature)
     }
 
     /// Encodes `source` moved by `map` and runs the head, on a scratch

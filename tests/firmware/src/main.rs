@@ -19,10 +19,10 @@
 //!   n_registrations, options_offset)`: the cloud is `n_points x [f32; 3]`
 //!   at `cloud_offset`; `iterations` i-PCRNet passes (tolerance 0) run
 //!   after the inference when non-zero;
-//! - at `options_offset`, `n_registrations` option sets of 11 words each,
+//! - at `options_offset`, `n_registrations` option sets of 12 words each,
 //!   every `Options` field: `passes tolerance hypotheses screen_iterations
 //!   icp_iterations metric icp_tolerance icp_distance inlier_distance
-//!   max_points max_residual` (counts as u32, f32 as their bits, metric 0
+//!   max_points max_residual lk_iterations` (counts as u32, f32 as their bits, metric 0
 //!   point-to-point / 1 point-to-plane).
 //!
 //! Output lines (f32 as 8 hex digits of their bits, `{:?}` for errors):
@@ -33,9 +33,10 @@
 //!   (or `pose_error E`), or `case C error ENCODED E`;
 //! - `case C iter ok PASSES Q0..T2`, or `case C iter error E`;
 //! - `case C reg K ok INSTR STACK QW QX QY QZ TX TY TZ RESIDUAL RELATIVE
-//!   FITNESS RMSE PLANE RELATIVE_PLANE HYPOTHESIS PASSES ICP_ITERATIONS
-//!   SATURATED OUT_OF_RANGE none|Point|Line true|false`, or `case C reg K error INSTR
-//!   STACK E`;
+//!   FITNESS RMSE PLANE RELATIVE_PLANE HYPOTHESIS PASSES LK_ITERATIONS
+//!   ICP_ITERATIONS SATURATED OUT_OF_RANGE none|Point|Line true|false AXIS
+//!   TURN` (the ambiguity as `pcrnet_core::testing::describe_ambiguity`
+//!   words it), or `case C reg K error INSTR STACK E`;
 //! - after each successful `register`, `case C track K START ok INSTR STACK`
 //!   and the same fields, then `Kept|Recovered|Lost`, or `case C track K
 //!   START error INSTR STACK E`: a tracking step with the same options from
@@ -72,7 +73,7 @@ const VERSION: u32 = 4;
 /// u32 words per case in the container's table.
 const CASE_WORDS: usize = 7;
 /// u32 words per option set.
-const OPTIONS_WORDS: usize = 11;
+const OPTIONS_WORDS: usize = 12;
 
 fn word(index: usize) -> u32 {
     // SAFETY: the data region is always mapped; reads stay inside it.
@@ -114,6 +115,7 @@ fn read_options(index: usize) -> Options {
         inlier_distance: f32::from_bits(w(8)),
         max_points: w(9) as usize,
         max_residual: f32::from_bits(w(10)),
+        lk_iterations: w(11) as usize,
     }
 }
 
@@ -132,8 +134,8 @@ macro_rules! say {
 }
 
 /// Appends a registration's fields: the pose, the six distances (hex bits),
-/// `hypothesis passes icp_iterations saturated out_of_range`, the
-/// degeneracy, the verdict and the ambiguity (two words).
+/// `hypothesis passes lk_iterations icp_iterations saturated
+/// out_of_range`, the degeneracy, the verdict and the ambiguity (two words).
 fn write_registration(line: &mut String<LINE>, r: &Registration) {
     for v in r.pose.rotation.iter().chain(&r.pose.translation) {
         let _ = write!(line, " {:08x}", v.to_bits());
@@ -150,8 +152,8 @@ fn write_registration(line: &mut String<LINE>, r: &Registration) {
     }
     let _ = write!(
         line,
-        " {} {} {} {} {} ",
-        r.hypothesis, r.passes, r.icp_iterations, r.saturated, r.out_of_range
+        " {} {} {} {} {} {} ",
+        r.hypothesis, r.passes, r.lk_iterations, r.icp_iterations, r.saturated, r.out_of_range
     );
     let _ = match r.degenerate {
         None => write!(line, "none"),

@@ -193,6 +193,7 @@ impl Method {
     pub fn device_options(&self) -> pcrnet_core::Options {
         pcrnet_core::Options {
             passes: self.iterations,
+            lk_iterations: 0,
             tolerance: self.tolerance,
             hypotheses: self.hypotheses,
             icp_iterations: self.icp_iterations,

@@ -340,63 +340,11 @@ pub(super) fn model(ctx: &Context, name: &str) -> anyhow::Result<Model> {
     })
 }
 
-/// A trained PointNetLK model: an f32 blob of its parameters made in
-/// memory, for `--method pointnetlk` on the host only.
-pub struct LkModel {
-    name: String,
-    f32: Vec<u8>,
-}
-
-impl LkModel {
-    pub(super) fn f32(&self) -> Option<NamedBlob<'_>> {
-        Some((&self.name, &self.f32))
-    }
-}
-
-/// Loads PointNetLK model `name` from its checkpoint in `<work>/models/`,
-/// training it first (by its [`Recipe`]) until the checkpoint is finished.
-/// `pcrnet train` writes no blobs for PointNetLK (the format has no place
-/// for its Jacobian yet, and a device would run the untrained head), so
-/// the f32 blob is made here, in memory, and never written: its template
-/// (a generated shape) and its head are placeholders, since PointNetLK
-/// binds each pair's template and runs the encoder alone
-/// ([`crate::register::register_pointnetlk`]).
-pub(super) fn lk_model(ctx: &Context, name: &str) -> anyhow::Result<LkModel> {
-    let dir = ctx.work.join("models").join(name);
-    let path = dir.join(pcrnet_train::CHECKPOINT_FILE);
-    if !(path.is_file() && pcrnet_train::Checkpoint::load(&path)?.finished()) {
-        train(ctx, name, &dir)?;
-    }
-    let ck = pcrnet_train::Checkpoint::load(&path)?;
-    anyhow::ensure!(
-        matches!(ck.config.model, pcrnet_train::ModelKind::PointNetLk { .. }),
-        "{name} is not a PointNetLK model"
-    );
-    let placeholder = pcrnet_train::shapes::sample(pcrnet_train::shapes::Shape::Ell, 512, 1);
-    let reference = pcrnet_train::template::Reference::with_table(&placeholder, 512, None)?;
-    let trained = pcrnet_train::TrainedFor {
-        centre_source: ck.config.pairs.centre,
-        passes: 1,
-    };
-    Ok(LkModel {
-        name: name.to_string(),
-        f32: ck.params().to_f32_blob(&reference, trained)?,
-    })
-}
-
 impl Recorder<'_> {
     /// Loads model `name` ([`model`]) and records it with its training
     /// command in the report's provenance.
     pub(crate) fn model(&mut self, name: &str) -> anyhow::Result<Model> {
         let m = model(self.ctx, name)?;
-        self.provenance(name);
-        Ok(m)
-    }
-
-    /// Loads PointNetLK model `name` ([`lk_model`]) and records it as
-    /// [`Self::model`] does.
-    pub(crate) fn lk_model(&mut self, name: &str) -> anyhow::Result<LkModel> {
-        let m = lk_model(self.ctx, name)?;
         self.provenance(name);
         Ok(m)
     }

@@ -52,6 +52,7 @@ pub mod forward;
 pub mod geometry;
 pub mod inspect;
 pub mod lk;
+pub mod lk_solver;
 pub mod loss;
 pub mod metrics;
 pub mod model;

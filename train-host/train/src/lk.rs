@@ -167,6 +167,12 @@ impl LkSolver {
         Self::new(jacobian)
     }
 
+    /// `P = (J^T J + lambda I)^-1 J^T` (`6 x F`): the step is `P r`.
+    pub fn pseudo_inverse(&self) -> DMatrix<f64> {
+        let n = DMatrix::from_fn(6, 6, |i, j| self.normal_inverse[(i, j)]);
+        n * self.jacobian.transpose()
+    }
+
     /// The step `dxi` for the feature residual `r = phi(G S) - phi(T)`.
     pub fn step(&self, residual: &DVector<f64>) -> Vector6<f64> {
         let jtr = self.jacobian.transpose() * residual;

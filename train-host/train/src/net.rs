@@ -13,8 +13,15 @@ use crate::template::{Reference, TemplateError, f32_blob};
 pub struct TrainedFor {
     /// Sources were centred on their centroid (see `pcrnet_core::pose::centring`).
     pub centre_source: bool,
-    /// Network passes per registration: 1 for PCRNet, more for i-PCRNet.
+    /// Network passes per registration: 1 for PCRNet, more for i-PCRNet;
+    /// PointNetLK's iterations for a model trained as PointNetLK.
     pub passes: u16,
+    /// The model was trained as PointNetLK: its blobs have no head (the
+    /// head's parameters were never trained) and always PointNetLK's solver.
+    pub pointnetlk: bool,
+    /// The blobs carry PointNetLK's solver for their template
+    /// (`pcrnet export --lk`; always for a PointNetLK model).
+    pub lk_solver: bool,
 }
 
 impl TrainedFor {
@@ -23,7 +30,24 @@ impl TrainedFor {
         TrainedFor {
             centre_source,
             passes: 1,
+            pointnetlk: false,
+            lk_solver: false,
         }
+    }
+
+    /// A model trained as PointNetLK with `iterations` LK iterations.
+    pub fn pointnetlk(centre_source: bool, iterations: u16) -> Self {
+        TrainedFor {
+            centre_source,
+            passes: iterations,
+            pointnetlk: true,
+            lk_solver: true,
+        }
+    }
+
+    /// Whether the blobs carry PointNetLK's solver.
+    pub fn has_lk_solver(&self) -> bool {
+        self.pointnetlk || self.lk_solver
     }
 }
 
@@ -90,6 +114,21 @@ impl F32Params {
         F32Network::new(self.arch.clone(), layers, template)
     }
 
+    /// The parameters a blob of a model trained as `trained` holds: all of
+    /// them, or for PointNetLK the encoder alone (its head was never
+    /// trained), with no head in the architecture.
+    pub fn for_blob(&self, trained: TrainedFor) -> F32Params {
+        if !trained.pointnetlk {
+            return self.clone();
+        }
+        let mut arch = self.arch.clone();
+        arch.head.clear();
+        F32Params {
+            layers: self.layers[..arch.encoder.len()].to_vec(),
+            arch,
+        }
+    }
+
     /// The f32 global feature of a cloud.
     pub fn encode(&self, cloud: &[[f32; 3]]) -> pcrnet_core::Result<Vec<f32>> {
         let dummy = vec![0.0; self.arch.feature_dim()];
@@ -106,7 +145,8 @@ impl F32Params {
         reference: &Reference,
         trained: TrainedFor,
     ) -> Result<Vec<u8>, TemplateError> {
-        let bytes: Vec<(Vec<u8>, Vec<u8>)> = self
+        let params = self.for_blob(trained);
+        let bytes: Vec<(Vec<u8>, Vec<u8>)> = params
             .layers
             .iter()
             .map(|(w, b)| (le_bytes(w), le_bytes(b)))
@@ -123,7 +163,7 @@ impl F32Params {
                 })?;
         }
         let payload = F32Payload {
-            arch: self.arch.clone(),
+            arch: params.arch.clone(),
             centre_source: trained.centre_source,
             passes: trained.passes,
             frame: reference.frame,
@@ -131,7 +171,7 @@ impl F32Params {
             layers,
             template_feature: &[],
         };
-        f32_blob(&payload, reference)
+        f32_blob(&payload, reference, trained.has_lk_solver())
     }
 }
 

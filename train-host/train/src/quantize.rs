@@ -31,7 +31,7 @@ use pcrnet_core::fixed::quantize_multiplier;
 use pcrnet_core::float::{Layer, dense};
 use pcrnet_core::format::{Int8Layer, Int8Output, Int8Payload};
 use pcrnet_core::pose::{Centring, Rigid};
-use pcrnet_core::{Frame, POSE_DIM};
+use pcrnet_core::Frame;
 
 use crate::net::{F32Params, TrainedFor, le_bytes};
 use crate::template::{Reference, TemplateError, int8_blob};
@@ -268,6 +268,7 @@ pub fn quantize(
     } else {
         calibration
     };
+    let params = &params.for_blob(trained);
     let ranges = calibrate(params, &reference.normalised(), calibration)?;
     let arch = &params.arch;
     let n_enc = arch.encoder.len();
@@ -282,7 +283,9 @@ pub fn quantize(
         layers.push(quantize_layer(l, w, b, s.inputs, s_x, z_x, x_max, s_y)?);
         (s_x, z_x, x_max) = (s_y, -128, 255);
     }
-    for (h, s) in arch.head_layers().enumerate() {
+    // A PointNetLK blob has no head: the encoder's layers are all there are.
+    let head_layers = params.layers.len() - n_enc;
+    for (h, s) in arch.head_layers().enumerate().take(head_layers) {
         let l = n_enc + h;
         let (w, b) = &params.layers[l];
         // The output layer is not requantized: pass its own accumulator scale.
@@ -294,9 +297,14 @@ pub fn quantize(
         layers.push(quantize_layer(l, w, b, s.inputs, s_x, z_x, x_max, s_y)?);
         (s_x, z_x, x_max) = (s_y, -128, 255);
     }
-    let output = layers.pop().ok_or(QuantizeError::NoCalibrationData)?;
-    let out_scale = le_bytes(&output.acc_scale);
-    debug_assert_eq!(output.acc_scale.len(), POSE_DIM);
+    let output = if head_layers > 0 {
+        layers.pop()
+    } else {
+        None
+    };
+    let out_scale = output.as_ref().map_or_else(Vec::new, |o| le_bytes(&o.acc_scale));
+    let no_bytes = Vec::new();
+    let out_bytes = |f: fn(&QLayer) -> &Vec<u8>| output.as_ref().map_or(&no_bytes, f);
 
     let payload = Int8Payload {
         arch: arch.clone(),
@@ -308,11 +316,11 @@ pub fn quantize(
         encoder: layers[..n_enc].iter().map(QLayer::view).collect(),
         head: layers[n_enc..].iter().map(QLayer::view).collect(),
         output: Int8Output {
-            weights: &output.weights,
-            bias: &output.bias,
+            weights: out_bytes(|o| &o.weights),
+            bias: out_bytes(|o| &o.bias),
             scale: &out_scale,
         },
         template_feature: &[],
     };
-    Ok(int8_blob(&payload, reference)?)
+    Ok(int8_blob(&payload, reference, trained.has_lk_solver())?)
 }

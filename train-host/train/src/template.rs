@@ -9,8 +9,10 @@
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use pcrnet_core::format::{
-    self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, NearestTable, TemplateCloud, write_blob,
+    self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, NearestTable, TemplateCloud, Trailer,
+    write_blob,
 };
+use pcrnet_core::lk::TWIST_DIM;
 use pcrnet_core::template::{self, MAX_GRID};
 use pcrnet_core::{F32Model, Frame, Int8Model};
 
@@ -311,10 +313,12 @@ fn principal_turns(model: &[[f32; 3]]) -> Vec<[f32; 4]> {
 
 /// Writes an int8 blob from `payload` with `reference` as its template:
 /// frame, template points and the template feature (computed by the int8
-/// encoder itself, as the device would).
+/// encoder itself, as the device would), and with `lk` PointNetLK's
+/// solver for it ([`crate::lk_solver`]).
 pub fn int8_blob(
     payload: &Int8Payload<'_>,
     reference: &Reference,
+    lk: bool,
 ) -> Result<Vec<u8>, TemplateError> {
     let zeros = vec![0u8; payload.arch.feature_dim()];
     let draft = Int8Payload {
@@ -323,7 +327,16 @@ pub fn int8_blob(
         template_feature: &zeros,
         ..payload.clone()
     };
-    let model = Int8Model::from_payload(draft.clone(), reference.table())?;
+    // A placeholder solver of zeros lets a headless draft load.
+    let zero_rows = vec![0u8; 4 * TWIST_DIM * payload.arch.feature_dim()];
+    let draft_trailer = Trailer {
+        table: reference.table(),
+        lk: lk.then(|| crate::lk_solver::stored(&zero_rows)),
+    };
+    let model = Int8Model::from_payload(draft.clone(), draft_trailer)?;
+    let rows = lk
+        .then(|| crate::lk_solver::int8_rows(&model, &reference.points))
+        .transpose()?;
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let feature: Vec<u8> = model
         .encode(&reference.points, &mut scratch)?
@@ -334,15 +347,22 @@ pub fn int8_blob(
         template_feature: &feature,
         ..draft
     };
-    let table = reference.table();
-    let mut out = vec![0u8; format::blob_len(&done, table.as_ref())?];
-    write_blob(ModelKind::Int8, &done, table.as_ref(), &mut out)?;
+    let trailer = Trailer {
+        table: reference.table(),
+        lk: rows.as_deref().map(crate::lk_solver::stored),
+    };
+    let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
+    write_blob(ModelKind::Int8, &done, &trailer, &mut out)?;
     Int8Model::from_bytes(&out)?;
     Ok(out)
 }
 
 /// Writes an f32 blob from `payload` with `reference` as its template (as [`int8_blob`]).
-pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u8>, TemplateError> {
+pub fn f32_blob(
+    payload: &F32Payload<'_>,
+    reference: &Reference,
+    lk: bool,
+) -> Result<Vec<u8>, TemplateError> {
     let zeros = vec![0u8; 4 * payload.arch.feature_dim()];
     let draft = F32Payload {
         frame: reference.frame,
@@ -350,7 +370,15 @@ pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u
         template_feature: &zeros,
         ..payload.clone()
     };
-    let model = F32Model::from_payload(draft.clone(), reference.table())?;
+    let zero_rows = vec![0u8; 4 * TWIST_DIM * payload.arch.feature_dim()];
+    let draft_trailer = Trailer {
+        table: reference.table(),
+        lk: lk.then(|| crate::lk_solver::stored(&zero_rows)),
+    };
+    let model = F32Model::from_payload(draft.clone(), draft_trailer)?;
+    let rows = lk
+        .then(|| crate::lk_solver::f32_rows(&model, &reference.normalised()))
+        .transpose()?;
     let mut scratch = vec![0f32; model.tiled_scratch_len()];
     let feature: Vec<u8> = model
         .network()
@@ -362,15 +390,19 @@ pub fn f32_blob(payload: &F32Payload<'_>, reference: &Reference) -> Result<Vec<u
         template_feature: &feature,
         ..draft
     };
-    let table = reference.table();
-    let mut out = vec![0u8; format::blob_len(&done, table.as_ref())?];
-    write_blob(ModelKind::F32, &done, table.as_ref(), &mut out)?;
+    let trailer = Trailer {
+        table: reference.table(),
+        lk: rows.as_deref().map(crate::lk_solver::stored),
+    };
+    let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
+    write_blob(ModelKind::F32, &done, &trailer, &mut out)?;
     F32Model::from_bytes(&out)?;
     Ok(out)
 }
 
 /// The same model with another template (user units): for registering
-/// against any cloud with a trained blob of either kind.
+/// against any cloud with a trained blob of either kind. A blob with
+/// PointNetLK's solver gets one for the new template.
 pub fn bind(blob: &[u8], template: &[[f32; 3]], stored: usize) -> Result<Vec<u8>, TemplateError> {
     bind_reference(blob, &Reference::new(template, stored)?)
 }
@@ -380,10 +412,11 @@ pub fn bind(blob: &[u8], template: &[[f32; 3]], stored: usize) -> Result<Vec<u8>
 /// estimates normals, several milliseconds at 512 stored points).
 pub fn bind_reference(blob: &[u8], reference: &Reference) -> Result<Vec<u8>, TemplateError> {
     match Int8Model::from_bytes(blob) {
-        Ok(m) => int8_blob(m.payload(), reference),
+        Ok(m) => int8_blob(m.payload(), reference, m.lk_solver().is_some()),
         Err(pcrnet_core::Error::WrongKind { .. }) => {
-            let (payload, _): (F32Payload<'_>, _) = format::decode_model(blob, ModelKind::F32)?;
-            f32_blob(&payload, reference)
+            let (payload, trailer): (F32Payload<'_>, _) =
+                format::decode_model(blob, ModelKind::F32)?;
+            f32_blob(&payload, reference, trailer.lk.is_some())
         }
         Err(e) => Err(e.into()),
     }

@@ -124,10 +124,13 @@ fn with_table(
     payload: &impl serde::Serialize,
     table: &crate::template::OwnedTable,
 ) -> Result<(ModelKind, Vec<u8>), UpgradeError> {
-    let view = table.view();
+    let trailer = format::Trailer {
+        table: Some(table.view()),
+        lk: None,
+    };
     let mut out =
-        vec![0u8; format::blob_len(payload, Some(&view)).map_err(UpgradeError::DamagedFormat3)?];
-    write_blob(kind, payload, Some(&view), &mut out).map_err(UpgradeError::DamagedFormat3)?;
+        vec![0u8; format::blob_len(payload, &trailer).map_err(UpgradeError::DamagedFormat3)?];
+    write_blob(kind, payload, &trailer, &mut out).map_err(UpgradeError::DamagedFormat3)?;
     Ok((kind, out))
 }
 

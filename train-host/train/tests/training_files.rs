@@ -233,40 +233,78 @@ fn a_model_with_non_finite_weights_is_not_written() {
     assert!(!dir.join(export::F32_BLOB).exists());
 }
 
-/// A PointNetLK run ends with its checkpoint and log but no blobs (the
-/// format has no place for its Jacobian yet), and `pcrnet export` refuses
-/// its checkpoint with a typed error saying so, before reading anything
-/// else.
+/// A PointNetLK run ends with blobs without a head and with PointNetLK's
+/// solver: both load, refuse a network pass with the typed `NoHead`, and
+/// register by LK steps; the f32 blob's stored `P` is the one recomputed
+/// from the f32 parameters by the training code's own Jacobian.
 #[test]
-fn a_pointnetlk_checkpoint_has_no_blobs() {
+fn a_pointnetlk_checkpoint_exports_headless_blobs_with_a_solver() {
     let (train, val) = data_sets(64);
     let cfg = TrainConfig {
         model: ModelKind::PointNetLk { iterations: 2 },
         ..small_config()
     };
     let dir = tmp_dir("pointnetlk");
-    let mut t = Trainer::new(cfg, train, val).unwrap();
+    let mut t = Trainer::new(cfg, train.clone(), val).unwrap();
     t.run(&RunOptions {
         out_dir: Some(dir.clone()),
         ..RunOptions::default()
     })
     .unwrap();
-    let ck = dir.join(pcrnet_train::CHECKPOINT_FILE);
-    assert!(Checkpoint::load(&ck).unwrap().finished());
-    let err = pcrnet_train::cli::export(pcrnet_train::cli::ExportArgs {
-        checkpoint: ck,
-        template: dir.join("no-such-template.ply"),
-        points: None,
-        template_points: 512,
-        out: dir.clone(),
-    })
-    .unwrap_err();
+    let tpl = &train.clouds[0];
+    let cal = export::calibration_clouds(tpl, &t.config.pairs, 8, 1);
+    let reference = Reference::new(tpl, 256).unwrap();
+    let trained = TrainedFor::pointnetlk(true, 2);
+    export::export(&t.params, &reference, Some(&cal), trained, &dir).unwrap();
+    let (src, _, _) = data::make_pair(tpl, &t.config.pairs, 9);
+    let lk = Options {
+        passes: 0,
+        lk_iterations: 5,
+        ..Options::default()
+    };
+
+    let f = std::fs::read(dir.join(export::F32_BLOB)).unwrap();
+    let m = F32Model::from_bytes(&f).unwrap();
+    assert!(!m.network().has_head());
+    assert_eq!(m.trained_passes(), 2);
+    let mut s = vec![0.0; m.tiled_scratch_len()];
     assert_eq!(
-        err.downcast_ref::<pcrnet_train::cli::NoBlob>(),
-        Some(&pcrnet_train::cli::NoBlob::PointNetLk),
-        "{err:#}"
+        m.register(&src, &Options::default(), &mut s),
+        Err(pcrnet_core::Error::NoHead)
     );
-    assert!(format!("{err}").contains("Jacobian"), "{err}");
-    assert!(!dir.join(export::F32_BLOB).exists());
-    assert!(!dir.join(export::INT8_BLOB).exists());
+    let r = m.register(&src, &lk, &mut s).unwrap();
+    assert_eq!((r.passes, r.lk_iterations), (0, 5));
+    // The stored P against the training code's LK solver on the f32
+    // encoder (its own moves, in f64): the same to f32 rounding.
+    let stored: Vec<f32> = pcrnet_core::format::le_f32s(m.lk_solver().unwrap().stored().rows).collect();
+    let params = pcrnet_train::F32Params::from_network(m.network());
+    let mut centred = reference.normalised();
+    data::centre_cloud(&mut centred);
+    let phi = params.encode(&centred).unwrap();
+    let moved: Vec<nalgebra::DVector<f64>> = pcrnet_train::lk::moved_templates(&centred)
+        .iter()
+        .map(|c| nalgebra::DVector::from_iterator(phi.len(), params.encode(c).unwrap().iter().map(|&v| v as f64)))
+        .collect();
+    let phi = nalgebra::DVector::from_iterator(phi.len(), phi.iter().map(|&v| v as f64));
+    let p = pcrnet_train::lk::LkSolver::from_features(&phi, std::array::from_fn(|k| &moved[k]))
+        .pseudo_inverse();
+    let largest = p.iter().fold(0f64, |m, v| m.max(v.abs()));
+    for k in 0..6 {
+        for j in 0..phi.len() {
+            let (a, b) = (stored[k * phi.len() + j] as f64, p[(k, j)]);
+            assert!((a - b).abs() <= 1e-3 * largest, "P[{k}][{j}]: stored {a}, recomputed {b}");
+        }
+    }
+
+    let q = std::fs::read(dir.join(export::INT8_BLOB)).unwrap();
+    let m = Int8Model::from_bytes(&q).unwrap();
+    assert!(!m.has_head() && m.lk_solver().is_some());
+    let mut s = vec![0i8; m.scratch_len(MAX_TILE)];
+    assert_eq!(
+        m.register(&src, &Options::default(), &mut s),
+        Err(pcrnet_core::Error::NoHead)
+    );
+    let r = m.register(&src, &lk, &mut s).unwrap();
+    assert_eq!((r.passes, r.lk_iterations), (0, 5));
+    let _ = std::fs::remove_dir_all(&dir);
 }

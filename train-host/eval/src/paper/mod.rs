@@ -86,7 +86,7 @@ pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
     let mut rec = Recorder::new(ctx, "generalisation");
     let gen5 = rec.model("mn10-seen5-ipcrnet")?;
     let toilet = rec.model("mn10-toilet-ipcrnet")?;
-    let lk5 = rec.lk_model("mn10-seen5-pointnetlk")?;
+    let lk5 = rec.model("mn10-seen5-pointnetlk")?;
     let clean = PairConfig::default();
     let sets: [(&str, &[&str]); 3] = [
         ("seen classes", &SEEN),

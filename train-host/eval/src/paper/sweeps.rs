@@ -141,7 +141,7 @@ pub(crate) fn noise(ctx: &Context) -> anyhow::Result<Report> {
     let mut rec = Recorder::new(ctx, "noise");
     let pc = rec.model("mn10-pcrnet")?;
     let ipc = rec.model("mn10-ipcrnet")?;
-    let trained_lk = rec.lk_model("mn10-pointnetlk")?;
+    let trained_lk = rec.model("mn10-pointnetlk")?;
     let sigmas = [0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06];
     let sets: Vec<SweepSet> = sigmas
         .iter()

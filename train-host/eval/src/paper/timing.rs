@@ -196,7 +196,7 @@ pub(crate) fn iterations(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "iterations");
     let ipc = rec.model("mn10-ipcrnet")?;
-    let trained_lk = rec.lk_model("mn10-pointnetlk")?;
+    let trained_lk = rec.model("mn10-pointnetlk")?;
     let pairs = pair_set(
         ctx,
         "iterations",

@@ -28,6 +28,12 @@ pub struct ExportArgs {
     /// its normal, about 1 for the search grid).
     #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS, allow_negative_numbers = true)]
     pub template_points: usize,
+    /// Add PointNetLK's solver for the template to both blobs, so that
+    /// `Options::lk_iterations` can refine a pose in feature space (about
+    /// 24 bytes of flash per feature entry: 6 KB at F = 256). Always there
+    /// for a model trained as PointNetLK.
+    #[arg(long)]
+    pub lk: bool,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -122,42 +128,38 @@ pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
         ..data::PairConfig::default()
     };
     let trained = crate::TrainedFor {
-        centre_source: centre,
         passes: args.passes,
+        ..crate::TrainedFor::pcrnet(centre)
     };
     write_blobs(&params, &reference, &pairs, args.seed, trained, &args.out)
 }
 
-/// Why a checkpoint has no blobs.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum NoBlob {
-    /// A PointNetLK checkpoint: the blob format does not carry the
-    /// template's feature Jacobian yet, and without it a device would run
-    /// the untrained head.
-    #[error(
-        "PointNetLK checkpoints have no blobs yet: the device format does not carry the template's feature Jacobian (issue 36, item 2), and a blob without it would run an untrained head. The checkpoint and the log's validation errors are kept; train with --model pcrnet or ipcrnet for a blob"
-    )]
-    PointNetLk,
-}
-
 /// How a training configuration's network should be run: centred
-/// sources as its pairs were, and i-PCRNet's passes; an error for a model
-/// no blob can hold.
-pub(super) fn trained_for(config: &super::TrainConfig) -> Result<crate::TrainedFor, NoBlob> {
-    Ok(crate::TrainedFor {
-        centre_source: config.pairs.centre,
-        passes: match config.model {
-            ModelKind::Pcrnet => 1,
-            ModelKind::Ipcrnet { iterations } => u16::try_from(iterations).unwrap_or(u16::MAX),
-            ModelKind::PointNetLk { .. } => return Err(NoBlob::PointNetLk),
+/// sources as its pairs were, i-PCRNet's passes, PointNetLK's iterations
+/// (and no head), and whether the blobs carry PointNetLK's solver.
+pub(super) fn trained_for(config: &super::TrainConfig, lk_solver: bool) -> crate::TrainedFor {
+    let centre = config.pairs.centre;
+    let count = |n: usize| u16::try_from(n).unwrap_or(u16::MAX);
+    match config.model {
+        ModelKind::Pcrnet => crate::TrainedFor {
+            lk_solver,
+            ..crate::TrainedFor::pcrnet(centre)
         },
-    })
+        ModelKind::Ipcrnet { iterations } => crate::TrainedFor {
+            passes: count(iterations),
+            lk_solver,
+            ..crate::TrainedFor::pcrnet(centre)
+        },
+        ModelKind::PointNetLk { iterations } => {
+            crate::TrainedFor::pointnetlk(centre, count(iterations))
+        }
+    }
 }
 
 /// Runs `pcrnet export`.
 pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ck = Checkpoint::load(&args.checkpoint)?;
-    let trained = trained_for(&ck.config)?;
+    let trained = trained_for(&ck.config, args.lk);
     let points = args.points.unwrap_or(ck.config.points);
     let reference = load_template(&args.template, points, args.template_points, ck.config.seed)?;
     write_blobs(

@@ -4,7 +4,7 @@
 
 mod blobs;
 mod object;
-pub use blobs::{ExportArgs, NoBlob, UpgradeArgs, export, upgrade};
+pub use blobs::{ExportArgs, UpgradeArgs, export, upgrade};
 use blobs::{load_template, trained_for, write_blobs};
 
 use std::path::PathBuf;
@@ -540,13 +540,7 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         eprintln!("stopped before the end (--max-steps): no export");
         return Ok(());
     }
-    let trained = match trained_for(&trainer.config) {
-        Ok(t) => t,
-        Err(no_blob) => {
-            eprintln!("no export: {no_blob}");
-            return Ok(());
-        }
-    };
+    let trained = trained_for(&trainer.config, false);
     let reference = match args.template.as_ref().or(args.object.as_ref()) {
         Some(p) => load_template(p, trainer.train_data().points, args.template_points, seed)?,
         None => Reference::new(&trainer.train_data().clouds[0], args.template_points)?,
