@@ -162,8 +162,8 @@ pub struct NearestTable<'a> {
 
 /// PointNetLK's solver for the blob's template ([`crate::lk`]): the damped
 /// pseudo-inverse `P = (J^T J + lambda I)^-1 J^T` of the template feature's
-/// Jacobian `J` (`F x 6`, forward differences of step `jacobian_step`
-/// about the template), so that a step's twist is `P r` for the feature
+/// Jacobian `J` (`F x 6`, finite differences of step `jacobian_step` about
+/// the template), so that a step's twist is `P r` for the feature
 /// residual `r`.
 ///
 /// In an int8 blob `r` is the int8 difference `q_S - q_T` and `J` is in
@@ -172,9 +172,11 @@ pub struct NearestTable<'a> {
 /// the same arithmetic. In an f32 blob both are the f32 encoder's.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LkSolver<'a> {
-    /// Step of the Jacobian's forward differences (twist units: radians and
+    /// Step of the Jacobian's finite differences (twist units: radians and
     /// model units): informational.
     pub jacobian_step: f32,
+    /// Central differences (else forward ones): informational.
+    pub central: bool,
     /// Damping `lambda` relative to the mean diagonal of `J^T J`: informational.
     pub damping: f32,
     /// `P`, `6 x F` f32 little-endian, row-major by twist component

@@ -6,8 +6,10 @@
 //! For the template `T` and the encoder's global feature `phi` (`F` values),
 //! the exporter computes the Jacobian of `phi` with respect to a twist
 //! `xi = (omega, v)` (rotation vector, radians; translation, model units)
-//! by forward differences about the template,
-//! `J[:, k] = (phi(exp(d e_k) T) - phi(T)) / d`, and stores its damped
+//! by finite differences about the template (f32:
+//! `J[:, k] = (phi(exp(d e_k) T) - phi(T)) / d` as in training; int8:
+//! central differences of a larger step, see `pcrnet_train::lk_solver`),
+//! and stores its damped
 //! pseudo-inverse `P = (J^T J + lambda I)^-1 J^T` (`6 x F`) in the blob
 //! ([`crate::format::LkSolver`]). Each LK step then costs one encoder pass
 //! of the source moved by the pose so far `G`, and:
@@ -119,11 +121,7 @@ pub fn exp(xi: &[f32; TWIST_DIM]) -> Pose {
     let t = libm::sqrtf(t2);
     // sin(t / 2) / t, a, b.
     let (half, a, b) = if t < SERIES_BELOW {
-        (
-            0.5 - t2 / 48.0,
-            0.5 - t2 / 24.0,
-            1.0 / 6.0 - t2 / 120.0,
-        )
+        (0.5 - t2 / 48.0, 0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0)
     } else {
         (
             libm::sinf(0.5 * t) / t,
@@ -169,6 +167,7 @@ mod tests {
     fn stored(rows: &[u8]) -> LkSolver<'_> {
         LkSolver {
             jacobian_step: 0.01,
+            central: false,
             damping: 1e-6,
             rows,
         }

@@ -335,14 +335,7 @@ pub(crate) fn run_swept(
         &options.icp_settings(),
         options.inlier_distance,
     )?;
-    conclude(
-        frame,
-        template,
-        &checked,
-        &r,
-        Stage::default(),
-        options,
-    )
+    conclude(frame, template, &checked, &r, Stage::default(), options)
 }
 
 /// Registers `source` from `start` (user units): ICP from it against the

@@ -262,9 +262,10 @@ pub fn with_random_lk_solver<'o>(
     }
     let trailer = Trailer {
         table: trailer.table,
-        // No forward differences or damping made these rows.
+        // No finite differences or damping made these rows.
         lk: Some(LkSolver {
             jacobian_step: 0.0,
+            central: false,
             damping: 0.0,
             rows,
         }),

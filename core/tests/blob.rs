@@ -241,7 +241,13 @@ fn write_then_read_round_trips() {
     assert_eq!(&out[..n], &good[..]);
     let mut short = vec![0u8; good.len() - 1];
     assert_eq!(
-        format::write_blob(ModelKind::Int8, model.payload(), &format::Trailer::default(), &mut short).err(),
+        format::write_blob(
+            ModelKind::Int8,
+            model.payload(),
+            &format::Trailer::default(),
+            &mut short
+        )
+        .err(),
         Some(Error::BufferTooSmall {
             needed: good.len(),
             available: good.len() - 1

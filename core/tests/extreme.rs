@@ -74,7 +74,13 @@ fn f32_blobs() -> Vec<Vec<u8>> {
     let mut payload: F32Payload<'_> = format::decode_model(&plain, ModelKind::F32).unwrap().0;
     payload.centre_source = true;
     let mut centred = vec![0u8; format::blob_len(&payload, &format::Trailer::default()).unwrap()];
-    format::write_blob(ModelKind::F32, &payload, &format::Trailer::default(), &mut centred).unwrap();
+    format::write_blob(
+        ModelKind::F32,
+        &payload,
+        &format::Trailer::default(),
+        &mut centred,
+    )
+    .unwrap();
     vec![plain.clone(), centred]
 }
 

@@ -22,7 +22,13 @@ fn without_table(version: u16) -> Vec<u8> {
     assert!(table.table.is_some(), "the shipped blob carries a table");
     if version == format::FORMAT_VERSION {
         let mut out = vec![0u8; format::blob_len(&payload, &format::Trailer::default()).unwrap()];
-        let n = format::write_blob(ModelKind::Int8, &payload, &format::Trailer::default(), &mut out).unwrap();
+        let n = format::write_blob(
+            ModelKind::Int8,
+            &payload,
+            &format::Trailer::default(),
+            &mut out,
+        )
+        .unwrap();
         assert_eq!(n, out.len());
         return out;
     }

@@ -66,10 +66,18 @@ fn wrapping_f32_head() -> anyhow::Result<Vec<u8>> {
         template_feature: &template_feature,
         ..base
     };
-    let mut blob =
-        vec![0u8; format::blob_len(&payload, &format::Trailer::default()).map_err(|e| anyhow::anyhow!("{e:?}"))?];
-    let n = format::write_blob(ModelKind::F32, &payload, &format::Trailer::default(), &mut blob)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut blob = vec![
+        0u8;
+        format::blob_len(&payload, &format::Trailer::default())
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+    ];
+    let n = format::write_blob(
+        ModelKind::F32,
+        &payload,
+        &format::Trailer::default(),
+        &mut blob,
+    )
+    .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     blob.truncate(n);
     Ok(blob)
 }

@@ -19,12 +19,16 @@
 //! 8. [`tracking`] adds the tracking steps after each registration: their
 //!    starts, the host's results, the device's lines and their comparison;
 //! 9. [`scene`] adds the scene path: a generated depth frame, the scene
-//!    stages and `locate`, per model.
+//!    stages and `locate`, per model;
+//! 10. [`figures`] prints the instruction counts CI's log carries on their
+//!     own lines (the shipped model's registration and tracking step,
+//!     PointNetLK's registration and step).
 
 pub mod c_example;
 pub mod compare;
 pub mod elf;
 pub mod feature;
+pub mod figures;
 pub mod hostile;
 pub mod layers;
 pub mod plan;

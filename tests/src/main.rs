@@ -10,11 +10,12 @@
 //! Every case compares the inference (int8 feature, head, pose), and as
 //! the case asks, the iterative network pass and `Int8Model::register`
 //! with its option sets (every `Registration` field bit for bit, or the
-//! same error), then `Int8Model::track` after each registration (see
-//! `tracking`). `run` ends with `N passed, N failed`. With
-//! `--mutate-device-rounding` the device is built with ties rounded the
-//! other way, and the command succeeds only if the comparison catches it,
-//! in the inference and in the registrations.
+//! same error; PointNetLK's steps on the blobs with a solver), then
+//! `Int8Model::track` after each registration (see `tracking`). `run` ends
+//! with `N passed, N failed`. With `--mutate-device-rounding` the device is
+//! built with ties rounded the other way, and the command succeeds only if
+//! the comparison catches it, in the inference, in the registrations and
+//! in the PointNetLK registrations among them.
 
 use std::process::ExitCode;
 use std::time::Duration;
@@ -29,7 +30,7 @@ use pcrnet_qemu_tests::plan::{Plan, build_cases, models};
 use pcrnet_qemu_tests::vectors::{
     Case, TestModel, container, describe, expected, expected_iterative, expected_registrations,
 };
-use pcrnet_qemu_tests::{c_example, elf, feature, layers, qemu, scene, tracking};
+use pcrnet_qemu_tests::{c_example, elf, feature, figures, layers, qemu, scene, tracking};
 
 struct Args {
     mutate: bool,
@@ -141,6 +142,8 @@ fn run_plans(
 
     let (mut passed, mut failed) = (0usize, 0usize);
     let (mut registrations, mut registrations_differ) = (0usize, 0usize);
+    // Those that ran PointNetLK's steps on the host.
+    let (mut lk_registrations, mut lk_differ) = (0usize, 0usize);
     let (mut tracks, mut tracks_differ) = (0usize, 0usize);
     let (mut features, mut features_differ) = (0usize, 0usize);
     for (i, (case, (host, host_iterative, host_registrations, (host_tracks, host_features)))) in
@@ -179,6 +182,12 @@ fn run_plans(
             .collect();
         registrations += register_verdicts.len();
         registrations_differ += register_verdicts.iter().flatten().count();
+        for (h, verdict) in host_registrations.iter().zip(&register_verdicts) {
+            if h.as_ref().is_ok_and(|r| r.lk_iterations > 0) {
+                lk_registrations += 1;
+                lk_differ += usize::from(verdict.is_some());
+            }
+        }
         let verdict = match device.cases.get(&i) {
             None => Some("no output from the device".to_string()),
             Some(d) => first_difference(host, &d.outputs),
@@ -244,10 +253,14 @@ fn run_plans(
     if args.mutate {
         println!(
             "mutation check: with device rounding changed, {failed} of {} cases and scenes differ from the host, \
-             {registrations_differ} of {registrations} registrations and {scenes_differ} of {scenes} scenes (they must)",
+             {registrations_differ} of {registrations} registrations ({lk_differ} of {lk_registrations} with PointNetLK steps) \
+             and {scenes_differ} of {scenes} scenes (they must)",
             cases.len() + scenes
         );
-        return Ok((failed > 0 && registrations_differ > 0, Vec::new()));
+        return Ok((
+            failed > 0 && registrations_differ > 0 && lk_differ > 0,
+            Vec::new(),
+        ));
     }
 
     let measurements = (0..models.len())
@@ -344,112 +357,8 @@ fn report(
     }
     println!();
     report_registrations(models, cases, device);
-    report_figures(models, cases, device);
+    figures::report(models, cases, device);
     Ok(())
-}
-
-/// The two figures CI's log carries, on their own lines: the shipped
-/// model's default registration of its 512-point demo source, and a
-/// tracking step on it from the registered pose (the pose held; 256 of the
-/// 512 points scored and refined, `Options::default().max_points`); then
-/// the latency table of the shipped model's demo sources (256, 512 and
-/// 1,024 points).
-fn report_figures(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
-    let default = pcrnet_core::Options::default();
-    let demo = |n: usize| {
-        cases.iter().enumerate().find(|(_, c)| {
-            models[c.model].name == "embedded-default-int8.pcrn"
-                && c.label.starts_with("demo")
-                && c.cloud.len() == n
-        })
-    };
-    // (instructions of: network only, K = 1, default, tracking step held)
-    let figures = |n: usize| -> Option<[u64; 4]> {
-        let (i, c) = demo(n)?;
-        let at = |o: &pcrnet_core::Options| c.registrations.iter().position(|r| r == o);
-        let k1 = pcrnet_core::Options {
-            hypotheses: 1,
-            ..default
-        };
-        let reg =
-            |o: &pcrnet_core::Options| Some(device.registrations.get(&(i, at(o)?))?.instructions);
-        let track = device
-            .tracks
-            .get(&(i, at(&default)?, "held".to_string()))?
-            .instructions;
-        Some([
-            reg(&pcrnet_core::Options::network_only())?,
-            reg(&k1)?,
-            reg(&default)?,
-            track,
-        ])
-    };
-    if let Some([_, _, registration, track]) = figures(512) {
-        println!("default registration, 512 points: {registration} instructions");
-        println!("tracking step, 256 points: {track} instructions");
-    }
-    let check = demo(512).and_then(|(i, c)| {
-        let k = c.registrations.iter().position(|r| *r == default)?;
-        Some(device.features.get(&(i, k))?.instructions)
-    });
-    if let Some(check) = check {
-        println!(
-            "feature-space check (Int8Model::feature_distance), 512 points: {check} instructions"
-        );
-    }
-    let shipped = models
-        .iter()
-        .position(|m| m.name == "embedded-default-int8.pcrn");
-    if let Some(s) = shipped.and_then(|m| device.scenes.get(&m)) {
-        let (w, h) = (
-            pcrnet_core::testing::scene::HARNESS_WIDTH,
-            pcrnet_core::testing::scene::HARNESS_HEIGHT,
-        );
-        if let Some(segment) = s.segment {
-            println!("scene stages, {w} x {h} frame: {segment} instructions");
-        }
-        for (name, how) in [
-            ("locate", "the network's hypotheses"),
-            ("sweep", "the yaw sweep, --up given"),
-        ] {
-            if let Some(run) = s.runs.get(name) {
-                println!(
-                    "locate ({how}; scene stages, {} candidates registered and verified), {w} x {h} frame: {} instructions, peak stack {} B",
-                    run.result
-                        .as_ref()
-                        .map_or(0, |words| words.matches(" t ").count()),
-                    run.instructions,
-                    run.stack
-                );
-            }
-        }
-    }
-    println!(
-        "\nlatency of the shipped model on its demo source (instructions, and ms at 168 MHz (M4) / 480 MHz (M7) \
-         assuming one cycle per instruction: flash wait states make the M4 slower, dual issue the M7 faster)\n\
-         | points | network only | K = 1 | default (K = 10) | tracking step (pose held) |\n|---|---|---|---|---|"
-    );
-    for n in [256, 512, 1024] {
-        let Some(f) = figures(n) else {
-            continue;
-        };
-        let cell = |v: u64| {
-            format!(
-                "{:.1} M ({:.0} / {:.0} ms)",
-                v as f64 / 1e6,
-                v as f64 / 168e3,
-                v as f64 / 480e3
-            )
-        };
-        println!(
-            "| {n} | {} | {} | {} | {} |",
-            cell(f[0]),
-            cell(f[1]),
-            cell(f[2]),
-            cell(f[3])
-        );
-    }
-    println!();
 }
 
 /// Instructions and stack per `register` call: every option set on each

@@ -5,16 +5,22 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use pcrnet_core::{Frame, MAX_TILE, Metric, Options};
+use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options};
 
 use crate::hostile;
 use crate::qemu::{self, CaseSet};
 use crate::vectors::{
     Case, TestModel, clouds_for, doubled, random_model, random_model_with, read_cloud,
+    with_lk_solver,
 };
 
 /// The shipped model that gets the realistic sources.
 const SHIPPED_DEFAULT: &str = "embedded-default-int8.pcrn";
+
+/// The shipped model's encoder with a random PointNetLK solver and no
+/// head (no PointNetLK model is shipped): PointNetLK's cost at the
+/// embedded size, on the 512-point demo source.
+pub const SHIPPED_LK: &str = "embedded-default encoder, random LK solver (headless)";
 
 /// A model, the sizes of its uniform clouds, its realistic sources, and
 /// the option sets `register` runs with on its small (<= 300 points) and
@@ -67,6 +73,33 @@ fn unusual_options() -> Options {
     }
 }
 
+/// PointNetLK alone: `steps` LK steps from the centring start, the start
+/// kept (one hypothesis, no ICP).
+pub fn lk_only(steps: usize) -> Options {
+    Options {
+        passes: 0,
+        lk_iterations: steps,
+        ..Options::network_only()
+    }
+}
+
+/// `passes` network passes, then `steps` LK steps, then the default
+/// hypotheses and ICP.
+fn lk_then_default(passes: usize, steps: usize) -> Options {
+    Options {
+        passes,
+        lk_iterations: steps,
+        ..Options::default()
+    }
+}
+
+/// A headless PointNetLK blob's option sets: LK alone, LK then the
+/// default ICP, and the default options, which ask for a network pass
+/// (`NoHead` on both sides).
+fn headless_lk_options() -> Vec<Options> {
+    vec![lk_only(5), lk_then_default(0, 5), Options::default()]
+}
+
 /// Invalid options: `register` must fail the same way on both sides.
 fn invalid_options() -> Options {
     Options {
@@ -82,11 +115,44 @@ const CM_FRAME: Frame = Frame {
     scale: 0.01,
 };
 
+/// The random models with a PointNetLK solver: one headless (centred
+/// sources, frame in centimetres), registering by LK alone, and one with a
+/// head, refining its network pass by LK.
+fn random_lk_plans() -> Vec<Plan> {
+    vec![
+        Plan {
+            model: with_lk_solver(
+                &random_model_with("", 7, &[16, 32, 64], &[], true, CM_FRAME).blob,
+                "random 16-32-64 / - PointNetLK (headless, random solver), frame cm, centred sources",
+                70,
+                true,
+            ),
+            sizes: vec![1, 64, 256],
+            sources: Vec::new(),
+            options: headless_lk_options(),
+        },
+        Plan {
+            model: with_lk_solver(
+                &random_model("", 8, &[16, 32, 64], &[64, 32]).blob,
+                "random 16-32-64 / 64-32 + random LK solver",
+                80,
+                false,
+            ),
+            sizes: vec![1, 64, 256],
+            sources: Vec::new(),
+            options: vec![lk_then_default(1, 3), Options::default()],
+        },
+    ]
+}
+
 /// Random models covering the shapes' corners, two with a frame in
-/// centimetres far from the origin, every int8 blob shipped in `models/`
-/// (the embedded default also with its demo source at 512 and 1024
-/// points), and the paper-size PCRNet (its 4.2 MB of weights go to PSRAM).
-/// Boards other than the default run a subset (see [`CaseSet`]).
+/// centimetres far from the origin, two with a random PointNetLK solver
+/// (one headless, registering by LK alone; one refining its network pass
+/// by LK), every int8 blob shipped in `models/` (the embedded default also
+/// with its demo source at 512 and 1024 points, and its encoder with a
+/// random solver as [`SHIPPED_LK`]), and the paper-size PCRNet (its 4.2
+/// MB of weights go to PSRAM). Boards other than the default run a subset
+/// (see [`CaseSet`]).
 pub fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
     let plan = |model, sizes: &[usize]| Plan {
         model,
@@ -135,6 +201,12 @@ pub fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
             &[1, 64, 256],
         ),
     ];
+    // Not on the micro:bit: the models above fill its 128 KiB data region
+    // (128.5 KB with their clouds); the Cortex-M3 and RISC-V boards run
+    // PointNetLK's steps in soft float.
+    if set != CaseSet::Small {
+        out.extend(random_lk_plans());
+    }
     let dir = qemu::workspace_root().join("models");
     let mut shipped: Vec<PathBuf> = std::fs::read_dir(&dir)
         .with_context(|| format!("reading {}", dir.display()))?
@@ -150,8 +222,18 @@ pub fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
             .to_string_lossy()
             .into_owned();
         let mut sources = Vec::new();
+        let mut lk = None;
         if name == SHIPPED_DEFAULT {
             let demo = read_cloud(&dir.join("embedded-default-source.f32"))?;
+            // LK alone also for one step: a step's cost is the difference.
+            let mut options = headless_lk_options();
+            options.insert(1, lk_only(1));
+            lk = Some(Plan {
+                model: with_lk_solver(&blob, SHIPPED_LK, 90, true),
+                sizes: vec![1, 100],
+                sources: vec![(format!("demo source {}", demo.len()), demo.clone())],
+                options,
+            });
             let dense = doubled(&demo, 1024, 0.005);
             let half: Vec<[f32; 3]> = demo.iter().step_by(2).copied().collect();
             sources.push((
@@ -170,6 +252,7 @@ pub fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
             sources,
             options: net_k1_k4_default(),
         });
+        out.extend(lk);
     }
     out.push(plan(
         random_model(
@@ -218,6 +301,7 @@ pub fn build_cases(plans: &[Plan]) -> (Vec<TestModel>, Vec<Case>) {
             clouds_for(&model.blob, 100 + mi as u64, &plan.sizes)
         };
         let generated = clouds.len();
+        let has_solver = Int8Model::from_bytes(&model.blob).is_ok_and(|m| m.lk_solver().is_some());
         let sources = plan.sources.iter().cloned();
         let mut unusual = false;
         for (ci, (label, cloud)) in clouds.into_iter().chain(sources).enumerate() {
@@ -241,6 +325,10 @@ pub fn build_cases(plans: &[Plan]) -> (Vec<TestModel>, Vec<Case>) {
             // Once per model, on its first uniform cloud of 9 to 300 points.
             if !unusual && label.starts_with("uniform") && (9..=300).contains(&cloud.len()) {
                 registrations.push(unusual_options());
+                // LK steps on a blob without a solver: `NoLkSolver` alike.
+                if !has_solver {
+                    registrations.push(lk_only(2));
+                }
                 unusual = true;
             }
             if label.starts_with("NaN") {

@@ -4,7 +4,7 @@ use pcrnet_core::testing::{SplitMix64, random_int8_blob_with, with_random_lk_sol
 use pcrnet_core::{Frame, Int8Model, Metric, Options, POSE_DIM, Registration};
 
 /// Container format version (the device checks it).
-pub const CONTAINER_VERSION: u32 = 4;
+pub const CONTAINER_VERSION: u32 = 5;
 /// Scratch bytes on the device (and lent to the host's `register`, so both
 /// pick the same tile).
 pub const SCRATCH_LEN: usize = 64 * 1024;
@@ -129,6 +129,15 @@ pub fn expected_registrations(model: &[u8], case: &Case) -> Vec<RegistrationOutc
         .collect()
 }
 
+/// `n` and `noun`, plural unless `n` is 1 (`1 pass`, `3 LK steps`).
+fn count(n: usize, noun: &str) -> String {
+    match (n, noun.ends_with('s')) {
+        (1, _) => format!("1 {noun}"),
+        (_, true) => format!("{n} {noun}es"),
+        (_, false) => format!("{n} {noun}s"),
+    }
+}
+
 /// A short name for a set of options (reports).
 pub fn describe(o: &Options) -> String {
     let d = Options::default();
@@ -153,7 +162,7 @@ pub fn describe(o: &Options) -> String {
             ..Options::network_only()
         })
     {
-        return format!("LK only ({} steps)", o.lk_iterations);
+        return format!("LK only ({})", count(o.lk_iterations, "step"));
     }
     if *o
         == (Options {
@@ -163,14 +172,21 @@ pub fn describe(o: &Options) -> String {
         })
     {
         return format!(
-            "{} passes + {} LK steps + K={} + ICP {}",
-            o.passes, o.lk_iterations, o.hypotheses, o.icp_iterations
+            "{} + {} + K={} + ICP {}",
+            count(o.passes, "pass"),
+            count(o.lk_iterations, "LK step"),
+            o.hypotheses,
+            o.icp_iterations
         );
     }
+    let lk = if o.lk_iterations > 0 {
+        format!(" + {}", count(o.lk_iterations, "LK step"))
+    } else {
+        String::new()
+    };
     format!(
-        "{} passes + {} LK steps (tol {}), K={}, ICP {} {:?} (screen {}, tol {}, {}), inlier {}, {} points, max residual {}",
+        "{} passes{lk} (tol {}), K={}, ICP {} {:?} (screen {}, tol {}, {}), inlier {}, {} points, max residual {}",
         o.passes,
-        o.lk_iterations,
         o.tolerance,
         o.hypotheses,
         o.icp_iterations,
@@ -265,11 +281,11 @@ pub fn random_model_with(
     }
 }
 
-/// `model` with a random PointNetLK solver (`pcrnet-core`'s seeded
-/// [`with_random_lk_solver`]), without its head if `headless`, renamed.
-pub fn with_lk_solver(model: &TestModel, name: &str, seed: u64, headless: bool) -> TestModel {
-    let (mut arena, mut out) = (vec![0u8; 1 << 20], vec![0u8; model.blob.len() + (1 << 20)]);
-    let blob = with_random_lk_solver(&model.blob, seed, headless, &mut arena, &mut out)
+/// The int8 model `blob` with a random PointNetLK solver (`pcrnet-core`'s
+/// seeded [`with_random_lk_solver`]), without its head if `headless`.
+pub fn with_lk_solver(blob: &[u8], name: &str, seed: u64, headless: bool) -> TestModel {
+    let (mut arena, mut out) = (vec![0u8; 1 << 20], vec![0u8; blob.len() + (1 << 20)]);
+    let blob = with_random_lk_solver(blob, seed, headless, &mut arena, &mut out)
         .expect("test models take a solver")
         .to_vec();
     TestModel {

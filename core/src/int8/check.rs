@@ -8,8 +8,8 @@ use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT};
 use crate::format::{
     Int8Layer, Int8Payload, Trailer, check_frame, check_passes, expect_len, le_f32s, le_i32s,
 };
-use crate::lk::Solver;
 use crate::kernel::rows;
+use crate::lk::Solver;
 use crate::template::Template;
 
 impl<'a> Int8Model<'a> {

@@ -367,7 +367,11 @@ impl<'a> Int8Model<'a> {
             source,
             passes,
             tolerance,
-            |map| Ok(self.pass(source, map, Step::Network, tile, scratch, ready)?.0),
+            |map| {
+                Ok(self
+                    .pass(source, map, Step::Network, tile, scratch, ready)?
+                    .0)
+            },
         )
     }
 

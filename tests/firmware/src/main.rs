@@ -11,7 +11,7 @@
 //! and peak stack measured per call), and prints the outputs as text over
 //! semihosting. The host compares them with its own, bit for bit.
 //!
-//! Container, version 3 (all u32 little-endian, offsets from its start,
+//! Container, version 5 (all u32 little-endian, offsets from its start,
 //! 4-aligned):
 //! - header: `b"PCRV" version n_models n_cases`;
 //! - `n_models x (blob_offset, blob_len)`;
@@ -69,7 +69,7 @@ const LINE: usize = 8192;
 #[cfg(feature = "microbit")]
 const LINE: usize = 1024;
 /// Container version this runner reads.
-const VERSION: u32 = 4;
+const VERSION: u32 = 5;
 /// u32 words per case in the container's table.
 const CASE_WORDS: usize = 7;
 /// u32 words per option set.

@@ -131,6 +131,12 @@ pub struct MethodOptions {
     /// stores about 10 bytes of flash per point (point, normal, search grid).
     #[arg(long, allow_negative_numbers = true)]
     pub template_points: Option<usize>,
+    /// PointNetLK steps of the device pipeline after its network passes
+    /// (--method device; default 0: none, or for a model trained as
+    /// PointNetLK, which has no head, as many as it was trained for).
+    /// Needs a blob with PointNetLK's solver (`pcrnet export --lk`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub lk_iterations: Option<usize>,
     /// Refine the network's pose with ICP.
     #[arg(long)]
     pub refine_icp: bool,
@@ -233,6 +239,7 @@ impl MethodOptions {
         m.inlier_distance = self.inlier_distance.unwrap_or(m.inlier_distance);
         m.max_residual = self.max_residual.unwrap_or(m.max_residual);
         m.template_points = self.template_points.unwrap_or(m.template_points);
+        m.lk_iterations = self.lk_iterations.unwrap_or(m.lk_iterations);
         m
     }
 

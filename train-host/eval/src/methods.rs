@@ -7,7 +7,7 @@
 //! | `ipcrnet` | up to [`Method::iterations`] passes (the paper: 20), stopping when `\|\|dT - I\|\|_F <` [`Method::tolerance`] (the paper: 1e-7) | int8 or f32 blob |
 //! | `pointnetlk` | inverse-compositional Lucas-Kanade on the encoder's features, up to 20 steps | f32 blob |
 //! | `icp` | point-to-point ICP from the identity, up to 100 iterations | none |
-//! | `device` | the device pipeline: network passes ([`Method::iterations`]), [`Method::hypotheses`] starting poses, ICP against the blob's template points, residual (`pcrnet-core`'s `register`) | int8 or f32 blob |
+//! | `device` | the device pipeline: network passes ([`Method::iterations`]), PointNetLK steps ([`Method::lk_iterations`]), [`Method::hypotheses`] starting poses, ICP against the blob's template points, residual (`pcrnet-core`'s `register`) | int8 or f32 blob |
 //!
 //! Any network method can be followed by host ICP refinement
 //! ([`Method::refine_icp`]): ICP (f64, k-d tree, all template points)
@@ -121,6 +121,12 @@ pub struct Method {
     /// against them).
     #[serde(default = "default_template_points")]
     pub template_points: usize,
+    /// PointNetLK steps of the device pipeline after its network passes
+    /// (0: none; a blob without a head, a model trained as PointNetLK,
+    /// then runs as many as it was trained for). Needs a blob with
+    /// PointNetLK's solver.
+    #[serde(default)]
+    pub lk_iterations: usize,
 }
 
 fn default_hypotheses() -> usize {
@@ -186,6 +192,7 @@ impl Method {
             inlier_distance: default_inlier_distance(),
             max_residual: default_max_residual(),
             template_points: default_template_points(),
+            lk_iterations: 0,
         }
     }
 
@@ -193,7 +200,7 @@ impl Method {
     pub fn device_options(&self) -> pcrnet_core::Options {
         pcrnet_core::Options {
             passes: self.iterations,
-            lk_iterations: 0,
+            lk_iterations: self.lk_iterations,
             tolerance: self.tolerance,
             hypotheses: self.hypotheses,
             icp_iterations: self.icp_iterations,
@@ -227,6 +234,11 @@ impl Method {
             MethodKind::Ipcrnet => "i-PCRNet",
             MethodKind::Pointnetlk => "PointNetLK",
             MethodKind::Icp => "ICP",
+            MethodKind::Device if self.lk_iterations > 0 => match self.iterations {
+                0 => "device PointNetLK",
+                1 => "device PCRNet + LK",
+                _ => "device i-PCRNet + LK",
+            },
             MethodKind::Device if self.iterations > 1 => "device i-PCRNet",
             MethodKind::Device if self.iterations == 1 => "device PCRNet",
             // As many passes as the blob was trained for.

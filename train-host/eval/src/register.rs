@@ -73,25 +73,30 @@ pub fn pipeline(
     options: &Options,
 ) -> Result<(Registration, Precision), TemplateError> {
     let blob = model_for(blob, template)?;
-    let with = |trained: usize| Options {
-        passes: if options.passes == 0 {
-            trained
-        } else {
-            options.passes
+    // Passes 0: as the blob was trained; for a blob without a head
+    // (PointNetLK) no network pass, and its trained LK steps unless asked.
+    let with = |trained: usize, head: bool| Options {
+        passes: match (options.passes, head) {
+            (0, true) => trained,
+            (passes, _) => passes,
+        },
+        lk_iterations: match (options.lk_iterations, head) {
+            (0, false) => trained,
+            (steps, _) => steps,
         },
         ..*options
     };
     match Int8Model::from_bytes(&blob) {
         Ok(model) => {
             let mut scratch = vec![0i8; model.host_scratch_len()];
-            let options = with(model.trained_passes());
+            let options = with(model.trained_passes(), model.has_head());
             let r = model.register(source, &options, &mut scratch)?;
             Ok((r, Precision::Int8))
         }
         Err(pcrnet_core::Error::WrongKind { .. }) => {
             let model = F32Model::from_bytes(&blob)?;
             let mut scratch = vec![0f32; model.tiled_scratch_len()];
-            let options = with(model.trained_passes());
+            let options = with(model.trained_passes(), model.network().has_head());
             let r = model.register(source, &options, &mut scratch)?;
             Ok((r, Precision::F32))
         }

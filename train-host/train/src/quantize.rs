@@ -27,11 +27,11 @@
 //! - **Template feature**: computed by the int8 encoder itself (`pcrnet-core`),
 //!   so it is exactly what the device would compute.
 
+use pcrnet_core::Frame;
 use pcrnet_core::fixed::quantize_multiplier;
 use pcrnet_core::float::{Layer, dense};
 use pcrnet_core::format::{Int8Layer, Int8Output, Int8Payload};
 use pcrnet_core::pose::{Centring, Rigid};
-use pcrnet_core::Frame;
 
 use crate::net::{F32Params, TrainedFor, le_bytes};
 use crate::template::{Reference, TemplateError, int8_blob};
@@ -297,12 +297,10 @@ pub fn quantize(
         layers.push(quantize_layer(l, w, b, s.inputs, s_x, z_x, x_max, s_y)?);
         (s_x, z_x, x_max) = (s_y, -128, 255);
     }
-    let output = if head_layers > 0 {
-        layers.pop()
-    } else {
-        None
-    };
-    let out_scale = output.as_ref().map_or_else(Vec::new, |o| le_bytes(&o.acc_scale));
+    let output = if head_layers > 0 { layers.pop() } else { None };
+    let out_scale = output
+        .as_ref()
+        .map_or_else(Vec::new, |o| le_bytes(&o.acc_scale));
     let no_bytes = Vec::new();
     let out_bytes = |f: fn(&QLayer) -> &Vec<u8>| output.as_ref().map_or(&no_bytes, f);
 

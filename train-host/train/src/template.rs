@@ -331,7 +331,7 @@ pub fn int8_blob(
     let zero_rows = vec![0u8; 4 * TWIST_DIM * payload.arch.feature_dim()];
     let draft_trailer = Trailer {
         table: reference.table(),
-        lk: lk.then(|| crate::lk_solver::stored(&zero_rows)),
+        lk: lk.then(|| crate::lk_solver::stored(ModelKind::Int8, &zero_rows)),
     };
     let model = Int8Model::from_payload(draft.clone(), draft_trailer)?;
     let rows = lk
@@ -349,7 +349,9 @@ pub fn int8_blob(
     };
     let trailer = Trailer {
         table: reference.table(),
-        lk: rows.as_deref().map(crate::lk_solver::stored),
+        lk: rows
+            .as_deref()
+            .map(|r| crate::lk_solver::stored(ModelKind::Int8, r)),
     };
     let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
     write_blob(ModelKind::Int8, &done, &trailer, &mut out)?;
@@ -373,7 +375,7 @@ pub fn f32_blob(
     let zero_rows = vec![0u8; 4 * TWIST_DIM * payload.arch.feature_dim()];
     let draft_trailer = Trailer {
         table: reference.table(),
-        lk: lk.then(|| crate::lk_solver::stored(&zero_rows)),
+        lk: lk.then(|| crate::lk_solver::stored(ModelKind::F32, &zero_rows)),
     };
     let model = F32Model::from_payload(draft.clone(), draft_trailer)?;
     let rows = lk
@@ -392,7 +394,9 @@ pub fn f32_blob(
     };
     let trailer = Trailer {
         table: reference.table(),
-        lk: rows.as_deref().map(crate::lk_solver::stored),
+        lk: rows
+            .as_deref()
+            .map(|r| crate::lk_solver::stored(ModelKind::F32, r)),
     };
     let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
     write_blob(ModelKind::F32, &done, &trailer, &mut out)?;

@@ -276,14 +276,20 @@ fn a_pointnetlk_checkpoint_exports_headless_blobs_with_a_solver() {
     assert_eq!((r.passes, r.lk_iterations), (0, 5));
     // The stored P against the training code's LK solver on the f32
     // encoder (its own moves, in f64): the same to f32 rounding.
-    let stored: Vec<f32> = pcrnet_core::format::le_f32s(m.lk_solver().unwrap().stored().rows).collect();
+    let stored: Vec<f32> =
+        pcrnet_core::format::le_f32s(m.lk_solver().unwrap().stored().rows).collect();
     let params = pcrnet_train::F32Params::from_network(m.network());
     let mut centred = reference.normalised();
     data::centre_cloud(&mut centred);
     let phi = params.encode(&centred).unwrap();
     let moved: Vec<nalgebra::DVector<f64>> = pcrnet_train::lk::moved_templates(&centred)
         .iter()
-        .map(|c| nalgebra::DVector::from_iterator(phi.len(), params.encode(c).unwrap().iter().map(|&v| v as f64)))
+        .map(|c| {
+            nalgebra::DVector::from_iterator(
+                phi.len(),
+                params.encode(c).unwrap().iter().map(|&v| v as f64),
+            )
+        })
         .collect();
     let phi = nalgebra::DVector::from_iterator(phi.len(), phi.iter().map(|&v| v as f64));
     let p = pcrnet_train::lk::LkSolver::from_features(&phi, std::array::from_fn(|k| &moved[k]))
@@ -292,7 +298,10 @@ fn a_pointnetlk_checkpoint_exports_headless_blobs_with_a_solver() {
     for k in 0..6 {
         for j in 0..phi.len() {
             let (a, b) = (stored[k * phi.len() + j] as f64, p[(k, j)]);
-            assert!((a - b).abs() <= 1e-3 * largest, "P[{k}][{j}]: stored {a}, recomputed {b}");
+            assert!(
+                (a - b).abs() <= 1e-3 * largest,
+                "P[{k}][{j}]: stored {a}, recomputed {b}"
+            );
         }
     }
 

@@ -81,6 +81,19 @@ fn lk() -> Method {
     Method::new(MethodKind::Pointnetlk)
 }
 
+/// The device pipeline on a PointNetLK blob: 20 LK steps (as the host's
+/// PointNetLK) alone (one start, scored, no ICP), or followed by the
+/// default hypotheses and device ICP.
+fn device_lk(then_icp: bool) -> Method {
+    let device = Method::new(MethodKind::Device);
+    Method {
+        lk_iterations: 20,
+        hypotheses: if then_icp { device.hypotheses } else { 1 },
+        icp_iterations: if then_icp { device.icp_iterations } else { 0 },
+        ..device
+    }
+}
+
 pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "generalisation");
@@ -99,15 +112,18 @@ pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
             &format!("gen-{}", set.split(' ').next().unwrap_or(set)),
             modelnet10(ctx, Some(classes), clean),
         )?;
+        let first = rec.raw.len();
         rec.score(set, icp(), None, &pairs, true)?;
         rec.score(set, lk(), gen5.f32(), &pairs, true)?;
         rec.score(set, lk(), lk5.f32(), &pairs, true)?;
+        rec.score(set, device_lk(false), lk5.f32(), &pairs, true)?;
+        rec.score(set, device_lk(false), lk5.int8(), &pairs, true)?;
+        rec.score(set, device_lk(true), lk5.int8(), &pairs, true)?;
         rec.score(set, ipcrnet(), gen5.f32(), &pairs, true)?;
         rec.score(set, ipcrnet(), gen5.int8(), &pairs, true)?;
         if classes == ["toilet"] {
             rec.score(set, ipcrnet(), toilet.int8(), &pairs, true)?;
         }
-        let first = rec.raw.len() - if classes == ["toilet"] { 6 } else { 5 };
         let runs: Vec<&MethodScore> = rec.raw[first..].iter().map(|r| &r.1).collect();
         let chart = success_chart(&format!("Generalisation: {set}"), &runs, 90.0);
         rec.plot(set.split(' ').next().unwrap_or(set), &chart)?;
@@ -123,7 +139,7 @@ pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
         vec![
             "ModelNet10, test split, clean sources, Euler angles U[-45°, 45°], translation U[-1, 1].".into(),
             format!("Seen: {}. Unseen: {}.", SEEN.join(", "), UNSEEN.join(", ")),
-            "i-PCRNet: up to 20 passes, stopping at ||dT - I||_F < 1e-7. PointNetLK (up to 20 steps) twice: on mn10-seen5-ipcrnet's f32 encoder, and on mn10-seen5-pointnetlk's, trained as PointNetLK on the same classes (10 Lucas-Kanade iterations, pose loss, gradient through the last iteration; f32 on the host: no blob carries its Jacobian yet).".into(),
+            "i-PCRNet: up to 20 passes, stopping at ||dT - I||_F < 1e-7. PointNetLK (up to 20 steps) twice on the host (f64 solver, Jacobian recomputed per template): on mn10-seen5-ipcrnet's f32 encoder, and on mn10-seen5-pointnetlk's, trained as PointNetLK on the same classes (10 Lucas-Kanade iterations, pose loss, gradient through the last iteration). Device PointNetLK: mn10-seen5-pointnetlk's blobs (no head; PointNetLK's solver computed at bind time by the blob's own encoder: int8 for the int8 blob) through pcrnet-core's register with 20 LK steps, alone (K=1, scored, no ICP) and followed by the default hypotheses and device ICP.".into(),
         ],
         vec![table, confidence],
         started,
