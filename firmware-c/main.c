@@ -70,8 +70,8 @@ static void print_registration_bits(const PcrnetRegistration *r) {
     const float scores[6] = {r->residual, r->relative_residual, r->plane_residual,
                              r->relative_plane_residual, r->fitness, r->inlier_rmse};
     print_bits(scores, 6);
-    printf(" %lu %lu %lu %lu %lu %lu %d %d", (unsigned long)r->hypothesis, (unsigned long)r->passes,
-           (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->out_of_range,
+    printf(" %lu %lu %lu %lu %lu %lu %lu %d %d", (unsigned long)r->hypothesis, (unsigned long)r->passes,
+           (unsigned long)r->lk_iterations, (unsigned long)r->icp_iterations, (unsigned long)r->saturated, (unsigned long)r->out_of_range,
            (unsigned long)r->degenerate, r->reliable ? 1 : 0, r->has_free_axis ? 1 : 0);
     const float axis[7] = {r->free_axis[0],       r->free_axis[1],       r->free_axis[2],
                            r->free_axis_point[0], r->free_axis_point[1], r->free_axis_point[2],

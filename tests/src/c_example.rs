@@ -65,6 +65,7 @@ const REG_FIELDS: [&str; 38] = [
     "inlier_rmse",
     "hypothesis",
     "passes",
+    "lk_iterations",
     "icp_iterations",
     "saturated",
     "out_of_range",
@@ -124,6 +125,7 @@ fn registration_words(r: &PcrnetRegistration) -> String {
     for count in [
         r.hypothesis,
         r.passes,
+        r.lk_iterations,
         r.icp_iterations,
         r.saturated,
         r.out_of_range,

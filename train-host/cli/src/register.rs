@@ -234,8 +234,10 @@ pub(crate) fn register(
             c.inlier_rmse
         ));
         say(format!(
-            "hypothesis {} won; {} ICP iteration(s); {} saturated int8 value(s){}",
+            "hypothesis {} won; {} network pass(es), {} PointNetLK step(s), {} ICP iteration(s); {} saturated int8 value(s){}",
             c.hypothesis,
+            c.passes,
+            c.lk_iterations,
             c.icp_iterations,
             c.saturated,
             match c.degenerate {
@@ -314,6 +316,7 @@ fn report_json(method: &str, out: &methods::Outcome, pose: &FilePose) -> serde_j
         v["relative_plane_residual"] = c.relative_plane_residual.into();
         v["hypothesis"] = c.hypothesis.into();
         v["passes"] = c.passes.into();
+        v["lk_iterations"] = c.lk_iterations.into();
         v["icp_iterations"] = c.icp_iterations.into();
         v["saturated"] = c.saturated.into();
         v["out_of_range"] = c.out_of_range.into();

@@ -250,6 +250,7 @@ fn frame_json(
         "fitness": r.fitness,
         "icp_iterations": r.icp_iterations,
         "passes": r.passes,
+        "lk_iterations": r.lk_iterations,
         "reliable": r.reliable,
         "ms": ms,
     })

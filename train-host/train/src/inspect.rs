@@ -17,7 +17,8 @@ pub fn describe(blob: &[u8]) -> Result<String, pcrnet_core::Error> {
     }
 }
 
-fn shape_table(arch: &Arch, out: &mut String) {
+/// The layer shapes; without a head (PointNetLK), the encoder's alone.
+fn shape_table(arch: &Arch, head: bool, out: &mut String) {
     let _ = writeln!(
         out,
         "  {:<10} {:>7} {:>7} {:>10} {:>10}",
@@ -33,6 +34,15 @@ fn shape_table(arch: &Arch, out: &mut String) {
             l.parameters(),
             format!("{}/pt", l.macs())
         );
+    }
+    if !head {
+        let encoder: usize = arch.encoder_layers().map(|l| l.parameters()).sum();
+        let _ = writeln!(
+            out,
+            "  parameters {encoder}; encoder {} MACs/point; no head",
+            arch.encoder_macs_per_point()
+        );
+        return;
     }
     for (i, l) in arch.head_layers().enumerate() {
         let _ = writeln!(
@@ -58,20 +68,24 @@ fn shape_table(arch: &Arch, out: &mut String) {
     );
 }
 
-fn widths(arch: &Arch) -> String {
-    format!(
-        "encoder {:?}, head {:?} -> 7",
-        &arch.encoder[..],
-        &arch.head[..]
-    )
+fn widths(arch: &Arch, head: bool) -> String {
+    if head {
+        format!(
+            "encoder {:?}, head {:?} -> 7",
+            &arch.encoder[..],
+            &arch.head[..]
+        )
+    } else {
+        format!("encoder {:?}, no head (PointNetLK)", &arch.encoder[..])
+    }
 }
 
 fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
     let arch = m.arch();
     let p = m.payload();
     let mut s = String::new();
-    let _ = writeln!(s, "int8 model: {}", widths(arch));
-    shape_table(arch, &mut s);
+    let _ = writeln!(s, "int8 model: {}", widths(arch, m.has_head()));
+    shape_table(arch, m.has_head(), &mut s);
     let _ = writeln!(
         s,
         "  input: int16, scale {:.3e} (range +-{:.3})",
@@ -99,13 +113,12 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
             l.out_scale, l.out_zero_point
         );
     }
-    template_lines(
-        m.trained_passes(),
-        m.centres_source(),
-        m.frame(),
-        m.template(),
-        &mut s,
-    );
+    let method = Method {
+        passes: m.trained_passes(),
+        head: m.has_head(),
+        lk: m.lk_solver(),
+    };
+    template_lines(&method, m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "flash (blob, weights used in place): {flash} bytes");
     let _ = writeln!(
         s,
@@ -116,24 +129,60 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
     s
 }
 
+/// How a model was trained to run: its passes, whether it has a head, and
+/// PointNetLK's solver if the blob has one.
+struct Method<'m, 'a> {
+    passes: usize,
+    head: bool,
+    lk: Option<&'m pcrnet_core::lk::Solver<'a>>,
+}
+
 /// How the model runs and what it records of its template.
 fn template_lines(
-    passes: usize,
+    method: &Method<'_, '_>,
     centred: bool,
     frame: &pcrnet_core::Frame,
     template: &pcrnet_core::template::Template<'_>,
     s: &mut String,
 ) {
-    let kind = if passes > 1 { "i-PCRNet" } else { "PCRNet" };
-    let _ = writeln!(
-        s,
-        "  trained for {passes} pass(es) ({kind}), sources {}",
-        if centred {
-            "centred on their centroid"
-        } else {
-            "as given"
+    let passes = method.passes;
+    let sources = if centred {
+        "centred on their centroid"
+    } else {
+        "as given"
+    };
+    if method.head {
+        let kind = if passes > 1 { "i-PCRNet" } else { "PCRNet" };
+        let _ = writeln!(
+            s,
+            "  trained for {passes} pass(es) ({kind}), sources {sources}"
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "  trained as PointNetLK for {passes} LK iterations, no head (run it with passes 0, lk_iterations {passes} or more), sources {sources}"
+        );
+    }
+    match method.lk {
+        Some(lk) => {
+            let stored = lk.stored();
+            let _ = writeln!(
+                s,
+                "  PointNetLK solver: 6 x {} f32 ({} bytes of flash), Jacobian by {} differences of step {}, damping {:e}",
+                lk.features(),
+                stored.rows.len(),
+                if stored.central { "central" } else { "forward" },
+                stored.jacobian_step,
+                stored.damping
+            );
         }
-    );
+        None => {
+            let _ = writeln!(
+                s,
+                "  PointNetLK solver: none (lk_iterations needs one: `pcrnet export --lk`)"
+            );
+        }
+    }
     let _ = writeln!(
         s,
         "  frame: p_model = {:e} x (p - {:?}); the template spans about {:.4} user units",
@@ -176,15 +225,15 @@ fn template_lines(
 
 fn describe_f32(m: &F32Model<'_>, size: usize) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "f32 model: {}", widths(m.network().arch()));
-    shape_table(m.network().arch(), &mut s);
-    template_lines(
-        m.trained_passes(),
-        m.centres_source(),
-        m.frame(),
-        m.template(),
-        &mut s,
-    );
+    let net = m.network();
+    let _ = writeln!(s, "f32 model: {}", widths(net.arch(), net.has_head()));
+    shape_table(net.arch(), net.has_head(), &mut s);
+    let method = Method {
+        passes: m.trained_passes(),
+        head: m.network().has_head(),
+        lk: m.lk_solver(),
+    };
+    template_lines(&method, m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "size: {size} bytes");
     let _ = writeln!(
         s,
