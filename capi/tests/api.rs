@@ -85,6 +85,40 @@ fn registration_through_the_c_api_is_bit_identical_to_the_rust_api() {
     assert_eq!(pose[4..], p.translation);
 }
 
+/// PointNetLK through the C API: a blob without a head (the shipped
+/// encoder with a random solver: agreement, not accuracy) registers by
+/// `lk_iterations` bit for bit as the Rust API does, a network pass asked
+/// of it is `PCRNET_ERROR_NO_HEAD`, and LK steps asked of the shipped blob
+/// (no solver) are `PCRNET_ERROR_NO_LK_SOLVER`.
+#[test]
+fn pointnetlk_through_the_c_api() {
+    let shipped = shipped_blob();
+    let (mut arena, mut out) = (vec![0u8; 1 << 16], vec![0u8; shipped.len()]);
+    let blob = pcrnet_core::testing::with_random_lk_solver(&shipped, 3, true, &mut arena, &mut out)
+        .unwrap()
+        .to_vec();
+    let model = loaded(&blob);
+    let rust = Int8Model::from_bytes(&blob).unwrap();
+    let source = shipped_source();
+    let mut scratch = vec![0i8; rust.scratch_len(PCRNET_MAX_TILE)];
+    let lk = Options {
+        passes: 0,
+        lk_iterations: 3,
+        ..Options::default()
+    };
+    let (status, c) = register(&model, &source, &PcrnetOptions::from(lk), &mut scratch);
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    let r = rust.register(&source, &lk, &mut scratch).unwrap();
+    assert_eq!(c, PcrnetRegistration::from(&r));
+    assert_eq!((c.passes, c.lk_iterations), (0, 3));
+    let (status, c) = register(&model, &source, &options_default(), &mut scratch);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NO_HEAD);
+    assert_eq!(c, sentinel());
+    let plain = loaded(&shipped);
+    let (status, _) = register(&plain, &source, &PcrnetOptions::from(lk), &mut scratch);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NO_LK_SOLVER);
+}
+
 #[test]
 fn the_smallest_scratch_gives_the_same_registration() {
     let blob = shipped_blob();
@@ -296,6 +330,8 @@ fn every_status_has_a_message_naming_what_to_do() {
         PCRNET_ERROR_INVALID_OPTION,
         PCRNET_ERROR_INVALID_POSE,
         PCRNET_ERROR_INVALID_FRAME,
+        PCRNET_ERROR_NO_HEAD,
+        PCRNET_ERROR_NO_LK_SOLVER,
         PCRNET_ERROR_OTHER,
     ];
     let message = |s: i32| unsafe { CStr::from_ptr(pcrnet_status_message(s)) }.to_str();

@@ -49,7 +49,7 @@ const LOCATE_FIELDS: [&str; 15] = [
 ];
 
 /// Names of the values of an `@ reg` line after its status.
-const REG_FIELDS: [&str; 38] = [
+const REG_FIELDS: [&str; 39] = [
     "rotation w",
     "rotation x",
     "rotation y",

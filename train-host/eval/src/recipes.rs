@@ -195,10 +195,9 @@ const LK_ARGS: &[&str] = &[
     "20",
 ];
 
-/// PointNetLK models (no blobs: the experiments make an f32 blob in memory
-/// from the checkpoint, for the host only): on the generalisation
-/// experiment's five classes, and on all of ModelNet10 with noise as
-/// `mn10-ipcrnet` (the noise experiment).
+/// PointNetLK models (blobs without a head, with PointNetLK's solver): on
+/// the generalisation experiment's five classes, and on all of ModelNet10
+/// with noise as `mn10-ipcrnet` (the noise experiment).
 pub const LK_RECIPES: [Recipe; 2] = [
     Recipe {
         name: "mn10-seen5-pointnetlk",

@@ -84,7 +84,7 @@ fn lk() -> Method {
 /// The device pipeline on a PointNetLK blob: 20 LK steps (as the host's
 /// PointNetLK) alone (one start, scored, no ICP), or followed by the
 /// default hypotheses and device ICP.
-fn device_lk(then_icp: bool) -> Method {
+pub(super) fn device_lk(then_icp: bool) -> Method {
     let device = Method::new(MethodKind::Device);
     Method {
         lk_iterations: 20,

@@ -159,11 +159,12 @@ pub(crate) fn noise(ctx: &Context) -> anyhow::Result<Report> {
         .collect();
     let mut methods = modelnet10_methods(&pc, &ipc).to_vec();
     methods.insert(2, (lk(), trained_lk.f32()));
+    methods.insert(3, (super::device_lk(false), trained_lk.int8()));
     let report = SweepReport {
         title: "Gaussian noise on the source",
         notes: vec![
             "ModelNet10 test split (all 10 classes), the same templates and transforms at every noise level; noise N(0, sigma^2) per coordinate.".into(),
-            "Networks trained on ModelNet10 with sigma ~ U[0, 0.04]. PointNetLK twice: on mn10-ipcrnet's f32 encoder, and trained as PointNetLK (mn10-pointnetlk: 10 Lucas-Kanade iterations, pose loss; f32 on the host).".into(),
+            "Networks trained on ModelNet10 with sigma ~ U[0, 0.04]. PointNetLK twice on the host: on mn10-ipcrnet's f32 encoder, and trained as PointNetLK (mn10-pointnetlk: 10 Lucas-Kanade iterations, pose loss); and mn10-pointnetlk's int8 blob through the device pipeline (20 LK steps, K=1, scored, no ICP).".into(),
         ],
         subject: "Gaussian noise on the source",
         x_label: "noise standard deviation",
