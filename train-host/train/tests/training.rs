@@ -5,7 +5,7 @@
 mod common;
 
 use common::{bits, data_sets, small_config};
-use pcrnet_core::{Arch, F32Model, Pose};
+use pcrnet_core::{Arch, F32Model, Int8Model, Options, Pose};
 use pcrnet_train::TrainedFor;
 use pcrnet_train::forward;
 use pcrnet_train::geometry::{apply, quat_to_mat};
@@ -104,7 +104,11 @@ fn sixty_steps(
     train: Dataset,
     val: Dataset,
 ) -> (f32, f32, pcrnet_train::Summary, pcrnet_train::Summary) {
-    let mut t = Trainer::new(cfg, train, val).unwrap();
+    sixty_steps_of(&mut Trainer::new(cfg, train, val).unwrap())
+}
+
+/// [`sixty_steps`] on a trainer the caller keeps.
+fn sixty_steps_of(t: &mut Trainer) -> (f32, f32, pcrnet_train::Summary, pcrnet_train::Summary) {
     let before = t.validate();
     let first: f32 = (0..5).map(|_| t.step().loss).sum();
     for _ in 0..50 {
@@ -172,13 +176,50 @@ fn pointnetlk_learns() {
         val_pairs: 32,
         ..TrainConfig::default()
     };
-    let (first, last, before, after) = sixty_steps(cfg, train, val);
+    let mut t = Trainer::new(cfg, train.clone(), val).unwrap();
+    let (first, last, before, after) = sixty_steps_of(&mut t);
     // Measured: loss 0.059 -> 0.003, mean rotation error 3.2 -> 0.8 deg.
     assert!(last < 0.3 * first, "loss {first} -> {last}");
     assert!(
         after.rotation_deg.mean < 0.5 * before.rotation_deg.mean,
         "rotation error {before:?} -> {after:?}"
     );
+    // Its blobs (no head, PointNetLK's solver) recover a generated shape
+    // under a known small motion by LK steps alone, in pcrnet-core.
+    let template = &train.clouds[0];
+    let reference = Reference::new(template, 64).unwrap();
+    let cal = pcrnet_train::export::calibration_clouds(template, &t.config.pairs, 8, 1);
+    let trained = TrainedFor::pointnetlk(true, 5);
+    let dir = std::env::temp_dir().join(format!("pcrnet-lk-small-{}", std::process::id()));
+    pcrnet_train::export::export(&t.params, &reference, Some(&cal), trained, &dir).unwrap();
+    let truth = Pose {
+        rotation: [0.9990482, 0.0, 0.0436194, 0.0],
+        translation: [0.05, -0.03, 0.02],
+    };
+    let source: Vec<[f32; 3]> = template
+        .iter()
+        .map(|&p| truth.inverse().transform_point(p))
+        .collect();
+    let lk = Options {
+        passes: 0,
+        lk_iterations: 10,
+        hypotheses: 1,
+        icp_iterations: 0,
+        ..Options::default()
+    };
+    let error = |pose: &Pose| rotation_error_deg(&pose.rotation_matrix(), &truth.rotation_matrix());
+    let f32_blob = std::fs::read(dir.join(pcrnet_train::export::F32_BLOB)).unwrap();
+    let m = F32Model::from_bytes(&f32_blob).unwrap();
+    let mut s = vec![0.0; m.tiled_scratch_len()];
+    let f32_error = error(&m.register(&source, &lk, &mut s).unwrap().pose);
+    let int8_blob = std::fs::read(dir.join(pcrnet_train::export::INT8_BLOB)).unwrap();
+    let m = Int8Model::from_bytes(&int8_blob).unwrap();
+    let mut s = vec![0i8; m.host_scratch_len()];
+    let int8_error = error(&m.register(&source, &lk, &mut s).unwrap().pose);
+    let _ = std::fs::remove_dir_all(&dir);
+    eprintln!("5 deg: f32 {f32_error} deg, int8 {int8_error} deg");
+    assert!(f32_error < 0.5, "f32 LK: {f32_error} deg off");
+    assert!(int8_error < 0.5, "int8 LK: {int8_error} deg off");
 }
 
 /// Regression test for the run that never learned rotation: with the
