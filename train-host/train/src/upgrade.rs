@@ -2,7 +2,10 @@
 //!
 //! A format-3 blob of either kind differs from format 4 only in lacking
 //! the template's closest-point table ([`add_table`]): its payload is kept
-//! byte for byte and the table is built from its stored template.
+//! byte for byte and the table is built from its stored template, and it
+//! is written in the current format (5: no PointNetLK solver; `pcrnet
+//! export --lk` makes one from a checkpoint). Format-4 blobs need nothing:
+//! this build reads them as they are.
 //!
 //! A format-2 f32 blob (before frames and template points) needs its
 //! template recorded afresh.
@@ -37,8 +40,10 @@ struct F32PayloadV2<'a> {
 /// Why a blob cannot be upgraded.
 #[derive(Debug, thiserror::Error)]
 pub enum UpgradeError {
-    /// Already the current format.
-    #[error("the blob is already format {0}, the current one: nothing to upgrade")]
+    /// Already a format this build reads with its closest-point table.
+    #[error(
+        "the blob is format {0}, which this build reads as it is (with its closest-point table): nothing to upgrade"
+    )]
     Current(u16),
     /// A format-3 blob that does not decode.
     #[error("not a sound format-3 blob")]
@@ -88,14 +93,14 @@ pub fn read_v2_f32(blob: &[u8]) -> Result<(F32Params, bool), UpgradeError> {
     Ok((F32Params::from_network(&net), payload.centre_source))
 }
 
-/// The format-3 blob `blob` (int8 or f32) as format 4: the same payload
-/// and the template's [`crate::template::DEFAULT_TABLE`] closest-point
-/// table. Returns the kind and the new blob.
+/// The format-3 blob `blob` (int8 or f32) in the current format: the same
+/// payload and the template's [`crate::template::DEFAULT_TABLE`]
+/// closest-point table. Returns the kind and the new blob.
 pub fn add_table(blob: &[u8]) -> Result<(ModelKind, Vec<u8>), UpgradeError> {
     let found = blob
         .get(4..6)
         .map_or(0, |v| u16::from_le_bytes([v[0], v[1]]));
-    if found == format::FORMAT_VERSION {
+    if (4..=format::FORMAT_VERSION).contains(&found) {
         return Err(UpgradeError::Current(found));
     }
     let damaged = UpgradeError::DamagedFormat3;
@@ -228,7 +233,9 @@ mod tests {
     }
 
     /// A format-3 blob of either kind gains the default table and nothing
-    /// else: the shipped blobs are exactly their format-3 forms upgraded.
+    /// else: the shipped blobs (format 4) are their format-3 forms
+    /// upgraded, the same payload and table (the current format adds only
+    /// an empty PointNetLK slot).
     #[test]
     fn format_3_blobs_gain_their_table() {
         let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
@@ -240,8 +247,11 @@ mod tests {
             let old = as_format_3(&shipped, kind);
             let (found, upgraded) = add_table(&old).unwrap();
             assert_eq!(found, kind);
+            let new = format::open_version(&upgraded, kind, format::FORMAT_VERSION).unwrap();
+            let old4 = format::open_version(&shipped, kind, 4).unwrap();
+            // Payload and table byte for byte, then `None` for the solver.
             assert!(
-                upgraded == shipped,
+                new[..new.len() - 1] == *old4 && new[new.len() - 1] == 0,
                 "{name}: upgrade differs from the shipped blob"
             );
             assert!(matches!(add_table(&shipped), Err(UpgradeError::Current(4))));

@@ -95,7 +95,8 @@ pub fn upgrade(args: UpgradeArgs) -> anyhow::Result<()> {
     let noise = parse_sigma(&args.noise, "--noise")?;
     let blob =
         std::fs::read(&args.model).with_context(|| format!("reading {}", args.model.display()))?;
-    if blob.get(4..6) == Some(&3u16.to_le_bytes()[..]) {
+    let version = blob.get(4..6).map(|v| u16::from_le_bytes([v[0], v[1]]));
+    if version.is_some_and(|v| (3..=pcrnet_core::format::FORMAT_VERSION).contains(&v)) {
         let (kind, out) = crate::upgrade::add_table(&blob)
             .with_context(|| format!("{}", args.model.display()))?;
         let name = match kind {
