@@ -33,6 +33,8 @@ pub fn options_from(bytes: &[u8; 16]) -> Options {
         },
         icp_tolerance: f(9),
         max_points: bytes[13] as usize * 4,
+        // LK steps: `NoLkSolver` on a blob without PointNetLK's solver.
+        lk_iterations: (bytes[14] % 3) as usize,
         ..Options::default()
     }
 }
