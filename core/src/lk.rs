@@ -88,8 +88,14 @@ impl<'a> Solver<'a> {
     /// component an f32 sum in feature order.
     pub fn twist(&self, residual: impl Fn(usize) -> f32) -> [f32; TWIST_DIM] {
         let mut dxi = [0f32; TWIST_DIM];
-        let rows = self.rows.chunks_exact(4 * self.features.max(1));
-        for (d, row) in dxi.iter_mut().zip(rows) {
+        // `new` checked that the rows hold 6 x F values: each split succeeds.
+        let width = 4 * self.features;
+        let mut rest = self.rows;
+        for d in dxi.iter_mut() {
+            let Some((row, tail)) = rest.split_at_checked(width) else {
+                break;
+            };
+            rest = tail;
             let mut acc = 0f32;
             for (j, p) in le_f32s(row).enumerate() {
                 acc += p * residual(j);
