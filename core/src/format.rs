@@ -305,15 +305,23 @@ pub fn decode_model<'a, T: Deserialize<'a>>(
         (OLDEST_READABLE..=FORMAT_VERSION).contains(&v)
     })?;
     let (payload, rest) = postcard::take_from_bytes::<T>(body).map_err(|_| Error::Malformed)?;
-    let trailer = match version {
+    Ok((payload, decode_trailer(version, rest)?))
+}
+
+/// The [`Trailer`] of a blob of format `version`: nothing in format 3, the
+/// table in format 4, both parts from format 5. Not inlined: its
+/// temporaries stay out of the loaders' frames (the load stack counts on a
+/// 16 KiB device).
+#[inline(never)]
+fn decode_trailer(version: u16, rest: &[u8]) -> Result<Trailer<'_>> {
+    Ok(match version {
         3 => decode::<()>(rest).map(|()| Trailer::default())?,
         4 => Trailer {
             table: decode(rest)?,
             lk: None,
         },
         _ => decode(rest)?,
-    };
-    Ok((payload, trailer))
+    })
 }
 
 /// Checks the envelope of a blob of format `version` exactly and returns

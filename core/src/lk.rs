@@ -117,6 +117,14 @@ impl<'a> Solver<'a> {
     }
 }
 
+/// A blob's solver, checked for features of `features` entries (none
+/// when the blob has none). Not inlined: the loaders' frames stay as they
+/// were (their stack counts on a 16 KiB device).
+#[inline(never)]
+pub fn solver(stored: Option<LkSolver<'_>>, features: usize) -> Result<Option<Solver<'_>>> {
+    stored.map(|s| Solver::new(s, features)).transpose()
+}
+
 /// The se(3) exponential of a twist `(omega, v)`: the rotation by the
 /// angle `|omega|` about `omega`, and the translation `J_l(omega) v` with
 /// `J_l = I + a [omega]x + b [omega]x^2`, `a = (1 - cos t) / t^2`,

@@ -291,10 +291,7 @@ impl<'a> F32Model<'a> {
         crate::format::check_passes(p.passes)?;
         let network = F32Network::new(p.arch, layers, LeF32(p.template_feature))?
             .with_centring(p.centre_source);
-        let lk = trailer
-            .lk
-            .map(|s| Solver::new(s, network.arch.feature_dim()))
-            .transpose()?;
+        let lk = crate::lk::solver(trailer.lk, network.arch.feature_dim())?;
         if !network.has_head() && lk.is_none() {
             return Err(Error::InconsistentDimensions {
                 what: "a blob without a head needs PointNetLK's solver",

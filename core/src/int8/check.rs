@@ -6,20 +6,21 @@ use crate::arch::POSE_DIM;
 use crate::error::{Error, Result};
 use crate::fixed::{INPUT_QMAX, MAX_SHIFT, MIN_SHIFT};
 use crate::format::{
-    Int8Layer, Int8Payload, Trailer, check_frame, check_passes, expect_len, le_f32s, le_i32s,
+    Int8Layer, Int8Payload, NearestTable, check_frame, check_passes, expect_len, le_f32s, le_i32s,
 };
 use crate::kernel::rows;
-use crate::lk::Solver;
 use crate::template::Template;
 
 impl<'a> Int8Model<'a> {
-    /// Every check of [`Self::from_payload`]; returns the template and
-    /// PointNetLK's solver, if the blob has one.
+    /// Every check of [`Self::from_payload`] but the solver's own
+    /// ([`crate::lk::solver`]); `has_lk` says whether the blob has one (a
+    /// blob without a head must). Returns the template.
     #[inline(never)]
     pub(super) fn validate(
         p: &Int8Payload<'a>,
-        trailer: Trailer<'a>,
-    ) -> Result<(Template<'a>, Option<Solver<'a>>)> {
+        table: Option<NearestTable<'a>>,
+        has_lk: bool,
+    ) -> Result<Template<'a>> {
         let arch = &p.arch;
         arch.validate()?;
         if !(p.input_scale.is_finite() && p.input_scale > 0.0) {
@@ -39,13 +40,9 @@ impl<'a> Int8Model<'a> {
         for (shape, layer) in arch.head_layers().zip(p.head.iter()) {
             check_layer(layer, shape.inputs, shape.outputs, 128)?;
         }
-        let lk = trailer
-            .lk
-            .map(|s| Solver::new(s, arch.feature_dim()))
-            .transpose()?;
         if !headless(p) {
             check_output(p)?;
-        } else if lk.is_none() {
+        } else if !has_lk {
             return Err(Error::InconsistentDimensions {
                 what: "a blob without a head needs PointNetLK's solver",
             });
@@ -58,7 +55,7 @@ impl<'a> Int8Model<'a> {
         )?;
         check_frame(&p.frame)?;
         check_passes(p.passes)?;
-        Ok((Template::new(p.template.clone(), trailer.table)?, lk))
+        Template::new(p.template.clone(), table)
     }
 }
 

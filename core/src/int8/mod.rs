@@ -100,8 +100,9 @@ impl<'a> Int8Model<'a> {
     /// table and PointNetLK's solver, if any.
     #[inline(always)]
     pub fn from_payload(p: Int8Payload<'a>, trailer: Trailer<'a>) -> Result<Self> {
+        let lk = crate::lk::solver(trailer.lk, p.arch.feature_dim())?;
         // Checked by reference, then moved once into the model.
-        let (template, lk) = Self::validate(&p, trailer)?;
+        let template = Self::validate(&p, trailer.table, lk.is_some())?;
         Ok(Int8Model { p, template, lk })
     }
 

@@ -221,135 +221,152 @@ fn main() -> ! {
             }
         };
         for c in (0..n_cases).filter(|&c| word(cases + CASE_WORDS * c) as usize == m) {
-            let entry = |k: usize| word(cases + CASE_WORDS * c + k);
-            let (cloud, tile) = (points(entry(1), entry(2)), entry(3) as usize);
-            let baseline = stack::paint();
-            let e0 = counter.instructions();
-            let encoded = model.encode_tiled(cloud, tile, scratch).is_ok();
-            let e1 = counter.instructions();
-            let result = model.infer_tiled(cloud, tile, scratch).map(|r| {
-                let pose = model.pose(&r.head);
-                (r, pose)
-            });
-            let e2 = counter.instructions();
-            let peak = stack::used_below(baseline);
-            line.clear();
-            match result {
-                Ok((r, pose)) => {
-                    let _ = write!(line, "case {c} ok {} {} {peak} feature ", e1 - e0, e2 - e1);
-                    for &v in r.feature {
-                        let _ = write!(line, "{:02x}", v as u8);
-                    }
-                    let _ = write!(line, " head");
-                    for v in r.head {
-                        let _ = write!(line, " {v}");
-                    }
-                    match pose {
-                        Ok(p) => {
-                            let _ = write!(line, " pose");
-                            for v in p.rotation.iter().chain(&p.translation) {
-                                let _ = write!(line, " {:08x}", v.to_bits());
-                            }
-                        }
-                        Err(e) => {
-                            let _ = write!(line, " pose_error {e:?}");
-                        }
-                    }
-                }
-                Err(e) => {
-                    let _ = write!(line, "case {c} error {encoded} {e:?}");
-                }
-            }
-            emit(&line);
-            let iterations = entry(4) as usize;
-            if iterations > 0 {
-                line.clear();
-                match model.network_pose(cloud, iterations, 0.0, scratch) {
-                    Ok((p, n)) => {
-                        let _ = write!(line, "case {c} iter ok {n}");
-                        for v in p.rotation.iter().chain(&p.translation) {
-                            let _ = write!(line, " {:08x}", v.to_bits());
-                        }
-                    }
-                    Err(e) => {
-                        let _ = write!(line, "case {c} iter error {e:?}");
-                    }
-                }
-                emit(&line);
-            }
-            let (n_registrations, options_at) = (entry(5) as usize, entry(6) as usize / 4);
-            for k in 0..n_registrations {
-                let options = read_options(options_at + OPTIONS_WORDS * k);
-                let baseline = stack::paint();
-                let r0 = counter.instructions();
-                let result = model.register(cloud, &options, scratch);
-                let r1 = counter.instructions();
-                let peak = stack::used_below(baseline);
-                line.clear();
-                match &result {
-                    Ok(r) => {
-                        let _ = write!(line, "case {c} reg {k} ok {} {peak}", r1 - r0);
-                        write_registration(&mut line, r);
-                    }
-                    Err(e) => {
-                        let _ = write!(line, "case {c} reg {k} error {} {peak} {e:?}", r1 - r0);
-                    }
-                }
-                emit(&line);
-                let Ok(r) = result else {
-                    continue;
-                };
-                // The feature-space check of the pose (the rule of the
-                // host's `feature::checked`: default options only).
-                if options == Options::default() {
-                    let f0 = counter.instructions();
-                    let checked = model.feature_distance(cloud, &r.pose, scratch);
-                    let f1 = counter.instructions();
-                    line.clear();
-                    let _ = match checked {
-                        Ok(d) => write!(
-                            line,
-                            "case {c} feature {k} ok {} {:08x}",
-                            f1 - f0,
-                            d.to_bits()
-                        ),
-                        Err(e) => write!(line, "case {c} feature {k} error {} {e:?}", f1 - f0),
-                    };
-                    emit(&line);
-                }
-                // Tracking from the registered pose (held), and with the
-                // default options also from its constant-velocity
-                // prediction after the identity (mostly a fallback).
-                let predicted = pose::predict(&Pose::IDENTITY, &r.pose);
-                let starts = [("held", r.pose), ("predicted", predicted)];
-                let n_starts = if options == Options::default() { 2 } else { 1 };
-                for (name, start) in starts.iter().take(n_starts) {
-                    let baseline = stack::paint();
-                    let t0 = counter.instructions();
-                    let tracked = model.track(cloud, start, &options, scratch);
-                    let t1 = counter.instructions();
-                    let peak = stack::used_below(baseline);
-                    line.clear();
-                    let _ = write!(line, "case {c} track {k} {name} ");
-                    match tracked {
-                        Ok(t) => {
-                            let _ = write!(line, "ok {} {peak}", t1 - t0);
-                            write_registration(&mut line, &t.registration);
-                            let _ = write!(line, " {:?}", t.outcome);
-                        }
-                        Err(e) => {
-                            let _ = write!(line, "error {} {peak} {e:?}", t1 - t0);
-                        }
-                    }
-                    emit(&line);
-                }
-            }
+            run_case(c, cases, &model, scratch, &counter, &mut line);
         }
         #[cfg(not(feature = "microbit"))]
         run_scene(m, &model, scratch, &counter, &mut line);
     }
     say!("done");
     exit(true)
+}
+
+/// One case of the container (`cases`: its table's first word): the
+/// inference, the i-PCRNet passes, the registrations and what follows each.
+/// Not inlined: its locals (results, poses, registrations) stay out of
+/// `main`'s frame, which on the micro:bit's 16 KiB of RAM must leave room
+/// for loading a blob.
+#[inline(never)]
+fn run_case(
+    c: usize,
+    cases: usize,
+    model: &Int8Model,
+    scratch: &mut [i8],
+    counter: &icount::Counter,
+    line: &mut String<LINE>,
+) {
+    let entry = |k: usize| word(cases + CASE_WORDS * c + k);
+    let (cloud, tile) = (points(entry(1), entry(2)), entry(3) as usize);
+    let baseline = stack::paint();
+    let e0 = counter.instructions();
+    let encoded = model.encode_tiled(cloud, tile, scratch).is_ok();
+    let e1 = counter.instructions();
+    let result = model.infer_tiled(cloud, tile, scratch).map(|r| {
+        let pose = model.pose(&r.head);
+        (r, pose)
+    });
+    let e2 = counter.instructions();
+    let peak = stack::used_below(baseline);
+    line.clear();
+    match result {
+        Ok((r, pose)) => {
+            let _ = write!(line, "case {c} ok {} {} {peak} feature ", e1 - e0, e2 - e1);
+            for &v in r.feature {
+                let _ = write!(line, "{:02x}", v as u8);
+            }
+            let _ = write!(line, " head");
+            for v in r.head {
+                let _ = write!(line, " {v}");
+            }
+            match pose {
+                Ok(p) => {
+                    let _ = write!(line, " pose");
+                    for v in p.rotation.iter().chain(&p.translation) {
+                        let _ = write!(line, " {:08x}", v.to_bits());
+                    }
+                }
+                Err(e) => {
+                    let _ = write!(line, " pose_error {e:?}");
+                }
+            }
+        }
+        Err(e) => {
+            let _ = write!(line, "case {c} error {encoded} {e:?}");
+        }
+    }
+    emit(line);
+    let iterations = entry(4) as usize;
+    if iterations > 0 {
+        line.clear();
+        match model.network_pose(cloud, iterations, 0.0, scratch) {
+            Ok((p, n)) => {
+                let _ = write!(line, "case {c} iter ok {n}");
+                for v in p.rotation.iter().chain(&p.translation) {
+                    let _ = write!(line, " {:08x}", v.to_bits());
+                }
+            }
+            Err(e) => {
+                let _ = write!(line, "case {c} iter error {e:?}");
+            }
+        }
+        emit(line);
+    }
+    let (n_registrations, options_at) = (entry(5) as usize, entry(6) as usize / 4);
+    for k in 0..n_registrations {
+        let options = read_options(options_at + OPTIONS_WORDS * k);
+        let baseline = stack::paint();
+        let r0 = counter.instructions();
+        let result = model.register(cloud, &options, scratch);
+        let r1 = counter.instructions();
+        let peak = stack::used_below(baseline);
+        line.clear();
+        match &result {
+            Ok(r) => {
+                let _ = write!(line, "case {c} reg {k} ok {} {peak}", r1 - r0);
+                write_registration(line, r);
+            }
+            Err(e) => {
+                let _ = write!(line, "case {c} reg {k} error {} {peak} {e:?}", r1 - r0);
+            }
+        }
+        emit(line);
+        let Ok(r) = result else {
+            continue;
+        };
+        // The feature-space check of the pose (the rule of the
+        // host's `feature::checked`: default options only).
+        if options == Options::default() {
+            let f0 = counter.instructions();
+            let checked = model.feature_distance(cloud, &r.pose, scratch);
+            let f1 = counter.instructions();
+            line.clear();
+            let _ = match checked {
+                Ok(d) => write!(
+                    line,
+                    "case {c} feature {k} ok {} {:08x}",
+                    f1 - f0,
+                    d.to_bits()
+                ),
+                Err(e) => write!(line, "case {c} feature {k} error {} {e:?}", f1 - f0),
+            };
+            emit(line);
+        }
+        // Tracking from the registered pose (held), and with the
+        // default options also from its constant-velocity
+        // prediction after the identity (mostly a fallback).
+        let predicted = pose::predict(&Pose::IDENTITY, &r.pose);
+        let starts = [("held", r.pose), ("predicted", predicted)];
+        let n_starts = if options == Options::default() { 2 } else { 1 };
+        for (name, start) in starts.iter().take(n_starts) {
+            let baseline = stack::paint();
+            let t0 = counter.instructions();
+            let tracked = model.track(cloud, start, &options, scratch);
+            let t1 = counter.instructions();
+            let peak = stack::used_below(baseline);
+            line.clear();
+            let _ = write!(line, "case {c} track {k} {name} ");
+            match tracked {
+                Ok(t) => {
+                    let _ = write!(line, "ok {} {peak}", t1 - t0);
+                    write_registration(line, &t.registration);
+                    let _ = write!(line, " {:?}", t.outcome);
+                }
+                Err(e) => {
+                    let _ = write!(line, "error {} {peak} {e:?}", t1 - t0);
+                }
+            }
+            emit(line);
+        }
+    }
 }
 
 /// The scene path on the harness frame ([`pcrnet_core::testing::scene`]):
