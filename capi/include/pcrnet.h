@@ -645,6 +645,19 @@ uint32_t pcrnet_model_trained_passes(const PcrnetModel *model);
 void pcrnet_options_default(PcrnetOptions *out);
 
 /*
+ Writes the recommended options with the steps `model` was trained for
+ (`Int8Model::trained_options`): its passes (PCRNet 1, i-PCRNet more),
+ or for a model trained as PointNetLK, which has no head, `passes` 0 and
+ its LK steps in `lk_iterations`. `PCRNET_ERROR_NULL_POINTER` or
+ `PCRNET_ERROR_NOT_LOADED`, writing nothing, otherwise.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`; `out` null or point
+ to a writable `PcrnetOptions`.
+ */
+PcrnetStatus pcrnet_options_for_model(const PcrnetModel *model, PcrnetOptions *out);
+
+/*
  Writes the options of the network alone, scored: one start, no ICP.
  Does nothing if `out` is null.
 

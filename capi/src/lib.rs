@@ -263,6 +263,33 @@ pub unsafe extern "C" fn pcrnet_options_default(out: *mut PcrnetOptions) {
     }
 }
 
+/// Writes the recommended options with the steps `model` was trained for
+/// (`Int8Model::trained_options`): its passes (PCRNet 1, i-PCRNet more),
+/// or for a model trained as PointNetLK, which has no head, `passes` 0 and
+/// its LK steps in `lk_iterations`. `PCRNET_ERROR_NULL_POINTER` or
+/// `PCRNET_ERROR_NOT_LOADED`, writing nothing, otherwise.
+///
+/// # Safety
+/// `model` must be null or point to a `PcrnetModel`; `out` null or point
+/// to a writable `PcrnetOptions`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_options_for_model(
+    model: *const PcrnetModel,
+    out: *mut PcrnetOptions,
+) -> PcrnetStatus {
+    if out.is_null() {
+        return PcrnetStatus::PCRNET_ERROR_NULL_POINTER;
+    }
+    match self::model(model) {
+        Ok(m) => {
+            // SAFETY: non-null and the caller's contract.
+            unsafe { out.write(m.trained_options().into()) };
+            PcrnetStatus::PCRNET_OK
+        }
+        Err(status) => status,
+    }
+}
+
 /// Writes the options of the network alone, scored: one start, no ICP.
 /// Does nothing if `out` is null.
 ///

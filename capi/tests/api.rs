@@ -106,6 +106,15 @@ fn pointnetlk_through_the_c_api() {
         lk_iterations: 3,
         ..Options::default()
     };
+    // The options for the model: no network pass, its trained LK steps.
+    let mut for_model = options_default();
+    let status = unsafe { pcrnet_options_for_model(&*model, &mut for_model) };
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    assert_eq!(for_model, PcrnetOptions::from(rust.trained_options()));
+    assert_eq!(
+        (for_model.passes, for_model.lk_iterations),
+        (0, rust.trained_passes() as u32)
+    );
     let (status, c) = register(&model, &source, &PcrnetOptions::from(lk), &mut scratch);
     assert_eq!(status, PcrnetStatus::PCRNET_OK);
     let r = rust.register(&source, &lk, &mut scratch).unwrap();

@@ -90,6 +90,19 @@ impl Default for Options {
 }
 
 impl Options {
+    /// [`Options::default`] with the steps a blob was trained for: its
+    /// `trained` passes when it has a head (PCRNet 1, i-PCRNet its count),
+    /// else (PointNetLK) no network pass and `trained` LK steps. What
+    /// `Int8Model::trained_options` and `F32Model::trained_options` give.
+    pub fn trained(trained: usize, head: bool) -> Self {
+        let (passes, lk_iterations) = if head { (trained, 0) } else { (0, trained) };
+        Options {
+            passes,
+            lk_iterations,
+            ..Options::default()
+        }
+    }
+
     /// The network alone (no turns, no ICP), still scored.
     pub fn network_only() -> Self {
         Options {

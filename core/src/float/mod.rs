@@ -170,6 +170,12 @@ impl<'a> F32Model<'a> {
         self.lk.as_ref()
     }
 
+    /// The recommended options with the steps this blob was trained for,
+    /// as [`crate::Int8Model::trained_options`].
+    pub fn trained_options(&self) -> Options {
+        Options::trained(self.trained_passes(), self.network.has_head())
+    }
+
     /// One step on the source moved by `map`: a network pass or a
     /// PointNetLK step (`exp(P r)^-1` for the f32 feature residual).
     fn step(

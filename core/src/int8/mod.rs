@@ -117,6 +117,13 @@ impl<'a> Int8Model<'a> {
         self.lk.as_ref()
     }
 
+    /// The recommended options with the steps this blob was trained for
+    /// ([`Options::trained`]): i-PCRNet's passes, or a PointNetLK blob's
+    /// LK steps with no network pass.
+    pub fn trained_options(&self) -> Options {
+        Options::trained(self.trained_passes(), self.has_head())
+    }
+
     /// The template's points (model frame) used to check and refine poses.
     pub fn template(&self) -> &Template<'a> {
         &self.template

@@ -166,6 +166,10 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
         black_box(capi::pcrnet_model_trained_passes(model));
         capi::pcrnet_options_default(black_box(options.as_mut_ptr()));
         capi::pcrnet_options_network_only(black_box(options.as_mut_ptr()));
+        black_box(capi::pcrnet_options_for_model(
+            model,
+            black_box(options.as_mut_ptr()),
+        ));
         black_box(capi::pcrnet_register(
             model,
             points,

@@ -308,6 +308,8 @@ fn a_pointnetlk_checkpoint_exports_headless_blobs_with_a_solver() {
     let q = std::fs::read(dir.join(export::INT8_BLOB)).unwrap();
     let m = Int8Model::from_bytes(&q).unwrap();
     assert!(!m.has_head() && m.lk_solver().is_some());
+    let trained = m.trained_options();
+    assert_eq!((trained.passes, trained.lk_iterations), (0, 2));
     let mut s = vec![0i8; m.scratch_len(MAX_TILE)];
     assert_eq!(
         m.register(&src, &Options::default(), &mut s),
