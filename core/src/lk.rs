@@ -118,11 +118,23 @@ impl<'a> Solver<'a> {
 }
 
 /// A blob's solver, checked for features of `features` entries (none
-/// when the blob has none). Not inlined: the loaders' frames stay as they
-/// were (their stack counts on a 16 KiB device).
+/// when the blob has none); a blob without a `head` must have one
+/// ([`Error::InconsistentDimensions`] otherwise). Not inlined: the
+/// loaders' frames stay as they were (their stack counts on a 16 KiB
+/// device).
 #[inline(never)]
-pub fn solver(stored: Option<LkSolver<'_>>, features: usize) -> Result<Option<Solver<'_>>> {
-    stored.map(|s| Solver::new(s, features)).transpose()
+pub fn solver(
+    stored: Option<LkSolver<'_>>,
+    features: usize,
+    head: bool,
+) -> Result<Option<Solver<'_>>> {
+    match stored {
+        Some(s) => Solver::new(s, features).map(Some),
+        None if head => Ok(None),
+        None => Err(Error::InconsistentDimensions {
+            what: "a blob without a head needs PointNetLK's solver",
+        }),
+    }
 }
 
 /// The se(3) exponential of a twist `(omega, v)`: the rotation by the

@@ -274,3 +274,28 @@ proptest! {
         let _ = F32Model::from_bytes(&b);
     }
 }
+
+/// A blob without a head loads only with PointNetLK's solver: written
+/// again without it, it is the typed dimensions error naming the solver.
+#[test]
+fn a_headless_blob_needs_its_solver() {
+    let (mut arena, mut out) = (vec![0u8; 1 << 16], vec![0u8; 1 << 16]);
+    let headless =
+        pcrnet_core::testing::with_random_lk_solver(&int8_blob(), 3, true, &mut arena, &mut out)
+            .unwrap()
+            .to_vec();
+    let model = Int8Model::from_bytes(&headless).unwrap();
+    assert!(!model.has_head() && model.lk_solver().is_some());
+    let trailer = format::Trailer {
+        table: model.template().table(),
+        lk: None,
+    };
+    let mut without = vec![0u8; format::blob_len(model.payload(), &trailer).unwrap()];
+    format::write_blob(ModelKind::Int8, model.payload(), &trailer, &mut without).unwrap();
+    assert_eq!(
+        Int8Model::from_bytes(&without).err(),
+        Some(Error::InconsistentDimensions {
+            what: "a blob without a head needs PointNetLK's solver"
+        })
+    );
+}

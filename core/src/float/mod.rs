@@ -190,9 +190,7 @@ impl<'a> F32Model<'a> {
             Step::Network => net.pass(source, map, scratch)?,
             Step::Lk => {
                 let solver = self.lk.as_ref().ok_or(Error::NoLkSolver)?;
-                let (feature, work) = net.split(scratch)?;
-                net.encode_into(source, map, feature, work)?;
-                finite(feature)?;
+                let feature = net.encode_mapped(source, map, scratch)?;
                 let template = net.template;
                 solver.step(|j| match feature.get(j) {
                     Some(&s) => s - template.get(j),
@@ -297,12 +295,7 @@ impl<'a> F32Model<'a> {
         crate::format::check_passes(p.passes)?;
         let network = F32Network::new(p.arch, layers, LeF32(p.template_feature))?
             .with_centring(p.centre_source);
-        let lk = crate::lk::solver(trailer.lk, network.arch.feature_dim())?;
-        if !network.has_head() && lk.is_none() {
-            return Err(Error::InconsistentDimensions {
-                what: "a blob without a head needs PointNetLK's solver",
-            });
-        }
+        let lk = crate::lk::solver(trailer.lk, network.arch.feature_dim(), network.has_head())?;
         Ok(F32Model {
             network,
             passes: p.passes,
@@ -500,10 +493,22 @@ impl<P: Params> F32Network<P> {
         motion: &Pose,
         scratch: &'s mut [f32],
     ) -> Result<&'s [f32]> {
-        let (feature, work) = self.split(scratch)?;
         let centring = pose::centring(source, self.centring(), &Frame::IDENTITY)?;
         let map = PointMap::new(Frame::IDENTITY, &centring.then(motion));
-        self.encode_into(source, &map, feature, work)?;
+        self.encode_mapped(source, &map, scratch)
+    }
+
+    /// Encodes `source`, each point first moved by `map`, into its global
+    /// feature (a view into `scratch`; [`Error::NonFiniteResult`] if an
+    /// entry overflows f32).
+    fn encode_mapped<'s>(
+        &self,
+        source: &[[f32; 3]],
+        map: &PointMap,
+        scratch: &'s mut [f32],
+    ) -> Result<&'s [f32]> {
+        let (feature, work) = self.split(scratch)?;
+        self.encode_into(source, map, feature, work)?;
         finite(feature)?;
         Ok(feature)
     }

@@ -12,14 +12,12 @@ use crate::kernel::rows;
 use crate::template::Template;
 
 impl<'a> Int8Model<'a> {
-    /// Every check of [`Self::from_payload`] but the solver's own
-    /// ([`crate::lk::solver`]); `has_lk` says whether the blob has one (a
-    /// blob without a head must). Returns the template.
+    /// Every check of [`Self::from_payload`] but the solver's
+    /// ([`crate::lk::solver`]). Returns the template.
     #[inline(never)]
     pub(super) fn validate(
         p: &Int8Payload<'a>,
         table: Option<NearestTable<'a>>,
-        has_lk: bool,
     ) -> Result<Template<'a>> {
         let arch = &p.arch;
         arch.validate()?;
@@ -42,10 +40,6 @@ impl<'a> Int8Model<'a> {
         }
         if !headless(p) {
             check_output(p)?;
-        } else if !has_lk {
-            return Err(Error::InconsistentDimensions {
-                what: "a blob without a head needs PointNetLK's solver",
-            });
         }
         expect_len(
             p.template_feature,

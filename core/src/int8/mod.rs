@@ -100,9 +100,9 @@ impl<'a> Int8Model<'a> {
     /// table and PointNetLK's solver, if any.
     #[inline(always)]
     pub fn from_payload(p: Int8Payload<'a>, trailer: Trailer<'a>) -> Result<Self> {
-        let lk = crate::lk::solver(trailer.lk, p.arch.feature_dim())?;
+        let lk = crate::lk::solver(trailer.lk, p.arch.feature_dim(), !check::headless(&p))?;
         // Checked by reference, then moved once into the model.
-        let template = Self::validate(&p, trailer.table, lk.is_some())?;
+        let template = Self::validate(&p, trailer.table)?;
         Ok(Int8Model { p, template, lk })
     }
 
@@ -407,7 +407,7 @@ impl<'a> Int8Model<'a> {
 
     /// One PointNetLK step ([`crate::lk`]): the encoder on the source moved
     /// by `map`, then `exp(P r)^-1` for the int8 feature residual
-    /// `r = q_S - q_T` (the feature's scale is folded into `P`).
+    /// `r = q_S - q_T` (in int8 steps, as the stored `P`'s Jacobian).
     fn lk_step(
         &self,
         source: &[[f32; 3]],
@@ -417,9 +417,7 @@ impl<'a> Int8Model<'a> {
         ready: Ready,
     ) -> Result<(Pose, PassCounts)> {
         let solver = self.lk.as_ref().ok_or(Error::NoLkSolver)?;
-        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
-        let (block, _) = self.split_host(extra);
-        let out_of_range = self.encode_into(source, map, tile, feature, work, block, ready)?;
+        let (feature, out_of_range) = self.encode_mapped(source, map, tile, scratch, ready)?;
         let template = self.p.template_feature;
         let residual = |j: usize| match (feature.get(j), template.get(j)) {
             (Some(&s), Some(&t)) => (s as i32 - t as i8 as i32) as f32,
@@ -444,12 +442,29 @@ impl<'a> Int8Model<'a> {
         scratch: &'s mut [i8],
     ) -> Result<&'s [i8]> {
         let tile = self.tile_for(scratch.len())?;
-        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
-        let (block, _) = self.split_host(extra);
         let (centring, _) = self.centred(source)?;
         let map = PointMap::new(self.p.frame, &centring.then(motion));
-        self.encode_into(source, &map, tile, feature, work, block, Ready::default())?;
-        Ok(feature)
+        Ok(self
+            .encode_mapped(source, &map, tile, scratch, Ready::default())?
+            .0)
+    }
+
+    /// Encodes `source` moved by `map` with `tile` points per pass, on a
+    /// scratch where [`Self::prepare`] left what `ready` says: the feature
+    /// (a view into the scratch) and the points left out (outside the
+    /// input range).
+    fn encode_mapped<'s>(
+        &self,
+        source: &[[f32; 3]],
+        map: &PointMap,
+        tile: usize,
+        scratch: &'s mut [i8],
+        ready: Ready,
+    ) -> Result<(&'s [i8], u32)> {
+        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
+        let (block, _) = self.split_host(extra);
+        let out_of_range = self.encode_into(source, map, tile, feature, work, block, ready)?;
+        Ok((feature, out_of_range))
     }
 
     /// Encodes `source` moved by `map` and runs the head, on a scratch
