@@ -73,30 +73,26 @@ pub fn pipeline(
     options: &Options,
 ) -> Result<(Registration, Precision), TemplateError> {
     let blob = model_for(blob, template)?;
-    // Passes 0: as the blob was trained; for a blob without a head
-    // (PointNetLK) no network pass, and its trained LK steps unless asked.
-    let with = |trained: usize, head: bool| Options {
-        passes: match (options.passes, head) {
-            (0, true) => trained,
-            (passes, _) => passes,
-        },
-        lk_iterations: match (options.lk_iterations, head) {
-            (0, false) => trained,
-            (steps, _) => steps,
-        },
+    // A count of 0 (passes, LK steps): as the blob was trained
+    // (`trained_options`: for a blob without a head, PointNetLK, no network
+    // pass and its trained LK steps).
+    let or_trained = |asked: usize, trained: usize| if asked == 0 { trained } else { asked };
+    let with = |trained: Options| Options {
+        passes: or_trained(options.passes, trained.passes),
+        lk_iterations: or_trained(options.lk_iterations, trained.lk_iterations),
         ..*options
     };
     match Int8Model::from_bytes(&blob) {
         Ok(model) => {
             let mut scratch = vec![0i8; model.host_scratch_len()];
-            let options = with(model.trained_passes(), model.has_head());
+            let options = with(model.trained_options());
             let r = model.register(source, &options, &mut scratch)?;
             Ok((r, Precision::Int8))
         }
         Err(pcrnet_core::Error::WrongKind { .. }) => {
             let model = F32Model::from_bytes(&blob)?;
             let mut scratch = vec![0f32; model.tiled_scratch_len()];
-            let options = with(model.trained_passes(), model.network().has_head());
+            let options = with(model.trained_options());
             let r = model.register(source, &options, &mut scratch)?;
             Ok((r, Precision::F32))
         }

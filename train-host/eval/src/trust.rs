@@ -201,7 +201,6 @@ fn feature_auroc(s: &MethodScore, with_plane: bool) -> Option<f64> {
     if s.pairs.iter().all(|p| p.feature_distance.is_none()) {
         return None;
     }
-    let rot: Vec<f64> = s.pairs.iter().map(|p| p.rot_deg).collect();
     let worst = |v: Option<f64>| v.unwrap_or(f64::INFINITY);
     let feature: Vec<f64> = s.pairs.iter().map(|p| worst(p.feature_distance)).collect();
     let score = if with_plane {
@@ -214,8 +213,16 @@ fn feature_auroc(s: &MethodScore, with_plane: bool) -> Option<f64> {
     } else {
         feature
     };
+    confidence(s, &score).auroc
+}
+
+/// How well `score` (one per pair of `s`, lower meaning a better pose)
+/// separates good registrations (rotation error below [`GOOD_BELOW_DEG`])
+/// from bad ones, beside the pairs' verdicts.
+pub(super) fn confidence(s: &MethodScore, score: &[f64]) -> Confidence {
+    let rot: Vec<f64> = s.pairs.iter().map(|p| p.rot_deg).collect();
     let reliable: Vec<bool> = s.pairs.iter().map(|p| p.reliable == Some(true)).collect();
-    Confidence::of(&rot, &score, &reliable, GOOD_BELOW_DEG).auroc
+    Confidence::of(&rot, score, &reliable, GOOD_BELOW_DEG)
 }
 
 /// Each value's rank (0-based, ties the mean of their ranks).
@@ -243,15 +250,13 @@ fn point_auroc(s: &MethodScore) -> Option<f64> {
     if s.pairs.iter().all(|p| p.residual.is_none()) {
         return None;
     }
-    let rot: Vec<f64> = s.pairs.iter().map(|p| p.rot_deg).collect();
     // As for the plane residual, a failed registration counts as the worst.
     let residual: Vec<f64> = s
         .pairs
         .iter()
         .map(|p| p.residual.unwrap_or(f64::INFINITY))
         .collect();
-    let reliable: Vec<bool> = s.pairs.iter().map(|p| p.reliable == Some(true)).collect();
-    Confidence::of(&rot, &residual, &reliable, GOOD_BELOW_DEG).auroc
+    confidence(s, &residual).auroc
 }
 
 #[cfg(test)]

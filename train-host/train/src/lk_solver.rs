@@ -19,7 +19,7 @@
 //!   0.05 was chosen on those same pairs (RESULTS.md `generalisation`).
 
 use nalgebra::{DMatrix, DVector};
-use pcrnet_core::format::LkSolver as StoredSolver;
+use pcrnet_core::format::{LkSolver as StoredSolver, NearestTable, Trailer};
 use pcrnet_core::lk::{TWIST_DIM, exp};
 use pcrnet_core::{F32Model, Int8Model, Pose};
 
@@ -81,8 +81,27 @@ fn rows(jacobian: DMatrix<f64>) -> Vec<u8> {
         .collect()
 }
 
+/// A blob's trailer: the template's closest-point `table` and, given its
+/// `rows`, the solver of a blob of `kind`.
+pub fn trailer<'a>(
+    kind: pcrnet_core::format::ModelKind,
+    table: Option<NearestTable<'a>>,
+    rows: Option<&'a [u8]>,
+) -> Trailer<'a> {
+    Trailer {
+        table,
+        lk: rows.map(|r| stored(kind, r)),
+    }
+}
+
+/// Rows of zeros for a solver of `features` entries: a placeholder that
+/// lets a blob without a head load before its solver is computed.
+pub fn placeholder_rows(features: usize) -> Vec<u8> {
+    vec![0u8; 4 * TWIST_DIM * features]
+}
+
 /// The blob's record of a solver with these rows, for a blob of `kind`.
-pub fn stored(kind: pcrnet_core::format::ModelKind, rows: &[u8]) -> StoredSolver<'_> {
+fn stored(kind: pcrnet_core::format::ModelKind, rows: &[u8]) -> StoredSolver<'_> {
     let d = match kind {
         pcrnet_core::format::ModelKind::Int8 => INT8_DIFFERENCES,
         pcrnet_core::format::ModelKind::F32 => F32_DIFFERENCES,

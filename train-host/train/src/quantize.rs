@@ -157,6 +157,7 @@ pub fn calibrate(
 }
 
 /// Owned bytes of one quantized layer.
+#[derive(Default)]
 struct QLayer {
     out_scale: f32,
     weights: Vec<u8>,
@@ -297,12 +298,12 @@ pub fn quantize(
         layers.push(quantize_layer(l, w, b, s.inputs, s_x, z_x, x_max, s_y)?);
         (s_x, z_x, x_max) = (s_y, -128, 255);
     }
-    let output = if head_layers > 0 { layers.pop() } else { None };
-    let out_scale = output
-        .as_ref()
-        .map_or_else(Vec::new, |o| le_bytes(&o.acc_scale));
-    let no_bytes = Vec::new();
-    let out_bytes = |f: fn(&QLayer) -> &Vec<u8>| output.as_ref().map_or(&no_bytes, f);
+    // Without a head the output layer is empty (the blob's mark of one).
+    let output = match head_layers {
+        0 => QLayer::default(),
+        _ => layers.pop().unwrap_or_default(),
+    };
+    let out_scale = le_bytes(&output.acc_scale);
 
     let payload = Int8Payload {
         arch: arch.clone(),
@@ -314,8 +315,8 @@ pub fn quantize(
         encoder: layers[..n_enc].iter().map(QLayer::view).collect(),
         head: layers[n_enc..].iter().map(QLayer::view).collect(),
         output: Int8Output {
-            weights: out_bytes(|o| &o.weights),
-            bias: out_bytes(|o| &o.bias),
+            weights: &output.weights,
+            bias: &output.bias,
             scale: &out_scale,
         },
         template_feature: &[],

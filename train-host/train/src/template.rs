@@ -9,13 +9,12 @@
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use pcrnet_core::format::{
-    self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, NearestTable, TemplateCloud, Trailer,
-    write_blob,
+    self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, NearestTable, TemplateCloud, write_blob,
 };
-use pcrnet_core::lk::TWIST_DIM;
 use pcrnet_core::template::{self, MAX_GRID};
 use pcrnet_core::{F32Model, Frame, Int8Model};
 
+use crate::lk_solver;
 use crate::shapes::frame_of;
 use pcrnet_io::sampling::farthest_point_sampling;
 
@@ -328,14 +327,12 @@ pub fn int8_blob(
         ..payload.clone()
     };
     // A placeholder solver of zeros lets a headless draft load.
-    let zero_rows = vec![0u8; 4 * TWIST_DIM * payload.arch.feature_dim()];
-    let draft_trailer = Trailer {
-        table: reference.table(),
-        lk: lk.then(|| crate::lk_solver::stored(ModelKind::Int8, &zero_rows)),
-    };
+    let zero_rows = lk.then(|| lk_solver::placeholder_rows(payload.arch.feature_dim()));
+    let draft_trailer =
+        lk_solver::trailer(ModelKind::Int8, reference.table(), zero_rows.as_deref());
     let model = Int8Model::from_payload(draft.clone(), draft_trailer)?;
     let rows = lk
-        .then(|| crate::lk_solver::int8_rows(&model, &reference.points))
+        .then(|| lk_solver::int8_rows(&model, &reference.points))
         .transpose()?;
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let feature: Vec<u8> = model
@@ -347,12 +344,7 @@ pub fn int8_blob(
         template_feature: &feature,
         ..draft
     };
-    let trailer = Trailer {
-        table: reference.table(),
-        lk: rows
-            .as_deref()
-            .map(|r| crate::lk_solver::stored(ModelKind::Int8, r)),
-    };
+    let trailer = lk_solver::trailer(ModelKind::Int8, reference.table(), rows.as_deref());
     let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
     write_blob(ModelKind::Int8, &done, &trailer, &mut out)?;
     Int8Model::from_bytes(&out)?;
@@ -372,14 +364,11 @@ pub fn f32_blob(
         template_feature: &zeros,
         ..payload.clone()
     };
-    let zero_rows = vec![0u8; 4 * TWIST_DIM * payload.arch.feature_dim()];
-    let draft_trailer = Trailer {
-        table: reference.table(),
-        lk: lk.then(|| crate::lk_solver::stored(ModelKind::F32, &zero_rows)),
-    };
+    let zero_rows = lk.then(|| lk_solver::placeholder_rows(payload.arch.feature_dim()));
+    let draft_trailer = lk_solver::trailer(ModelKind::F32, reference.table(), zero_rows.as_deref());
     let model = F32Model::from_payload(draft.clone(), draft_trailer)?;
     let rows = lk
-        .then(|| crate::lk_solver::f32_rows(&model, &reference.normalised()))
+        .then(|| lk_solver::f32_rows(&model, &reference.normalised()))
         .transpose()?;
     let mut scratch = vec![0f32; model.tiled_scratch_len()];
     let feature: Vec<u8> = model
@@ -392,12 +381,7 @@ pub fn f32_blob(
         template_feature: &feature,
         ..draft
     };
-    let trailer = Trailer {
-        table: reference.table(),
-        lk: rows
-            .as_deref()
-            .map(|r| crate::lk_solver::stored(ModelKind::F32, r)),
-    };
+    let trailer = lk_solver::trailer(ModelKind::F32, reference.table(), rows.as_deref());
     let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
     write_blob(ModelKind::F32, &done, &trailer, &mut out)?;
     F32Model::from_bytes(&out)?;

@@ -15,7 +15,6 @@ use crate::report::{
     Context, Recorder, Report, Run, SEEN, Table, UNSEEN, label, modelnet10, pair_set, success_chart,
 };
 use pcrnet_train::data::PairConfig;
-use pcrnet_train::metrics::Confidence;
 
 /// The summary table's header.
 fn summary_header(first: &str) -> Vec<String> {
@@ -155,13 +154,12 @@ fn lk_confidence(raw: &[(String, MethodScore)]) -> Table {
         .iter()
         .filter(|(_, s)| s.pairs.iter().any(|p| p.feature_distance.is_some()))
         .map(|(set, s)| {
-            let rot: Vec<f64> = s.pairs.iter().map(|p| p.rot_deg).collect();
             let distance: Vec<f64> = s
                 .pairs
                 .iter()
                 .map(|p| p.feature_distance.unwrap_or(f64::INFINITY))
                 .collect();
-            let c = Confidence::of(&rot, &distance, &vec![false; rot.len()], GOOD_BELOW_DEG);
+            let c = crate::trust::confidence(s, &distance);
             vec![
                 set.clone(),
                 label(&s.method, s.model.as_deref()),
