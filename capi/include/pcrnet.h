@@ -289,6 +289,12 @@ typedef struct {
    0 and one hypothesis; LK then ICP: both.
    */
   uint32_t lk_iterations;
+  /*
+   Most source points each network pass and LK step encodes (every
+   k-th point; at least 1). The default 256 halves the network's cost
+   at 512 points with the same accuracy.
+   */
+  uint32_t network_points;
 } PcrnetOptions;
 
 /*
@@ -350,8 +356,8 @@ typedef struct {
    */
   uint32_t saturated;
   /*
-   Source points left out of the network: outside the model's input
-   range (stray points far from the object).
+   Points of the network's sample (`network_points`) left out of it:
+   outside the model's input range (stray points far from the object).
    */
   uint32_t out_of_range;
   /*

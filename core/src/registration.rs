@@ -41,6 +41,13 @@ pub struct Options {
     /// to any model. Refine by ICP: 0 (the default); by LK: `icp_iterations`
     /// 0 and one hypothesis; LK then ICP: both.
     pub lk_iterations: usize,
+    /// Most source points each network pass and LK step encodes: every
+    /// k-th point from the first, as for `max_points` (at least 1). The
+    /// max-pooled feature barely moves when half of a dense cloud is left
+    /// out, and the encoder's cost is linear in its points: 256 of 512
+    /// halves the network's instructions with the same `trust` accuracy
+    /// (README, "Latency"). Centring and ICP still use their own points.
+    pub network_points: usize,
     /// Network passes and LK steps stop once a step's `||dT - I||_F` is
     /// below this (0: never).
     pub tolerance: f32,
@@ -75,6 +82,7 @@ impl Default for Options {
         Options {
             passes: 1,
             lk_iterations: 0,
+            network_points: 256,
             tolerance: 0.0,
             hypotheses: 10,
             screen_iterations: 10,
@@ -112,6 +120,20 @@ impl Options {
         }
     }
 
+    /// The points of `cloud` each network pass and LK step encodes under
+    /// these options: every k-th from the first, at most
+    /// [`Self::network_points`]. A template's feature is encoded from the
+    /// same sample of its points at the default (the exporter does so), so
+    /// that both max-pools run over as many points, as in training.
+    pub fn network_sample<'c>(
+        &self,
+        cloud: &'c [[f32; 3]],
+    ) -> impl Iterator<Item = &'c [f32; 3]> + 'c {
+        Sample::new(cloud, self.network_points)
+            .iter()
+            .map(|(_, p)| p)
+    }
+
     /// The ICP settings these options give.
     pub(crate) fn icp_settings(&self) -> IcpSettings {
         IcpSettings {
@@ -130,8 +152,8 @@ impl Options {
         if self.hypotheses == 0 {
             return bad("hypotheses must be at least 1");
         }
-        if self.max_points == 0 {
-            return bad("max_points must be at least 1");
+        if self.max_points == 0 || self.network_points == 0 {
+            return bad("max_points and network_points must be at least 1");
         }
         let non_negative = |v: f32| v.is_finite() && v >= 0.0;
         if !non_negative(self.tolerance) || !non_negative(self.icp_tolerance) {
@@ -187,9 +209,9 @@ pub struct Registration {
     /// head activations, summed over passes): clipping that costs accuracy.
     /// Always 0 on the f32 path.
     pub saturated: u32,
-    /// Source points the network left out because they lie outside the
-    /// model's input range (the most over its passes): stray points far
-    /// from the object. They still count in the residual and the fitness
+    /// Points of the network's sample ([`Options::network_points`]) it
+    /// left out because they lie outside the model's input range (the
+    /// most over its passes): stray points far from the object. They still count in the residual and the fitness
     /// (capped at the inlier distance). Always 0 on the f32 path.
     pub out_of_range: u32,
     /// The source's shape does not determine a pose.
@@ -223,6 +245,47 @@ pub(crate) struct Stage {
     pub lk_iterations: usize,
     /// What their encoder passes counted.
     pub counts: PassCounts,
+}
+
+/// The source points a network pass or an LK step encodes: every
+/// `stride`-th point from the first, at most [`Options::network_points`]
+/// of them (the rule of [`Subset`]'s `max_points`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Sample<'s> {
+    points: &'s [[f32; 3]],
+    stride: usize,
+}
+
+impl<'s> Sample<'s> {
+    /// At most `most` of `points`, evenly strided.
+    pub fn new(points: &'s [[f32; 3]], most: usize) -> Self {
+        Sample {
+            points,
+            stride: refine::stride_for(points.len(), most),
+        }
+    }
+
+    /// Every point.
+    pub fn all(points: &'s [[f32; 3]]) -> Self {
+        Sample { points, stride: 1 }
+    }
+
+    /// The sampled points with their indices in the whole cloud.
+    pub fn iter(self) -> impl Iterator<Item = (usize, &'s [f32; 3])> + 's {
+        self.points.iter().enumerate().step_by(self.stride.max(1))
+    }
+
+    /// How many points [`Self::iter`] yields (the host block kernel's
+    /// test of whether a block can fill).
+    #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
+    pub fn len(&self) -> usize {
+        self.points.len().div_ceil(self.stride.max(1))
+    }
+
+    /// Whether there is no point to encode.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
 }
 
 /// What one network pass counted (the int8 path; the f32 path has no range).
@@ -272,7 +335,7 @@ pub(crate) fn run(
     template: &Template<'_>,
     source: &[[f32; 3]],
     options: &Options,
-    pass: impl FnMut(&PointMap, Step) -> Result<(Pose, PassCounts)>,
+    pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     let checked = check(frame, template, source, options)?;
     run_checked(frame, centring, template, &checked, options, pass)
@@ -285,17 +348,21 @@ pub(crate) fn run_checked(
     template: &Template<'_>,
     checked: &Checked<'_>,
     options: &Options,
-    mut pass: impl FnMut(&PointMap, Step) -> Result<(Pose, PassCounts)>,
+    mut pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
+    let source = checked.subset.source;
+    // The passes see a sample: every point is checked here instead.
+    all_finite(source)?;
+    let sample = Sample::new(source, options.network_points);
     let mut counts = PassCounts::default();
     let (network, passes, lk_iterations) = pose_steps(
         frame,
         centring,
-        checked.subset.source,
+        source,
         (options.passes, options.lk_iterations),
         options.tolerance,
         |map, step| {
-            let (delta, c) = pass(map, step)?;
+            let (delta, c) = pass(sample, map, step)?;
             counts.saturated = counts.saturated.saturating_add(c.saturated);
             counts.out_of_range = counts.out_of_range.max(c.out_of_range);
             Ok(delta)

@@ -94,7 +94,11 @@ pub(crate) fn step(
     source: &[[f32; 3]],
     previous: &Pose,
     options: &Options,
-    pass: impl FnMut(&PointMap, registration::Step) -> Result<(Pose, PassCounts)>,
+    pass: impl FnMut(
+        registration::Sample<'_>,
+        &PointMap,
+        registration::Step,
+    ) -> Result<(Pose, PassCounts)>,
 ) -> Result<Tracking> {
     let checked = registration::check(frame, template, source, options)?;
     registration::all_finite(source)?;

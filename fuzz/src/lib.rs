@@ -35,6 +35,7 @@ pub fn options_from(bytes: &[u8; 16]) -> Options {
         max_points: bytes[13] as usize * 4,
         // LK steps: `NoLkSolver` on a blob without PointNetLK's solver.
         lk_iterations: (bytes[14] % 3) as usize,
+        network_points: bytes[15] as usize * 4,
         ..Options::default()
     }
 }

@@ -66,6 +66,7 @@ fn unusual_options() -> Options {
         icp_distance: 0.2,
         inlier_distance: 0.1,
         max_points: 64,
+        network_points: 48,
         max_residual: 0.05,
         // LK steps need a blob with PointNetLK's solver: the LK models'
         // own option sets run them.

@@ -11,7 +11,7 @@ pub const SCRATCH_LEN: usize = 64 * 1024;
 /// u32 words per case in the container's table.
 const CASE_WORDS: usize = 7;
 /// u32 words per [`Options`] in the container.
-pub const OPTIONS_WORDS: usize = 12;
+pub const OPTIONS_WORDS: usize = 13;
 
 /// A named int8 model blob.
 pub struct TestModel {
@@ -408,7 +408,7 @@ fn align4(buf: &mut Vec<u8>) {
 
 /// An option set as the container's words: `passes tolerance hypotheses
 /// screen_iterations icp_iterations metric icp_tolerance icp_distance
-/// inlier_distance max_points max_residual lk_iterations` (counts as u32, f32 as their
+/// inlier_distance max_points max_residual lk_iterations network_points` (counts as u32, f32 as their
 /// bits, metric 0 point-to-point / 1 point-to-plane). Every field: a field added to `Options` fails to compile here.
 pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
     let Options {
@@ -424,6 +424,7 @@ pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
         max_points,
         max_residual,
         lk_iterations,
+        network_points,
     } = *o;
     Ok([
         u32::try_from(passes)?,
@@ -441,6 +442,7 @@ pub fn options_words(o: &Options) -> anyhow::Result<[u32; OPTIONS_WORDS]> {
         u32::try_from(max_points)?,
         max_residual.to_bits(),
         u32::try_from(lk_iterations)?,
+        u32::try_from(network_points)?,
     ])
 }
 
@@ -463,6 +465,7 @@ pub fn options_from_words(w: &[u32; OPTIONS_WORDS]) -> Options {
         max_points: w[9] as usize,
         max_residual: f32::from_bits(w[10]),
         lk_iterations: w[11] as usize,
+        network_points: w[12] as usize,
     }
 }
 

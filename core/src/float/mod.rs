@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, Trailer, expect_len};
 use crate::lk::Solver;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, Options, PassCounts, Registration, Step};
+use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -180,17 +180,17 @@ impl<'a> F32Model<'a> {
     /// PointNetLK step (`exp(P r)^-1` for the f32 feature residual).
     fn step(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         step: Step,
         scratch: &mut [f32],
     ) -> Result<(Pose, PassCounts)> {
         let net = &self.network;
         let pose = match step {
-            Step::Network => net.pass(source, map, scratch)?,
+            Step::Network => net.pass(sample, map, scratch)?,
             Step::Lk => {
                 let solver = self.lk.as_ref().ok_or(Error::NoLkSolver)?;
-                let feature = net.encode_mapped(source, map, scratch)?;
+                let feature = net.encode_mapped(sample, map, scratch)?;
                 let template = net.template;
                 solver.step(|j| match feature.get(j) {
                     Some(&s) => s - template.get(j),
@@ -236,7 +236,7 @@ impl<'a> F32Model<'a> {
             &self.template,
             source,
             options,
-            |map, step| self.step(source, map, step, scratch),
+            |sample, map, step| self.step(sample, map, step, scratch),
         )
     }
 
@@ -257,7 +257,7 @@ impl<'a> F32Model<'a> {
             source,
             previous,
             options,
-            |map, step| self.step(source, map, step, scratch),
+            |sample, map, step| self.step(sample, map, step, scratch),
         )
     }
 
@@ -438,7 +438,7 @@ impl<P: Params> F32Network<P> {
     ) -> Result<Pose> {
         let centring = pose::centring(source, self.centring(), &Frame::IDENTITY)?;
         let map = PointMap::new(Frame::IDENTITY, &centring);
-        self.encode_into(source, &map, feature, work)?;
+        self.encode_into(Sample::all(source), &map, feature, work)?;
         Ok(centring)
     }
 
@@ -464,14 +464,14 @@ impl<P: Params> F32Network<P> {
         scratch: &mut [f32],
     ) -> Result<(Pose, usize)> {
         registration::network_pose(frame, self.centring(), source, passes, tolerance, |map| {
-            self.pass(source, map, scratch)
+            self.pass(Sample::all(source), map, scratch)
         })
     }
 
-    /// One pass on the source moved by `map`: the pose in the model frame.
-    fn pass(&self, source: &[[f32; 3]], map: &PointMap, scratch: &mut [f32]) -> Result<Pose> {
+    /// One pass on `sample` moved by `map`: the pose in the model frame.
+    fn pass(&self, sample: Sample<'_>, map: &PointMap, scratch: &mut [f32]) -> Result<Pose> {
         let (feature, work) = self.split(scratch)?;
-        self.encode_into(source, map, feature, work)?;
+        self.encode_into(sample, map, feature, work)?;
         Pose::from_head_output(&self.head(feature, work)?)
     }
 
@@ -495,20 +495,20 @@ impl<P: Params> F32Network<P> {
     ) -> Result<&'s [f32]> {
         let centring = pose::centring(source, self.centring(), &Frame::IDENTITY)?;
         let map = PointMap::new(Frame::IDENTITY, &centring.then(motion));
-        self.encode_mapped(source, &map, scratch)
+        self.encode_mapped(Sample::all(source), &map, scratch)
     }
 
-    /// Encodes `source`, each point first moved by `map`, into its global
+    /// Encodes `sample`, each point first moved by `map`, into its global
     /// feature (a view into `scratch`; [`Error::NonFiniteResult`] if an
     /// entry overflows f32).
     fn encode_mapped<'s>(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         scratch: &'s mut [f32],
     ) -> Result<&'s [f32]> {
         let (feature, work) = self.split(scratch)?;
-        self.encode_into(source, map, feature, work)?;
+        self.encode_into(sample, map, feature, work)?;
         finite(feature)?;
         Ok(feature)
     }
@@ -525,25 +525,25 @@ impl<P: Params> F32Network<P> {
             .ok_or(Error::ScratchTooSmall { needed, available })
     }
 
-    /// Encodes `source`, each point first moved by `map`.
+    /// Encodes `sample`, each point first moved by `map`.
     fn encode_into(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         feature: &mut [f32],
         work: &mut [f32],
     ) -> Result<()> {
-        if source.is_empty() {
+        if sample.is_empty() {
             return Err(Error::EmptyCloud);
         }
         feature.fill(f32::NEG_INFINITY);
         let encoder = self.encoder_layers()?;
         #[cfg(all(target_arch = "x86_64", feature = "std"))]
-        if x86::encode(encoder, &self.arch, source, map, feature, work)? {
+        if x86::encode(encoder, &self.arch, sample, map, feature, work)? {
             return Ok(());
         }
         let (mut a, mut b) = ping_pong(work, self.arch.widest_hidden_encoder())?;
-        for (index, p) in source.iter().enumerate() {
+        for (index, p) in sample.iter() {
             if p.iter().any(|x| !x.is_finite()) {
                 return Err(Error::NonFiniteCoordinate { index });
             }

@@ -29,18 +29,19 @@ use super::{Layer, Params, pool};
 use crate::arch::{Arch, F32_TILE, INPUT_DIM, ping_pong, prefix};
 use crate::error::{Error, Result};
 use crate::pose::PointMap;
+use crate::registration::Sample;
 
 /// Lanes of one AVX vector.
 const LANES: usize = 8;
 
-/// Encodes `source` (each point moved by `map`) into `feature` as the
+/// Encodes `sample` (each point moved by `map`) into `feature` as the
 /// portable path does, [`F32_TILE`] points at a time. Returns `Ok(false)`,
 /// having done nothing, without AVX or when `work` cannot hold two tiles
 /// of the widest hidden layer.
 pub(super) fn encode<P: Params>(
     layers: &[Layer<P>],
     arch: &Arch,
-    source: &[[f32; 3]],
+    sample: Sample<'_>,
     map: &PointMap,
     feature: &mut [f32],
     work: &mut [f32],
@@ -55,9 +56,9 @@ pub(super) fn encode<P: Params>(
     #[allow(unsafe_code)]
     unsafe {
         if std::is_x86_feature_detected!("avx512f") {
-            tiles(layers, arch, source, map, feature, a, b, outputs_wide::<P>)?
+            tiles(layers, arch, sample, map, feature, a, b, outputs_wide::<P>)?
         } else {
-            tiles(layers, arch, source, map, feature, a, b, outputs::<P>)?
+            tiles(layers, arch, sample, map, feature, a, b, outputs::<P>)?
         }
     };
     Ok(true)
@@ -66,14 +67,14 @@ pub(super) fn encode<P: Params>(
 /// A kernel for `B` outputs over a tile ([`outputs`], [`outputs_wide`]).
 type Block<P, const B: usize> = unsafe fn([P; B], [f32; B], &[f32]) -> [[f32; F32_TILE]; B];
 
-/// The encoder over the source, a tile at a time, `B` outputs at a time
+/// The encoder over the sample, a tile at a time, `B` outputs at a time
 /// through `block`, which the caller's CPU must support.
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx")]
 fn tiles<'w, P: Params, const B: usize>(
     layers: &[Layer<P>],
     arch: &Arch,
-    source: &[[f32; 3]],
+    sample: Sample<'_>,
     map: &PointMap,
     feature: &mut [f32],
     mut a: &'w mut [f32],
@@ -81,25 +82,26 @@ fn tiles<'w, P: Params, const B: usize>(
     block: Block<P, B>,
 ) -> Result<()> {
     let last = layers.len().saturating_sub(1);
-    for (c, chunk) in source.chunks(F32_TILE).enumerate() {
-        // The tile's points, input-major; lanes past the cloud's end
+    let mut points = sample.iter().peekable();
+    while points.peek().is_some() {
+        // The tile's points, input-major; lanes past the sample's end
         // repeat its first point and are never pooled.
         let mut x0 = [[0f32; F32_TILE]; INPUT_DIM];
-        for (t, p) in chunk.iter().enumerate() {
+        let mut filled = 0;
+        for (t, (index, p)) in points.by_ref().take(F32_TILE).enumerate() {
             if p.iter().any(|x| !x.is_finite()) {
-                return Err(Error::NonFiniteCoordinate {
-                    index: c * F32_TILE + t,
-                });
+                return Err(Error::NonFiniteCoordinate { index });
             }
             for (x, v) in x0.iter_mut().zip(map.apply(*p)) {
                 if let Some(lane) = x.get_mut(t) {
                     *lane = v;
                 }
             }
+            filled = t + 1;
         }
         for x in &mut x0 {
             let first = x[0];
-            x.iter_mut().skip(chunk.len()).for_each(|v| *v = first);
+            x.iter_mut().skip(filled).for_each(|v| *v = first);
         }
         let mut inputs = INPUT_DIM;
         for (l, (layer, shape)) in layers.iter().zip(arch.encoder_layers()).enumerate() {
@@ -132,7 +134,7 @@ fn tiles<'w, P: Params, const B: usize>(
                             *y = *v;
                         }
                     } else if let Some(f) = feature.get_mut(o + j) {
-                        pool_tile(f, v, chunk.len());
+                        pool_tile(f, v, filled);
                     }
                 }
             }

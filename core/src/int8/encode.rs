@@ -8,6 +8,7 @@ use crate::error::{Error, Result};
 use crate::fixed::quantize_coordinate;
 use crate::kernel::{Sink, as_words, dense_points, dense_tile_i8};
 use crate::pose::PointMap;
+use crate::registration::Sample;
 #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
 use crate::{arch::HOST_BLOCK, kernel::Requant, kernel::block::BlockEncoder};
 
@@ -40,7 +41,7 @@ impl Int8Model<'_> {
         })
     }
 
-    /// Encodes `source`, each point first moved by `map`, into `feature`
+    /// Encodes `sample`, each point first moved by `map`, into `feature`
     /// (max-pooled over the points). Points outside the input range are
     /// left out; returns how many. Those inside are packed into tiles of
     /// `tile` points in source order, so the feature does not depend on the
@@ -57,7 +58,7 @@ impl Int8Model<'_> {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn encode_into(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         tile: usize,
         feature: &mut [i8],
@@ -65,7 +66,7 @@ impl Int8Model<'_> {
         extra: &mut [i8],
         ready: Ready,
     ) -> Result<u32> {
-        if source.is_empty() {
+        if sample.is_empty() {
             return Err(Error::EmptyCloud);
         }
         feature.fill(i8::MIN);
@@ -79,7 +80,7 @@ impl Int8Model<'_> {
         #[cfg(all(any(target_arch = "x86_64", target_arch = "aarch64"), feature = "std"))]
         let mut block = if ready.block {
             BlockEncoder::prepared(&self.p.arch, extra)
-        } else if source.len() >= HOST_BLOCK {
+        } else if sample.len() >= HOST_BLOCK {
             BlockEncoder::new(&self.p.arch, &self.p.encoder, extra)
         } else {
             None
@@ -92,7 +93,7 @@ impl Int8Model<'_> {
         let (batch, _) = (tile, extra);
         let mut points = [[0i16; INPUT_DIM]; COLLECT];
         let (mut filled, mut encoded, mut left_out) = (0usize, 0usize, 0u32);
-        for (index, p) in source.iter().enumerate() {
+        for (index, p) in sample.iter() {
             let Some(q) = self.quantize_point(index, p, map)? else {
                 left_out = left_out.saturating_add(1);
                 continue;

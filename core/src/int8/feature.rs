@@ -7,6 +7,7 @@
 use super::{Int8Model, Ready};
 use crate::error::{Error, Result};
 use crate::pose::{PointMap, Pose};
+use crate::registration::Sample;
 
 impl Int8Model<'_> {
     /// The relative feature distance of `source` moved by `pose` (user
@@ -34,7 +35,15 @@ impl Int8Model<'_> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
         let (block, _) = self.split_host(extra);
         let map = PointMap::new(self.p.frame, &self.p.frame.pose_to_model(pose));
-        self.encode_into(source, &map, tile, feature, work, block, Ready::default())?;
+        self.encode_into(
+            Sample::all(source),
+            &map,
+            tile,
+            feature,
+            work,
+            block,
+            Ready::default(),
+        )?;
         let (zero, scale) = self
             .p
             .encoder

@@ -43,7 +43,7 @@ use crate::kernel::{Requant, bytes_of};
 use crate::lk::Solver;
 use crate::locate::Start;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, Options, PassCounts, Registration, Step};
+use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -213,7 +213,7 @@ impl<'a> Int8Model<'a> {
             &self.template,
             source,
             options,
-            |map, step| self.pass(source, map, step, tile, scratch, ready),
+            |sample, map, step| self.pass(sample, map, step, tile, scratch, ready),
         )
     }
 
@@ -241,7 +241,7 @@ impl<'a> Int8Model<'a> {
             source,
             previous,
             options,
-            |map, step| self.pass(source, map, step, tile, scratch, Ready::default()),
+            |sample, map, step| self.pass(sample, map, step, tile, scratch, Ready::default()),
         )
     }
 
@@ -377,7 +377,14 @@ impl<'a> Int8Model<'a> {
             tolerance,
             |map| {
                 Ok(self
-                    .pass(source, map, Step::Network, tile, scratch, ready)?
+                    .pass(
+                        Sample::all(source),
+                        map,
+                        Step::Network,
+                        tile,
+                        scratch,
+                        ready,
+                    )?
                     .0)
             },
         )
@@ -389,7 +396,7 @@ impl<'a> Int8Model<'a> {
     /// scratch.
     fn pass(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         step: Step,
         tile: usize,
@@ -398,10 +405,10 @@ impl<'a> Int8Model<'a> {
     ) -> Result<(Pose, PassCounts)> {
         match step {
             Step::Network => {
-                let (_, head, counts) = self.encode_and_head(source, map, tile, scratch, ready)?;
+                let (_, head, counts) = self.encode_and_head(sample, map, tile, scratch, ready)?;
                 Ok((self.pose(&head)?, counts))
             }
-            Step::Lk => self.lk_step(source, map, tile, scratch, ready),
+            Step::Lk => self.lk_step(sample, map, tile, scratch, ready),
         }
     }
 
@@ -410,14 +417,14 @@ impl<'a> Int8Model<'a> {
     /// `r = q_S - q_T` (in int8 steps, as the stored `P`'s Jacobian).
     fn lk_step(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         tile: usize,
         scratch: &mut [i8],
         ready: Ready,
     ) -> Result<(Pose, PassCounts)> {
         let solver = self.lk.as_ref().ok_or(Error::NoLkSolver)?;
-        let (feature, out_of_range) = self.encode_mapped(source, map, tile, scratch, ready)?;
+        let (feature, out_of_range) = self.encode_mapped(sample, map, tile, scratch, ready)?;
         let template = self.p.template_feature;
         let residual = |j: usize| match (feature.get(j), template.get(j)) {
             (Some(&s), Some(&t)) => (s as i32 - t as i8 as i32) as f32,
@@ -445,17 +452,17 @@ impl<'a> Int8Model<'a> {
         let (centring, _) = self.centred(source)?;
         let map = PointMap::new(self.p.frame, &centring.then(motion));
         Ok(self
-            .encode_mapped(source, &map, tile, scratch, Ready::default())?
+            .encode_mapped(Sample::all(source), &map, tile, scratch, Ready::default())?
             .0)
     }
 
-    /// Encodes `source` moved by `map` with `tile` points per pass, on a
+    /// Encodes `sample` moved by `map` with `tile` points per pass, on a
     /// scratch where [`Self::prepare`] left what `ready` says: the feature
     /// (a view into the scratch) and the points left out (outside the
     /// input range).
     fn encode_mapped<'s>(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         tile: usize,
         scratch: &'s mut [i8],
@@ -463,17 +470,17 @@ impl<'a> Int8Model<'a> {
     ) -> Result<(&'s [i8], u32)> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
         let (block, _) = self.split_host(extra);
-        let out_of_range = self.encode_into(source, map, tile, feature, work, block, ready)?;
+        let out_of_range = self.encode_into(sample, map, tile, feature, work, block, ready)?;
         Ok((feature, out_of_range))
     }
 
-    /// Encodes `source` moved by `map` and runs the head, on a scratch
+    /// Encodes `sample` moved by `map` and runs the head, on a scratch
     /// where [`Self::prepare`] left what `ready` says: the feature (a view
     /// into the scratch), the head's raw outputs and what the pass counted.
     #[inline(always)]
     fn encode_and_head<'s>(
         &self,
-        source: &[[f32; 3]],
+        sample: Sample<'_>,
         map: &PointMap,
         tile: usize,
         scratch: &'s mut [i8],
@@ -481,7 +488,7 @@ impl<'a> Int8Model<'a> {
     ) -> Result<(&'s [i8], [i32; POSE_DIM], PassCounts)> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
         let (block, folded) = self.split_host(extra);
-        let out_of_range = self.encode_into(source, map, tile, feature, work, block, ready)?;
+        let out_of_range = self.encode_into(sample, map, tile, feature, work, block, ready)?;
         let folded = ready.folded.then(|| bytes_of(folded));
         let (head, saturated) = self.head_counted(feature, work, folded)?;
         let counts = PassCounts {
@@ -523,7 +530,8 @@ impl<'a> Int8Model<'a> {
         ready: Ready,
     ) -> Result<Int8Inference<'s>> {
         let (centring, map) = self.centred(source)?;
-        let (feature, head, counts) = self.encode_and_head(source, &map, tile, scratch, ready)?;
+        let (feature, head, counts) =
+            self.encode_and_head(Sample::all(source), &map, tile, scratch, ready)?;
         Ok(Int8Inference {
             feature,
             head,
@@ -551,7 +559,15 @@ impl<'a> Int8Model<'a> {
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
         let (block, _) = self.split_host(extra);
         let (_, map) = self.centred(source)?;
-        self.encode_into(source, &map, tile, feature, work, block, Ready::default())?;
+        self.encode_into(
+            Sample::all(source),
+            &map,
+            tile,
+            feature,
+            work,
+            block,
+            Ready::default(),
+        )?;
         Ok(feature)
     }
 

@@ -44,11 +44,10 @@ impl<'s> Subset<'s> {
     /// Every point if the cloud has at most `max_points`, else a stride
     /// that keeps at most `max_points` (1..=[`MAX_SUBSET`]) of them.
     pub fn new(source: &'s [[f32; 3]], frame: Frame, max_points: usize) -> Self {
-        let max = NonZeroUsize::new(max_points.clamp(1, MAX_SUBSET)).unwrap_or(NonZeroUsize::MIN);
         Subset {
             source,
             frame,
-            stride: div_ceil(source.len(), max).max(1),
+            stride: stride_for(source.len(), max_points),
         }
     }
 
@@ -70,6 +69,14 @@ impl<'s> Subset<'s> {
         let n = n.max(1) as f32;
         sum.map(|s| s / n)
     }
+}
+
+/// The step between kept points when every k-th point of `len` (from
+/// index 0) is kept and at most `most` (clamped to `1..=`[`MAX_SUBSET`])
+/// may be: `ceil(len / most)`, at least 1.
+pub(crate) fn stride_for(len: usize, most: usize) -> usize {
+    let max = NonZeroUsize::new(most.clamp(1, MAX_SUBSET)).unwrap_or(NonZeroUsize::MIN);
+    div_ceil(len, max).max(1)
 }
 
 /// `a / b` rounded up, with a divisor the compiler sees is not zero (the

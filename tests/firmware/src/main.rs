@@ -73,7 +73,7 @@ const VERSION: u32 = 5;
 /// u32 words per case in the container's table.
 const CASE_WORDS: usize = 7;
 /// u32 words per option set.
-const OPTIONS_WORDS: usize = 12;
+const OPTIONS_WORDS: usize = 13;
 
 fn word(index: usize) -> u32 {
     // SAFETY: the data region is always mapped; reads stay inside it.
@@ -116,6 +116,7 @@ fn read_options(index: usize) -> Options {
         max_points: w(9) as usize,
         max_residual: f32::from_bits(w(10)),
         lk_iterations: w(11) as usize,
+        network_points: w(12) as usize,
     }
 }
 

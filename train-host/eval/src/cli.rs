@@ -107,6 +107,10 @@ pub struct MethodOptions {
     /// k-th point is used).
     #[arg(long, allow_negative_numbers = true)]
     pub max_points: Option<usize>,
+    /// Most source points each network pass (and LK step) of the device
+    /// pipeline encodes (every k-th point; default 256).
+    #[arg(long, allow_negative_numbers = true)]
+    pub network_points: Option<usize>,
     /// Device ICP leaves out pairs farther apart than this, as a share of
     /// the template's size.
     #[arg(long, allow_negative_numbers = true)]
@@ -153,6 +157,7 @@ impl MethodOptions {
             ("--iterations", self.iterations),
             ("--hypotheses", self.hypotheses),
             ("--max-points", self.max_points),
+            ("--network-points", self.network_points),
             ("--template-points", self.template_points),
         ];
         for (flag, v) in at_least_one {
@@ -233,6 +238,7 @@ impl MethodOptions {
         m.icp_iterations = self.icp_iterations.unwrap_or(m.icp_iterations);
         m.screen_iterations = self.screen_iterations.unwrap_or(m.screen_iterations);
         m.max_points = self.max_points.unwrap_or(m.max_points);
+        m.network_points = self.network_points.unwrap_or(m.network_points);
         m.metric = self.metric.unwrap_or(m.metric);
         m.icp_distance = self.icp_distance.unwrap_or(m.icp_distance);
         m.icp_tolerance = self.icp_tolerance.unwrap_or(m.icp_tolerance);

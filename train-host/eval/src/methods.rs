@@ -99,6 +99,10 @@ pub struct Method {
     /// Most source points the device pipeline scores and refines.
     #[serde(default = "default_max_points")]
     pub max_points: usize,
+    /// Most source points each network pass and LK step of the device
+    /// pipeline encodes.
+    #[serde(default = "default_network_points")]
+    pub network_points: usize,
     /// What the device pipeline's ICP minimises.
     #[serde(default)]
     pub metric: DeviceMetric,
@@ -145,6 +149,10 @@ fn default_max_points() -> usize {
     pcrnet_core::Options::default().max_points
 }
 
+fn default_network_points() -> usize {
+    pcrnet_core::Options::default().network_points
+}
+
 fn default_icp_distance() -> f32 {
     pcrnet_core::Options::default().icp_distance
 }
@@ -186,6 +194,7 @@ impl Method {
             icp_iterations: default_icp_iterations(),
             screen_iterations: default_screen_iterations(),
             max_points: default_max_points(),
+            network_points: default_network_points(),
             metric: DeviceMetric::default(),
             icp_distance: default_icp_distance(),
             icp_tolerance: default_icp_tolerance(),
@@ -206,6 +215,7 @@ impl Method {
             icp_iterations: self.icp_iterations,
             screen_iterations: self.screen_iterations,
             max_points: self.max_points,
+            network_points: self.network_points,
             metric: self.metric.into(),
             icp_distance: self.icp_distance,
             icp_tolerance: self.icp_tolerance,
@@ -259,6 +269,9 @@ impl Method {
             } else {
                 format!(", {} points", self.max_points)
             };
+            if self.network_points != default_network_points() {
+                points += &format!(", network on {} points", self.network_points);
+            }
             if self.template_points != default_template_points() {
                 points += &format!(", {}-point template", self.template_points);
             }

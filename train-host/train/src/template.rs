@@ -190,6 +190,18 @@ impl Reference {
         Ok(reference)
     }
 
+    /// The points of `cloud` (the template's, in some frame) its stored
+    /// feature and PointNetLK's Jacobian are encoded from: the sample a
+    /// network pass takes of a source under the default options
+    /// ([`pcrnet_core::Options::network_sample`]), so that template and
+    /// source are max-pooled over as many points.
+    fn network_sample(&self, cloud: &[[f32; 3]]) -> Vec<[f32; 3]> {
+        pcrnet_core::Options::default()
+            .network_sample(cloud)
+            .copied()
+            .collect()
+    }
+
     /// The closest-point table a blob stores beside the cloud, if any.
     pub fn table(&self) -> Option<NearestTable<'_>> {
         self.table.as_ref().map(OwnedTable::view)
@@ -331,12 +343,13 @@ pub fn int8_blob(
     let draft_trailer =
         lk_solver::trailer(ModelKind::Int8, reference.table(), zero_rows.as_deref());
     let model = Int8Model::from_payload(draft.clone(), draft_trailer)?;
+    let sample = reference.network_sample(&reference.points);
     let rows = lk
-        .then(|| lk_solver::int8_rows(&model, &reference.points))
+        .then(|| lk_solver::int8_rows(&model, &sample))
         .transpose()?;
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let feature: Vec<u8> = model
-        .encode(&reference.points, &mut scratch)?
+        .encode(&sample, &mut scratch)?
         .iter()
         .map(|&v| v as u8)
         .collect();
@@ -367,13 +380,14 @@ pub fn f32_blob(
     let zero_rows = lk.then(|| lk_solver::placeholder_rows(payload.arch.feature_dim()));
     let draft_trailer = lk_solver::trailer(ModelKind::F32, reference.table(), zero_rows.as_deref());
     let model = F32Model::from_payload(draft.clone(), draft_trailer)?;
+    let sample = reference.network_sample(&reference.normalised());
     let rows = lk
-        .then(|| lk_solver::f32_rows(&model, &reference.normalised()))
+        .then(|| lk_solver::f32_rows(&model, &sample))
         .transpose()?;
     let mut scratch = vec![0f32; model.tiled_scratch_len()];
     let feature: Vec<u8> = model
         .network()
-        .encode(&reference.normalised(), &mut scratch)?
+        .encode(&sample, &mut scratch)?
         .iter()
         .flat_map(|v| v.to_le_bytes())
         .collect();
