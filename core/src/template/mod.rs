@@ -200,9 +200,12 @@ impl<'a> Template<'a> {
     pub fn plane_offset(&self, i: usize, q: [i16; 3]) -> (f32, [f32; 3]) {
         let (t, ni) = (self.point(i), self.normal(i));
         let norm = libm::sqrtf((ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]) as f32);
-        let mut dot = 0i64;
+        // Exact in i32: |t - q| <= 65534 and |n| <= 128 per axis, so the
+        // sum is at most 3 x 65534 x 128 < 2^25 (and converts to f32 with
+        // one instruction, where an i64 takes a library call on the M4).
+        let mut dot = 0i32;
         for k in 0..3 {
-            dot += (t[k] as i64 - q[k] as i64) * ni[k] as i64;
+            dot += (t[k] as i32 - q[k] as i32) * ni[k];
         }
         (dot as f32 / norm, ni.map(|v| v as f32 / norm))
     }
