@@ -724,8 +724,9 @@ const char *pcrnet_status_message(int32_t status);
  (source units, as `PcrnetRegistration` gives it) lie from the template
  in the network's feature space: the relative distance between the
  encoder's feature of the moved points and the template's (0: the same
- feature; see `Int8Model::feature_distance`). One encoder pass over every
- point. Writes it to `out` on success; a pose that is not finite is
+ feature; see `Int8Model::feature_distance`). One encoder pass over at most
+ 256 points (every k-th: the sample a default registration encodes, as
+ the template's feature was pooled). Writes it to `out` on success; a pose that is not finite is
  `PCRNET_ERROR_NON_FINITE_RESULT`.
 
  # Safety

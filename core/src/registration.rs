@@ -25,6 +25,14 @@ use crate::pose::{self, Centring, PointMap, Pose};
 use crate::refine::{self, Degeneracy, IcpSettings, Metric, Resolved, Subset};
 use crate::template::Template;
 
+/// The default [`Options::network_points`]: at most this many points of a
+/// cloud are max-pooled into a feature. Exported template features are
+/// pooled over the same sample of the template's points
+/// ([`Options::network_sample`]), and [`crate::Int8Model::feature_distance`]
+/// samples the source so, so that both sides of a comparison pool over as
+/// many points, as in training.
+pub const NETWORK_POINTS: usize = 256;
+
 /// How to register. Distances are in **model units**: the template spans
 /// `[-0.5, 0.5]` along its longest axis, so 0.05 is 5% of its size, and
 /// the settings carry over between objects of any size or unit.
@@ -82,7 +90,7 @@ impl Default for Options {
         Options {
             passes: 1,
             lk_iterations: 0,
-            network_points: 256,
+            network_points: NETWORK_POINTS,
             tolerance: 0.0,
             hypotheses: 10,
             screen_iterations: 10,

@@ -7,7 +7,7 @@
 use super::{Int8Model, Ready};
 use crate::error::{Error, Result};
 use crate::pose::{PointMap, Pose};
-use crate::registration::Sample;
+use crate::registration::{self, NETWORK_POINTS, Sample};
 
 impl Int8Model<'_> {
     /// The relative feature distance of `source` moved by `pose` (user
@@ -16,9 +16,11 @@ impl Int8Model<'_> {
     /// both features dequantized with the last encoder layer's scale (the
     /// zero point cancels in the difference), sums of squares in f32 in
     /// feature order, one `libm::sqrtf` each. The source is not centred:
-    /// the pose already places it on the template. Costs one encoder pass
-    /// over every point (the network's cost without its head); bit-exact on
-    /// every target.
+    /// the pose already places it on the template. The encoder sees the
+    /// sample a default registration's network pass takes
+    /// ([`crate::registration::NETWORK_POINTS`] points at most, every k-th),
+    /// as the template's feature was pooled: one encoder pass over it (the
+    /// network's cost without its head); bit-exact on every target.
     ///
     /// Errors as [`Self::encode`]; [`Error::NonFiniteResult`] for a pose
     /// that is not finite or a template feature of zero norm.
@@ -31,12 +33,14 @@ impl Int8Model<'_> {
         if !pose.is_finite() {
             return Err(Error::NonFiniteResult);
         }
+        // The encoder sees a sample: every point is checked here.
+        registration::all_finite(source)?;
         let tile = self.tile_for(scratch.len())?;
         let (feature, work, extra) = self.split_scratch(tile, scratch)?;
         let (block, _) = self.split_host(extra);
         let map = PointMap::new(self.p.frame, &self.p.frame.pose_to_model(pose));
         self.encode_into(
-            Sample::all(source),
+            Sample::new(source, NETWORK_POINTS),
             &map,
             tile,
             feature,
