@@ -550,19 +550,22 @@ fn pose_steps(
     }
 }
 
-/// The network's passes alone ([`pose_steps`] without LK), with the pose
-/// in user units, as `Int8Model::network_pose` and `F32Model::network_pose`
-/// give it.
+/// The network's passes alone ([`pose_steps`] without LK) on the default
+/// sample of [`NETWORK_POINTS`] (every point checked for NaN first), with
+/// the pose in user units, as `Int8Model::network_pose` and
+/// `F32Model::network_pose` give it.
 pub(crate) fn network_pose(
     frame: &Frame,
     centring: Centring,
     source: &[[f32; 3]],
     passes: usize,
     tolerance: f32,
-    mut pass: impl FnMut(&PointMap) -> Result<Pose>,
+    mut pass: impl FnMut(Sample<'_>, &PointMap) -> Result<Pose>,
 ) -> Result<(Pose, usize)> {
+    all_finite(source)?;
+    let sample = Sample::new(source, NETWORK_POINTS);
     let (pose, n, _) = pose_steps(frame, centring, source, (passes, 0), tolerance, |map, _| {
-        pass(map)
+        pass(sample, map)
     })?;
     let pose = frame.pose_to_user(&pose);
     if pose.is_finite() {

@@ -463,9 +463,14 @@ impl<P: Params> F32Network<P> {
         tolerance: f32,
         scratch: &mut [f32],
     ) -> Result<(Pose, usize)> {
-        registration::network_pose(frame, self.centring(), source, passes, tolerance, |map| {
-            self.pass(Sample::all(source), map, scratch)
-        })
+        registration::network_pose(
+            frame,
+            self.centring(),
+            source,
+            passes,
+            tolerance,
+            |sample, map| self.pass(sample, map, scratch),
+        )
     }
 
     /// One pass on `sample` moved by `map`: the pose in the model frame.

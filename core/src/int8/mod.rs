@@ -334,7 +334,9 @@ impl<'a> Int8Model<'a> {
 
     /// The network alone, in user units: up to `passes` passes (1: PCRNet;
     /// more: i-PCRNet), each on the source moved by the pose so far (moved
-    /// point by point while quantizing: no copy of the cloud), composing the
+    /// point by point while quantizing: no copy of the cloud; at most
+    /// [`crate::registration::NETWORK_POINTS`] of its points, every k-th, as
+    /// the template's feature was pooled), composing the
     /// estimates, and stopping early once a pass changes the pose by less
     /// than `tolerance` (`||delta - I||_F`, see [`pose::iterate`]). Returns
     /// the pose and the number of passes. No check, no refinement: use
@@ -375,16 +377,9 @@ impl<'a> Int8Model<'a> {
             source,
             passes,
             tolerance,
-            |map| {
+            |sample, map| {
                 Ok(self
-                    .pass(
-                        Sample::all(source),
-                        map,
-                        Step::Network,
-                        tile,
-                        scratch,
-                        ready,
-                    )?
+                    .pass(sample, map, Step::Network, tile, scratch, ready)?
                     .0)
             },
         )
@@ -498,8 +493,10 @@ impl<'a> Int8Model<'a> {
         Ok((feature, head, counts))
     }
 
-    /// Encodes `source` and runs the head, returning the raw results.
-    /// Uses the largest tile the scratch allows.
+    /// Encodes `source` (every point: the low-level calls pool what they
+    /// are given, where [`Self::register`] and [`Self::network_pose`] take
+    /// a sample) and runs the head, returning the raw results. Uses the
+    /// largest tile the scratch allows.
     pub fn infer<'s>(
         &self,
         source: &[[f32; 3]],

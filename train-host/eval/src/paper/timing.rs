@@ -217,11 +217,24 @@ pub(crate) fn iterations(ctx: &Context) -> anyhow::Result<Report> {
     eprintln!("  PointNetLK after 1..20 steps: {lk_means:.2?}");
     let trained_means = trajectory_means(&lk(), trained_lk.f32().map(|b| b.1), &pairs)?;
     eprintln!("  PointNetLK (trained) after 1..20 steps: {trained_means:.2?}");
+    // The device's PointNetLK on the int8 blob (its stored solver), run
+    // once per count as i-PCRNet's passes are.
+    let mut device_lk = Vec::with_capacity(passes);
+    for k in 1..=passes {
+        let m = Method {
+            lk_iterations: k,
+            ..super::device_lk(false)
+        };
+        let s = score(&m, trained_lk.int8(), &pairs, true)?;
+        device_lk.push(s.summary.rotation_deg.mean);
+    }
+    eprintln!("  device PointNetLK int8 after 1..20 steps: {device_lk:.2?}");
     let icp_means = trajectory_means(&icp(), None, &pairs)?;
     let curves = [
         ("i-PCRNet int8 (mn10-ipcrnet)", &net),
         ("PointNetLK (mn10-ipcrnet)", &lk_means),
         ("PointNetLK (mn10-pointnetlk)", &trained_means),
+        ("device PointNetLK int8 (mn10-pointnetlk)", &device_lk),
         ("ICP", &icp_means),
     ];
     let chart = Chart {
@@ -273,7 +286,7 @@ pub(crate) fn iterations(ctx: &Context) -> anyhow::Result<Report> {
         "Rotation error against iterations",
         vec![
             "ModelNet10 test split, clean sources. Mean rotation error after k iterations (a registration that stopped earlier keeps its last pose).".into(),
-            "i-PCRNet: k passes of the int8 network (the run with at most k passes); PointNetLK: k Lucas-Kanade steps, on mn10-ipcrnet's f32 encoder and on mn10-pointnetlk's (trained as PointNetLK, 10 iterations, pose loss); ICP: k iterations.".into(),
+            "i-PCRNet: k passes of the int8 network (the run with at most k passes); PointNetLK: k Lucas-Kanade steps, on mn10-ipcrnet's f32 encoder and on mn10-pointnetlk's (trained as PointNetLK, 10 iterations, pose loss), on the host in f64; device PointNetLK int8: `pcrnet-core`'s LK steps on mn10-pointnetlk's int8 blob (its stored solver, the network's default sample of 256 points per step), the run with at most k steps; ICP: k iterations.".into(),
         ],
         vec![Table {
             caption: "Mean rotation error after k iterations".into(),
