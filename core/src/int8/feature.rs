@@ -36,18 +36,9 @@ impl Int8Model<'_> {
         // The encoder sees a sample: every point is checked here.
         registration::all_finite(source)?;
         let tile = self.tile_for(scratch.len())?;
-        let (feature, work, extra) = self.split_scratch(tile, scratch)?;
-        let (block, _) = self.split_host(extra);
         let map = PointMap::new(self.p.frame, &self.p.frame.pose_to_model(pose));
-        self.encode_into(
-            Sample::new(source, NETWORK_POINTS),
-            &map,
-            tile,
-            feature,
-            work,
-            block,
-            Ready::default(),
-        )?;
+        let sample = Sample::new(source, NETWORK_POINTS);
+        let (feature, _) = self.encode_mapped(sample, &map, tile, scratch, Ready::default())?;
         let (zero, scale) = self
             .p
             .encoder

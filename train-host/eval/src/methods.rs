@@ -205,6 +205,19 @@ impl Method {
         }
     }
 
+    /// The device pipeline on a PointNetLK blob: 20 LK steps (as the
+    /// host's PointNetLK) alone (one start, scored, no ICP), or followed
+    /// by the default hypotheses and device ICP.
+    pub fn device_lk(then_icp: bool) -> Method {
+        let device = Method::new(MethodKind::Device);
+        Method {
+            lk_iterations: 20,
+            hypotheses: if then_icp { device.hypotheses } else { 1 },
+            icp_iterations: if then_icp { device.icp_iterations } else { 0 },
+            ..device
+        }
+    }
+
     /// The device pipeline's options for this method.
     pub fn device_options(&self) -> pcrnet_core::Options {
         pcrnet_core::Options {

@@ -7,7 +7,6 @@ use anyhow::Context as _;
 
 use super::methods::{DeviceMetric, Method, MethodKind};
 use super::pairs::PairSetSpec;
-use super::paper;
 use super::{GOOD_BELOW_DEG, MethodScore};
 use crate::report::{
     Context, Recorder, Report, Table, UNSEEN, folder, label, pair_set, success_chart,
@@ -97,7 +96,7 @@ pub fn trust(ctx: &Context) -> anyhow::Result<Report> {
             rec.score(set, method, model, &pairs, true)?;
         }
         for then_icp in [false, true] {
-            rec.score(set, paper::device_lk(then_icp), lk.int8(), &pairs, true)?;
+            rec.score(set, Method::device_lk(then_icp), lk.int8(), &pairs, true)?;
         }
         let runs: Vec<&MethodScore> = rec.raw[first..].iter().map(|r| &r.1).collect();
         let chart = success_chart(&format!("Device pipeline: {set}"), &runs, 90.0);

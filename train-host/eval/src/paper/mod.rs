@@ -80,19 +80,6 @@ fn lk() -> Method {
     Method::new(MethodKind::Pointnetlk)
 }
 
-/// The device pipeline on a PointNetLK blob: 20 LK steps (as the host's
-/// PointNetLK) alone (one start, scored, no ICP), or followed by the
-/// default hypotheses and device ICP.
-pub(super) fn device_lk(then_icp: bool) -> Method {
-    let device = Method::new(MethodKind::Device);
-    Method {
-        lk_iterations: 20,
-        hypotheses: if then_icp { device.hypotheses } else { 1 },
-        icp_iterations: if then_icp { device.icp_iterations } else { 0 },
-        ..device
-    }
-}
-
 pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let mut rec = Recorder::new(ctx, "generalisation");
@@ -115,9 +102,9 @@ pub(super) fn generalisation(ctx: &Context) -> anyhow::Result<Report> {
         rec.score(set, icp(), None, &pairs, true)?;
         rec.score(set, lk(), gen5.f32(), &pairs, true)?;
         rec.score(set, lk(), lk5.f32(), &pairs, true)?;
-        rec.score(set, device_lk(false), lk5.f32(), &pairs, true)?;
-        rec.score(set, device_lk(false), lk5.int8(), &pairs, true)?;
-        rec.score(set, device_lk(true), lk5.int8(), &pairs, true)?;
+        rec.score(set, Method::device_lk(false), lk5.f32(), &pairs, true)?;
+        rec.score(set, Method::device_lk(false), lk5.int8(), &pairs, true)?;
+        rec.score(set, Method::device_lk(true), lk5.int8(), &pairs, true)?;
         rec.score(set, ipcrnet(), gen5.f32(), &pairs, true)?;
         rec.score(set, ipcrnet(), gen5.int8(), &pairs, true)?;
         if classes == ["toilet"] {

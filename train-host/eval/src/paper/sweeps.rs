@@ -159,7 +159,7 @@ pub(crate) fn noise(ctx: &Context) -> anyhow::Result<Report> {
         .collect();
     let mut methods = modelnet10_methods(&pc, &ipc).to_vec();
     methods.insert(2, (lk(), trained_lk.f32()));
-    methods.insert(3, (super::device_lk(false), trained_lk.int8()));
+    methods.insert(3, (Method::device_lk(false), trained_lk.int8()));
     let report = SweepReport {
         title: "Gaussian noise on the source",
         notes: vec![

@@ -223,7 +223,7 @@ pub(crate) fn iterations(ctx: &Context) -> anyhow::Result<Report> {
     for k in 1..=passes {
         let m = Method {
             lk_iterations: k,
-            ..super::device_lk(false)
+            ..Method::device_lk(false)
         };
         let s = score(&m, trained_lk.int8(), &pairs, true)?;
         device_lk.push(s.summary.rotation_deg.mean);
