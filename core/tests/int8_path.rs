@@ -439,3 +439,66 @@ fn trained_model_host_kernel_matches_tiles() {
         assert_eq!(got.head, head, "head, n {n}");
     }
 }
+
+/// The network's sample (`Options::network_points`): every k-th point,
+/// checked for NaN over the whole cloud all the same, and a sample that
+/// covers the cloud registers it exactly as before sampling existed.
+#[test]
+fn the_network_encodes_a_sample_and_every_point_is_checked() {
+    use pcrnet_core::Options;
+    let b = blob(43, SMALL_ENC, SMALL_HEAD);
+    let model = Int8Model::from_bytes(&b).unwrap();
+    let mut s = vec![0i8; model.scratch_len(MAX_TILE)];
+    let pts = cloud(44, 600, 1.0);
+    let options = Options {
+        network_points: 256,
+        ..Options::default()
+    };
+    // ceil(600 / 256) = 3: points 0, 3, ..., 597.
+    let sample: Vec<[f32; 3]> = options.network_sample(&pts).copied().collect();
+    assert_eq!(sample.len(), 200);
+    assert_eq!(sample[0], pts[0]);
+    assert_eq!(sample[199], pts[597]);
+    // Point 1 is not sampled; its NaN is an error all the same.
+    let mut bad = pts.clone();
+    bad[1][2] = f32::NAN;
+    assert_eq!(
+        model.register(&bad, &options, &mut s).map(|r| r.pose),
+        Err(Error::NonFiniteCoordinate { index: 1 })
+    );
+    assert_eq!(
+        model.network_pose(&bad, 1, 0.0, &mut s).map(|r| r.0),
+        Err(Error::NonFiniteCoordinate { index: 1 })
+    );
+    // The network sees the sampled points only: the same pose whether the
+    // others are there or not (this random model does not centre its
+    // sources; one that does takes the centroid of the whole cloud), with
+    // scoring on the same 200 points.
+    let alone = model
+        .register(&sample, &Options::network_only(), &mut s)
+        .unwrap();
+    let among = model
+        .register(
+            &pts,
+            &Options {
+                max_points: 200,
+                ..Options::network_only()
+            },
+            &mut s,
+        )
+        .unwrap();
+    assert_eq!(alone.pose, among.pose);
+    // A sample as large as the cloud is the whole cloud.
+    let all = Options {
+        network_points: pts.len(),
+        ..Options::network_only()
+    };
+    let more = Options {
+        network_points: usize::MAX,
+        ..all
+    };
+    assert_eq!(
+        model.register(&pts, &all, &mut s).unwrap(),
+        model.register(&pts, &more, &mut s).unwrap()
+    );
+}
