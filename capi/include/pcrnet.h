@@ -292,7 +292,9 @@ typedef struct {
   /*
    Most source points each network pass and LK step encodes (every
    k-th point; at least 1). The default 256 halves the network's cost
-   at 512 points with the same accuracy.
+   at 512 points with the same accuracy; exported template features
+   are pooled over 256 of the template's points, so other values pool
+   the head's two inputs over different counts.
    */
   uint32_t network_points;
 } PcrnetOptions;
@@ -695,9 +697,10 @@ PcrnetStatus pcrnet_register(const PcrnetModel *model,
 /*
  The network alone (no check, no refinement): up to `passes` passes
  (1: PCRNet; more: i-PCRNet, composing the estimates, stopping once a
- pass moves the pose by less than `tolerance`). Writes the pose
- `[qw, qx, qy, qz, tx, ty, tz]` (source units) to `pose` and the passes
- run to `passes_run` on success.
+ pass moves the pose by less than `tolerance`), each on at most 256
+ points of the cloud (every k-th, the sample a registration's pass
+ takes). Writes the pose `[qw, qx, qy, qz, tx, ty, tz]` (source units)
+ to `pose` and the passes run to `passes_run` on success.
 
  # Safety
  As `pcrnet_register`; `pose` must point to 7 writable floats and

@@ -371,9 +371,10 @@ unsafe fn register_into(
 
 /// The network alone (no check, no refinement): up to `passes` passes
 /// (1: PCRNet; more: i-PCRNet, composing the estimates, stopping once a
-/// pass moves the pose by less than `tolerance`). Writes the pose
-/// `[qw, qx, qy, qz, tx, ty, tz]` (source units) to `pose` and the passes
-/// run to `passes_run` on success.
+/// pass moves the pose by less than `tolerance`), each on at most 256
+/// points of the cloud (every k-th, the sample a registration's pass
+/// takes). Writes the pose `[qw, qx, qy, qz, tx, ty, tz]` (source units)
+/// to `pose` and the passes run to `passes_run` on success.
 ///
 /// # Safety
 /// As `pcrnet_register`; `pose` must point to 7 writable floats and
@@ -516,7 +517,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -21 => c"output buffer too small",
         -30 => c"the point cloud is empty",
         -31 => c"a point has a NaN or infinite coordinate",
-        -32 => c"every point lies outside the model's input range: the cloud is in other units than the template, or far from where the template is; bring it into the template's units and frame",
+        -32 => c"every point the network encodes lies outside the model's input range: the cloud is in other units than the template, or far from where the template is; bring it into the template's units and frame",
         -33 => c"the network's output has a zero quaternion",
         -34 => c"the pose or residual is not finite: the coordinates are too large once moved into the model's frame",
         -40 => c"a registration option is out of range (zero passes with zero lk_iterations, zero hypotheses, max_points or network_points, a negative or non-finite tolerance or distance, an unknown metric, or more points or buffer elements than memory can hold)",

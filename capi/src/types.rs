@@ -145,7 +145,9 @@ pub struct PcrnetOptions {
     pub lk_iterations: u32,
     /// Most source points each network pass and LK step encodes (every
     /// k-th point; at least 1). The default 256 halves the network's cost
-    /// at 512 points with the same accuracy.
+    /// at 512 points with the same accuracy; exported template features
+    /// are pooled over 256 of the template's points, so other values pool
+    /// the head's two inputs over different counts.
     pub network_points: u32,
 }
 

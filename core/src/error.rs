@@ -80,7 +80,8 @@ pub enum Error {
         /// Index of the offending point.
         index: usize,
     },
-    /// Every point lies outside the model's int16 input range
+    /// Every point the network encodes (its sample,
+    /// [`crate::Options::network_points`]) lies outside the model's int16 input range
     /// (`|x| > 32767 * input_scale` in the model frame, after centring for
     /// models that centre the source). Points outside it are left out of the
     /// network (never clamped, which would move them) and counted in

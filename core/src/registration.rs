@@ -50,11 +50,15 @@ pub struct Options {
     /// 0 and one hypothesis; LK then ICP: both.
     pub lk_iterations: usize,
     /// Most source points each network pass and LK step encodes: every
-    /// k-th point from the first, as for `max_points` (at least 1). The
-    /// max-pooled feature barely moves when half of a dense cloud is left
-    /// out, and the encoder's cost is linear in its points: 256 of 512
-    /// halves the network's instructions with the same `trust` accuracy
-    /// (README, "Latency"). Centring and ICP still use their own points.
+    /// k-th point from the first, as for `max_points` (at least 1; a cloud
+    /// of 257 to 511 points gives `ceil(n / 2)`). The encoder's cost is
+    /// linear in its points: 256 of 512 halves the network's instructions
+    /// with the same `trust` accuracy (docs/kernels.md). Centring uses
+    /// every point; scoring and ICP their own `max_points`. The template's
+    /// stored feature is pooled over [`NETWORK_POINTS`] of its points at
+    /// export whatever this says (blobs exported before that, such as the
+    /// shipped ones, over all of them): other values pool the two inputs
+    /// of the head over different counts.
     pub network_points: usize,
     /// Network passes and LK steps stop once a step's `||dT - I||_F` is
     /// below this (0: never).

@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, Trailer, expect_len};
 use crate::lk::Solver;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
+use crate::registration::{self, NETWORK_POINTS, Options, PassCounts, Registration, Sample, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -419,8 +419,9 @@ impl<P: Params> F32Network<P> {
         self.scratch_len().max(feature + tiles)
     }
 
-    /// Encodes the source (centred first if the network says so) and runs
-    /// the head, returning the raw 7 outputs. The feature is left in
+    /// Encodes the source (centred first if the network says so; every
+    /// point, where a registration's pass takes a sample) and runs the
+    /// head, returning the raw 7 outputs. The feature is left in
     /// `scratch[..F]`.
     pub fn infer(&self, source: &[[f32; 3]], scratch: &mut [f32]) -> Result<[f32; POSE_DIM]> {
         let (feature, work) = self.split(scratch)?;
@@ -489,9 +490,12 @@ impl<P: Params> F32Network<P> {
         Ok(feature)
     }
 
-    /// Encodes `source` as [`Self::encode`] does (centred first if the
-    /// network says so), then moved by `motion`: the exporter's encodings
-    /// of the template's six small moves for PointNetLK's Jacobian.
+    /// Encodes `source` as a registration's network pass does: centred on
+    /// the whole cloud first if the network says so, then moved by
+    /// `motion`, max-pooled over the default sample of [`NETWORK_POINTS`]
+    /// points: the exporter's encodings of the template's stored feature
+    /// (`motion` the identity) and of its six small moves for PointNetLK's
+    /// Jacobian. ([`Self::encode`] pools every point it is given.)
     pub fn encode_moved<'s>(
         &self,
         source: &[[f32; 3]],
@@ -500,7 +504,7 @@ impl<P: Params> F32Network<P> {
     ) -> Result<&'s [f32]> {
         let centring = pose::centring(source, self.centring(), &Frame::IDENTITY)?;
         let map = PointMap::new(Frame::IDENTITY, &centring.then(motion));
-        self.encode_mapped(Sample::all(source), &map, scratch)
+        self.encode_mapped(Sample::new(source, NETWORK_POINTS), &map, scratch)
     }
 
     /// Encodes `sample`, each point first moved by `map`, into its global

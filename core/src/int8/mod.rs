@@ -43,7 +43,7 @@ use crate::kernel::{Requant, bytes_of};
 use crate::lk::Solver;
 use crate::locate::Start;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
+use crate::registration::{self, NETWORK_POINTS, Options, PassCounts, Registration, Sample, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -432,11 +432,14 @@ impl<'a> Int8Model<'a> {
         Ok((solver.step(residual)?, counts))
     }
 
-    /// Encodes `source` as [`Self::encode`] does (centred first if the
-    /// model says so), then moved by `motion` (model frame), into its int8
-    /// global feature (a view into `scratch`): how the exporter encodes the
-    /// template's six small moves for PointNetLK's Jacobian, as a device LK
-    /// step encodes a moved source.
+    /// Encodes `source` as a registration's network pass does: centred on
+    /// the whole cloud's centroid first if the model says so, then moved
+    /// by `motion` (model frame), max-pooled over the default sample of
+    /// [`NETWORK_POINTS`] points (every k-th), into its int8 global feature
+    /// (a view into `scratch`). How the exporter encodes the template's
+    /// stored feature (`motion` the identity) and its six small moves for
+    /// PointNetLK's Jacobian, as a device LK step encodes a moved source.
+    /// ([`Self::encode`] pools every point it is given.)
     pub fn encode_moved<'s>(
         &self,
         source: &[[f32; 3]],
@@ -446,8 +449,9 @@ impl<'a> Int8Model<'a> {
         let tile = self.tile_for(scratch.len())?;
         let (centring, _) = self.centred(source)?;
         let map = PointMap::new(self.p.frame, &centring.then(motion));
+        let sample = Sample::new(source, NETWORK_POINTS);
         Ok(self
-            .encode_mapped(Sample::all(source), &map, tile, scratch, Ready::default())?
+            .encode_mapped(sample, &map, tile, scratch, Ready::default())?
             .0)
     }
 

@@ -382,9 +382,10 @@ pub fn run(
         .transpose()?;
     let degenerate = source_degeneracy(blob, reference.as_ref(), source)?;
     // The blob with the template bound in place of its own. The network's
-    // template feature is taken from the whole cloud, so the stored points
-    // (`method.template_points`) change only what the device pipeline
-    // checks and refines against.
+    // template feature is taken from the whole cloud (centred on all of
+    // it, pooled over the network's default sample of it), so the stored
+    // points (`method.template_points`) change only what the device
+    // pipeline checks and refines against.
     let bound = |blob| -> Result<Cow<'_, [u8]>, MethodError> {
         Ok(match &reference {
             Some(r) => Cow::Owned(bind_reference(blob, r)?),

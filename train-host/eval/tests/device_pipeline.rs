@@ -253,3 +253,22 @@ fn a_cloud_onto_itself_is_the_identity() {
     assert!(angle_deg(&r.pose.rotation, &identity) < 0.1, "{r:?}");
     assert!(r.relative_residual < 1e-4, "{r:?}");
 }
+
+/// The template's stored feature is the feature a registration compares
+/// with: the template itself at its true pose lies at (near) zero feature
+/// distance (0.112 when the exporter centred the sample on its own
+/// centroid instead of the whole template's). Catches a
+/// template feature pooled or centred unlike a source (the shipped model
+/// centres its sources; templates here have more points than the
+/// network's sample).
+#[test]
+fn a_template_at_its_own_pose_is_at_zero_feature_distance() {
+    let template = sample(Shape::Ell, 600, 21);
+    let bound = pcrnet_train::template::bind(&shipped(), &template, 512).unwrap();
+    let model = Int8Model::from_bytes(&bound).unwrap();
+    let mut scratch = vec![0i8; model.host_scratch_len()];
+    let d = model
+        .feature_distance(&template, &pcrnet_core::Pose::IDENTITY, &mut scratch)
+        .unwrap();
+    assert!(d < 1e-3, "feature distance {d}");
+}

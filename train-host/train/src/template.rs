@@ -12,7 +12,7 @@ use pcrnet_core::format::{
     self, F32Payload, Int8Payload, MAX_TURNS, ModelKind, NearestTable, TemplateCloud, write_blob,
 };
 use pcrnet_core::template::{self, MAX_GRID};
-use pcrnet_core::{F32Model, Frame, Int8Model};
+use pcrnet_core::{F32Model, Frame, Int8Model, Pose};
 
 use crate::lk_solver;
 use crate::shapes::frame_of;
@@ -190,18 +190,6 @@ impl Reference {
         Ok(reference)
     }
 
-    /// The points of `cloud` (the template's, in some frame) its stored
-    /// feature and PointNetLK's Jacobian are encoded from: the sample a
-    /// network pass takes of a source under the default options
-    /// ([`pcrnet_core::Options::network_sample`]), so that template and
-    /// source are max-pooled over as many points.
-    fn network_sample(&self, cloud: &[[f32; 3]]) -> Vec<[f32; 3]> {
-        pcrnet_core::Options::default()
-            .network_sample(cloud)
-            .copied()
-            .collect()
-    }
-
     /// The closest-point table a blob stores beside the cloud, if any.
     pub fn table(&self) -> Option<NearestTable<'_>> {
         self.table.as_ref().map(OwnedTable::view)
@@ -343,13 +331,14 @@ pub fn int8_blob(
     let draft_trailer =
         lk_solver::trailer(ModelKind::Int8, reference.table(), zero_rows.as_deref());
     let model = Int8Model::from_payload(draft.clone(), draft_trailer)?;
-    let sample = reference.network_sample(&reference.points);
+    // The feature a registration compares a source with: centred on the
+    // whole template, pooled over the network's sample of it.
     let rows = lk
-        .then(|| lk_solver::int8_rows(&model, &sample))
+        .then(|| lk_solver::int8_rows(&model, &reference.points))
         .transpose()?;
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let feature: Vec<u8> = model
-        .encode(&sample, &mut scratch)?
+        .encode_moved(&reference.points, &Pose::IDENTITY, &mut scratch)?
         .iter()
         .map(|&v| v as u8)
         .collect();
@@ -380,14 +369,14 @@ pub fn f32_blob(
     let zero_rows = lk.then(|| lk_solver::placeholder_rows(payload.arch.feature_dim()));
     let draft_trailer = lk_solver::trailer(ModelKind::F32, reference.table(), zero_rows.as_deref());
     let model = F32Model::from_payload(draft.clone(), draft_trailer)?;
-    let sample = reference.network_sample(&reference.normalised());
+    let normalised = reference.normalised();
     let rows = lk
-        .then(|| lk_solver::f32_rows(&model, &sample))
+        .then(|| lk_solver::f32_rows(&model, &normalised))
         .transpose()?;
     let mut scratch = vec![0f32; model.tiled_scratch_len()];
     let feature: Vec<u8> = model
         .network()
-        .encode(&sample, &mut scratch)?
+        .encode_moved(&normalised, &Pose::IDENTITY, &mut scratch)?
         .iter()
         .flat_map(|v| v.to_le_bytes())
         .collect();
