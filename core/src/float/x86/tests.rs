@@ -74,7 +74,8 @@ fn tiled_encoder_matches_one_point_path() {
         let blob = random_f32_blob_into(seed, encoder, head, &mut arena, &mut out).unwrap();
         let model = F32Model::from_bytes(blob).unwrap();
         let mut rng = SplitMix64(seed);
-        for n in [1, 15, 16, 17, 100] {
+        // 600: the network's sample (encode_moved) strides every third point.
+        for n in [1, 15, 16, 17, 100, 600] {
             let cloud: Vec<[f32; 3]> = (0..n)
                 .map(|_| [0; 3].map(|_: i32| rng.uniform(-2.0, 2.0)))
                 .collect();
@@ -91,6 +92,20 @@ fn tiled_encoder_matches_one_point_path() {
                 let want = net.infer(&cloud, &mut small).unwrap();
                 let got = net.infer(&cloud, &mut tiled).unwrap();
                 assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits));
+                let moved = crate::Pose::IDENTITY;
+                let want = net
+                    .encode_moved(&cloud, &moved, &mut small)
+                    .unwrap()
+                    .to_vec();
+                let got = net
+                    .encode_moved(&cloud, &moved, &mut tiled)
+                    .unwrap()
+                    .to_vec();
+                assert_eq!(
+                    bits(&got),
+                    bits(&want),
+                    "{n} points sampled, centred {centre}"
+                );
             }
         }
     }
