@@ -113,6 +113,7 @@ fn table(raw: &[(String, MethodScore)]) -> Table {
             "of those explained",
             "ambiguous (all pairs)",
             "ambiguous, < 5° off",
+            "of those by a turn alone: rival / pose residual",
         ]
         .iter()
         .map(|s| s.to_string())
@@ -211,5 +212,23 @@ fn row(set: &str, s: &MethodScore) -> Vec<String> {
             count(&|p| p.ambiguous == Some(true) && p.rot_deg <= GOOD_BELOW_DEG),
             n,
         ),
+        turn_ratios(
+            s.pairs
+                .iter()
+                .filter(|p| p.rot_deg <= GOOD_BELOW_DEG)
+                .filter_map(|p| p.turn_only_ratio),
+        ),
     ]
+}
+
+/// How many ratios, and their range: `k (lo-hi)`, or `-` for none.
+fn turn_ratios(ratios: impl Iterator<Item = f64>) -> String {
+    let v: Vec<f64> = ratios.collect();
+    let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if v.is_empty() {
+        "-".to_string()
+    } else {
+        format!("{} ({lo:.2}-{hi:.2})", v.len())
+    }
 }

@@ -92,6 +92,11 @@ pub struct PairScore {
     /// turn, [`pcrnet_core::ambiguity`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambiguous: Option<bool>,
+    /// When the pose was reported ambiguous by a turn and not by a free
+    /// axis: the turned rival's plane residual over the pose's (what
+    /// [`pcrnet_core::ambiguity::TURN_RESIDUAL_RATIO`] bounds).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn_only_ratio: Option<f64>,
     /// The relative feature distance of the device pipeline's pose
     /// ([`pcrnet_core::Int8Model::feature_distance`], int8 blobs), or
     /// PointNetLK's at its final pose.
@@ -202,6 +207,10 @@ pub fn score(
                 ),
                 feature_distance,
                 ambiguous: check.map(|c| c.ambiguity.is_ambiguous()),
+                turn_only_ratio: check.filter(|c| c.ambiguity.axis.is_none()).and_then(|c| {
+                    let t = c.ambiguity.turn?;
+                    Some((t.relative_plane_residual / c.relative_plane_residual) as f64)
+                }),
                 explained: check
                     .filter(|c| c.ambiguity.is_ambiguous())
                     .map(|c| symmetry::explains(&c.ambiguity, &pose, &p.r_gt)),
