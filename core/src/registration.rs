@@ -323,7 +323,9 @@ pub(crate) struct Checked<'s> {
     pub degenerate: Option<Degeneracy>,
 }
 
-/// Checks `options` and `source` and derives the [`Checked`] parts.
+/// Checks `options` and `source` (every point finite: the network passes
+/// see a sample, scoring and ICP a subset) and derives the [`Checked`]
+/// parts.
 pub(crate) fn check<'s>(
     frame: &Frame,
     template: &Template<'_>,
@@ -334,6 +336,7 @@ pub(crate) fn check<'s>(
     if source.is_empty() {
         return Err(Error::EmptyCloud);
     }
+    all_finite(source)?;
     let subset = Subset::new(source, *frame, options.max_points);
     let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
     Ok(Checked { subset, degenerate })
@@ -363,8 +366,6 @@ pub(crate) fn run_checked(
     mut pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     let source = checked.subset.source;
-    // The passes see a sample: every point is checked here instead.
-    all_finite(source)?;
     let sample = Sample::new(source, options.network_points);
     let mut counts = PassCounts::default();
     let (network, passes, lk_iterations) = pose_steps(
@@ -398,7 +399,7 @@ pub(crate) fn run_checked(
 }
 
 /// [`Error::NonFiniteCoordinate`] for the first point with a NaN or
-/// infinite coordinate (paths without a network pass, which checks them).
+/// infinite coordinate.
 pub(crate) fn all_finite(source: &[[f32; 3]]) -> Result<()> {
     match source.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
         Some(index) => Err(Error::NonFiniteCoordinate { index }),
@@ -417,7 +418,6 @@ pub(crate) fn run_swept(
 ) -> Result<Registration> {
     sweep.validate()?;
     let checked = check(frame, template, source, options)?;
-    all_finite(source)?;
     let starts = crate::sweep::starts(frame, template, &checked.subset, sweep);
     let r = refine::resolve_starts(
         template,
@@ -441,7 +441,6 @@ pub(crate) fn run_from(
     options: &Options,
 ) -> Result<Registration> {
     let checked = check(frame, template, source, options)?;
-    all_finite(source)?;
     if !start.is_finite() {
         return Err(Error::InvalidPose);
     }

@@ -101,7 +101,6 @@ pub(crate) fn step(
     ) -> Result<(Pose, PassCounts)>,
 ) -> Result<Tracking> {
     let checked = registration::check(frame, template, source, options)?;
-    registration::all_finite(source)?;
     let [w, x, y, z] = previous.rotation;
     let norm = w * w + x * x + y * y + z * z;
     if !(previous.is_finite() && libm::fabsf(norm - 1.0) <= UNIT_TOLERANCE) {
