@@ -304,6 +304,10 @@ fn bad_blobs_bad_clouds_and_bad_options_get_their_own_status() {
             ..options
         },
         PcrnetOptions {
+            network_points: 0,
+            ..options
+        },
+        PcrnetOptions {
             icp_distance: f32::NAN,
             ..options
         },
