@@ -97,7 +97,7 @@ impl<'a> Template<'a> {
                 });
             }
         }
-        let table = table.map(|t| Table::new(t, len)).transpose()?;
+        let table = table.map(|t| Table::new(t, cloud.points)).transpose()?;
         let t = Template {
             cloud,
             len,
@@ -210,16 +210,14 @@ impl<'a> Template<'a> {
         (dot as f32 / norm, ni.map(|v| v as f32 / norm))
     }
 
-    /// A model-frame point on the int16 grid, `round(x / step)` by
-    /// `libm::roundf`, clamped to `-32767..=32767` (a clamped point is at
-    /// least `32767 step - max|template|` away from every template point,
-    /// so the clamp only matters beyond any correspondence distance).
+    /// A model-frame point on the int16 grid, `round(x / step)` (half away
+    /// from zero, [`crate::fixed::round_clamped_i16`]), clamped to
+    /// `-32767..=32767` (a clamped point is at least `32767 step -
+    /// max|template|` away from every template point, so the clamp only
+    /// matters beyond any correspondence distance). NaN (not produced by
+    /// finite inputs) maps to 0.
     pub fn quantize(&self, p: [f32; 3]) -> [i16; 3] {
-        p.map(|x| {
-            let r = libm::roundf(x / self.cloud.step);
-            // NaN (not produced by finite inputs) maps to 0 via `as`.
-            r.clamp(-32767.0, 32767.0) as i16
-        })
+        p.map(|x| crate::fixed::round_clamped_i16(x / self.cloud.step))
     }
 
     fn offset(&self, c: usize) -> usize {
@@ -280,26 +278,46 @@ impl<'a> Template<'a> {
     /// the nearest anywhere in the cell, ties included; a tie goes to the
     /// point the grid search would meet first: the one in the nearer grid
     /// shell around `q`'s cell, then the lower index (the list ascends).
+    ///
+    /// Not inlined, and the tie rule out of line: on its own the loop keeps
+    /// the query and the bound in registers instead of spilling the grid
+    /// walk's state.
+    #[inline(never)]
     fn nearest_listed(&self, list: &[u8], q: [i16; 3], limit: u64) -> Option<Neighbour> {
-        let mut best = Best {
-            index: usize::MAX,
-            bound: limit,
+        let [x, y, z] = q.map(i32::from);
+        // A limit above every listed distance (see `scan_list`) is one no
+        // distance reaches either.
+        let (index, bound, tied) = scan_list(
+            self.cloud.points,
+            list,
+            [x, y, z],
+            limit.min(u32::MAX as u64) as u32,
+        );
+        let index = if tied {
+            self.break_tie(list, q, bound)
+        } else {
+            index
         };
+        (index != usize::MAX).then_some(Neighbour {
+            index,
+            distance_squared: bound as u64,
+        })
+    }
+
+    /// Of the listed points at squared distance `d` from `q` (two or
+    /// more), the one the grid search would meet first: in the nearest
+    /// grid shell around `q`'s cell, then the lowest index.
+    #[cold]
+    #[inline(never)]
+    fn break_tie(&self, list: &[u8], q: [i16; 3], d: u32) -> usize {
+        let mut best = (i32::MAX, usize::MAX);
         for entry in list.chunks_exact(2) {
             let i = u16::from_le_bytes([entry[0], entry[1]]) as usize;
-            let d = distance_squared(self.point(i), q);
-            if d < best.bound
-                || (d == best.bound
-                    && best.index != usize::MAX
-                    && self.shell(i, q) < self.shell(best.index, q))
-            {
-                best = Best { index: i, bound: d };
+            if distance_squared(self.point(i), q) == d as u64 {
+                best = best.min((self.shell(i, q), i));
             }
         }
-        (best.index != usize::MAX).then_some(Neighbour {
-            index: best.index,
-            distance_squared: best.bound,
-        })
+        best.1
     }
 
     /// The grid shell around `q`'s (clamped) cell that holds point `i`:
@@ -433,6 +451,44 @@ impl Best {
             }
         }
     }
+}
+
+/// The first of the listed points (u16 little-endian indices into
+/// `points`, six bytes a point) strictly nearer to `q` than `bound`
+/// (squared steps): its index (`usize::MAX` if none), its squared
+/// distance (else `bound`), and whether another listed point lies at the
+/// same distance (then [`Template::nearest`] breaks the tie).
+///
+/// Squared distances in u32: every listed point lies within
+/// `table::MAX_REACH` steps of `q` along each axis (checked at load), so
+/// three squares stay below 2^32 and the wrapping operations never wrap.
+/// Not inlined: on its own the loop keeps the query and the bound in
+/// registers.
+#[inline(never)]
+fn scan_list(points: &[u8], list: &[u8], q: [i32; 3], mut bound: u32) -> (usize, u32, bool) {
+    let (mut index, mut tied) = (usize::MAX, false);
+    for entry in list.chunks_exact(2) {
+        let i = u16::from_le_bytes([entry[0], entry[1]]) as usize;
+        let [px, py, pz] = points.get(6 * i..6 * i + 6).map_or([0; 3], stored_point);
+        let (dx, dy, dz) = (
+            (px as i32 - q[0]) as u32,
+            (py as i32 - q[1]) as u32,
+            (pz as i32 - q[2]) as u32,
+        );
+        let d = dx
+            .wrapping_mul(dx)
+            .wrapping_add(dy.wrapping_mul(dy))
+            .wrapping_add(dz.wrapping_mul(dz));
+        if d <= bound {
+            // Equal to the limit before any point is found is no tie;
+            // the caller sees `index == usize::MAX` then.
+            tied = d == bound;
+            if !tied {
+                (index, bound) = (i, d);
+            }
+        }
+    }
+    (index, bound, tied && index != usize::MAX)
 }
 
 /// One axis of a search: the grid along it and the query's coordinate.

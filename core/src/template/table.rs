@@ -22,6 +22,14 @@ use crate::format::NearestTable;
 /// Most cells a table may have (its offsets then take 256 KB).
 pub const MAX_TABLE_CELLS: usize = 1 << 17;
 
+/// The farthest a listed point may lie from any place in its cell, along
+/// each axis, in steps: three squares of it sum to less than `2^32`, so a
+/// search over a list takes exact squared distances in 32 bits (one
+/// `MUL` and two `MLA` on a Cortex-M4 instead of 64-bit `SMLAL`s).
+/// [`Table::new`] refuses a table that breaks it; a list's points are
+/// near their cell (its nearest ones), far inside this.
+pub(super) const MAX_REACH: i32 = i16::MAX as i32;
+
 /// Where a table's cells lie: `dims` cubic cells of `edge` int16 steps per
 /// axis from `origin` (x slowest, z fastest).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -79,6 +87,16 @@ impl TableShape {
         self.dims.iter().map(|&d| d as usize).product()
     }
 
+    /// Whether `p` lies within [`MAX_REACH`] steps, along every axis, of
+    /// every place in cell `at`: a list may name it (see [`Table::new`]).
+    fn reaches(&self, at: [i32; 3], p: [i16; 3]) -> bool {
+        let (lo, hi) = self.cell_box(at);
+        (0..3).all(|k| {
+            let v = p[k] as i64;
+            v - lo[k] <= MAX_REACH as i64 && hi[k] - v <= MAX_REACH as i64
+        })
+    }
+
     /// The inclusive int16-step corners of cell `(i, j, k)`.
     fn cell_box(&self, at: [i32; 3]) -> ([i64; 3], [i64; 3]) {
         let lo = [0, 1, 2].map(|k| self.origin[k] as i64 + at[k] as i64 * self.edge as i64);
@@ -110,7 +128,8 @@ pub fn table_len(
 /// Builds the closest-point table of `shape` for `template` into
 /// `offsets` and `candidates` (sizes from [`table_len`]; `work` holds
 /// [`table_work_len`] slots). A cell whose list would be longer than
-/// `max_list` gets none: the grid search answers there. Deterministic; no
+/// `max_list`, or name a point more than [`MAX_REACH`] steps from some
+/// place in it along an axis, gets none: the grid search answers there. Deterministic; no
 /// allocation. Errors when a buffer is short or the table would hold more
 /// than 65,535 entries.
 pub fn build_table<'o>(
@@ -217,7 +236,10 @@ fn for_each_list(
                     // The most central point beats most; then all of them.
                     let dominated = beats(centre, a) || near.iter().any(|&b| beats(b, a));
                     if !dominated {
-                        if len == max_list {
+                        // Too long a list, or a point too far for the
+                        // search's 32-bit distances: the grid answers here.
+                        if len == max_list || !shape.reaches([i, j, k], template.point(a as usize))
+                        {
                             len = 0;
                             break;
                         }
@@ -244,12 +266,16 @@ pub(super) struct Table<'a> {
 }
 
 impl<'a> Table<'a> {
-    /// Checks a table against a template of `points` points: a box of
-    /// at most [`MAX_TABLE_CELLS`] cells, offsets that start at 0 and
-    /// ascend to the entry count, entries that name stored points in
-    /// ascending order within each cell. (That each list holds its cell's
-    /// nearest points is the builder's promise, as the grid's cells are.)
-    pub(super) fn new(t: NearestTable<'a>, points: usize) -> Result<Self> {
+    /// Checks a table against a template's stored points (six bytes each,
+    /// as in the blob): a box of at most [`MAX_TABLE_CELLS`] cells, offsets
+    /// that start at 0 and ascend to the entry count, entries that name
+    /// stored points in ascending order within each cell, each point within
+    /// [`MAX_REACH`] steps along every axis of every place in its cell (so
+    /// a search over a list may take squared distances in 32 bits). (That
+    /// each list holds its cell's nearest points is the builder's promise,
+    /// as the grid's cells are.)
+    pub(super) fn new(t: NearestTable<'a>, stored: &[u8]) -> Result<Self> {
+        let points = stored.len() / 6;
         let bad = |what| Err(Error::InconsistentDimensions { what });
         let cells: usize = t.dims.iter().map(|&d| d as usize).product();
         if cells == 0 || cells > MAX_TABLE_CELLS || t.edge == 0 {
@@ -269,7 +295,15 @@ impl<'a> Table<'a> {
         if table.offset(0) != 0 {
             return bad("closest-point table offsets");
         }
-        for c in 0..cells {
+        let shape = TableShape {
+            origin: t.origin,
+            edge: t.edge,
+            dims: t.dims,
+        };
+        let [nx, ny, nz] = t.dims.map(i32::from);
+        let cell_of =
+            (0..nx).flat_map(|x| (0..ny).flat_map(move |y| (0..nz).map(move |z| [x, y, z])));
+        for (c, cell) in cell_of.enumerate() {
             let end = table.offset(c + 1);
             if end < start || 2 * end > t.candidates.len() {
                 return bad("closest-point table offsets");
@@ -279,6 +313,12 @@ impl<'a> Table<'a> {
                 let i = u16::from_le_bytes([e[0], e[1]]) as usize;
                 if i >= points || last.is_some_and(|l| l >= i) {
                     return bad("closest-point table entries");
+                }
+                let p = stored
+                    .get(6 * i..6 * i + 6)
+                    .map_or([0; 3], super::stored_point);
+                if !shape.reaches(cell, p) {
+                    return bad("closest-point table entry too far from its cell");
                 }
                 last = Some(i);
             }
@@ -445,6 +485,38 @@ mod tests {
         });
     }
 
+    /// Points over the whole int16 range: the lists keep to points within
+    /// `MAX_REACH` of their cell (cells that would need a farther one are
+    /// left to the grid), the table is accepted, and the search's 32-bit
+    /// distances match the grid search's everywhere, up to the largest.
+    #[test]
+    fn wide_templates_keep_lists_within_reach() {
+        let mut rng = SplitMix64(19);
+        let mut points: Vec<[i16; 3]> = (0..60)
+            .map(|_| [0; 3].map(|_: i32| rng.int(-32000, -30000) as i16))
+            .collect();
+        points.extend((0..60).map(|_| [0; 3].map(|_: i32| rng.int(30000, 32000) as i16)));
+        with_tables(&points, 4, 12, 0, 64, |plain, tabled| {
+            let (mut listed, mut far) = (0, 0u64);
+            for _ in 0..4000 {
+                let q = [0; 3].map(|_: i32| rng.int(-32767, 32767) as i16);
+                let want = plain.nearest(q, u64::MAX);
+                assert_eq!(tabled.nearest(q, u64::MAX), want, "{q:?}");
+                if tabled.table.and_then(|t| t.list(q)).is_some() {
+                    listed += 1;
+                    far = far.max(want.map_or(0, |n| n.distance_squared));
+                }
+            }
+            assert!(listed > 500, "{listed} of 4000 queries in the table");
+            assert!(far > 1 << 31, "largest listed distance {far}");
+            let table = tabled.table().unwrap();
+            let empty = (0..table.offsets.len() / 2 - 1)
+                .filter(|&c| tabled.table.unwrap().offset(c) == tabled.table.unwrap().offset(c + 1))
+                .count();
+            assert!(empty > 0, "no cell left to the grid");
+        });
+    }
+
     /// Tables that do not fit their template are refused at load.
     #[test]
     fn rejects_inconsistent_tables() {
@@ -461,6 +533,19 @@ mod tests {
                 candidates: &entries,
                 ..good
             }));
+            // One cell listing point 0 (at the origin): accepted where the
+            // point is within `MAX_REACH` of the whole cell, refused where
+            // the cell starts 32768 steps from it.
+            let (offsets, entries) = ([0u8, 0, 1, 0], [0u8, 0]);
+            let one = |origin| NearestTable {
+                origin,
+                edge: 200,
+                dims: [1, 1, 1],
+                offsets: &offsets,
+                candidates: &entries,
+            };
+            assert!(!refused(one([-100, -100, -100])));
+            assert!(refused(one([-32768, -100, -100])));
             // Offsets past the entries, or of the wrong count.
             let mut offsets = good.offsets.to_vec();
             let last = offsets.len() - 2;
