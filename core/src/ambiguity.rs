@@ -162,7 +162,7 @@ fn least_stiff_twist(
     pose: &Pose,
     lim: u64,
 ) -> Option<([f32; 3], [f32; 3], f32)> {
-    let sys = refine::plane_system(template, subset, pose, lim, LinearisedAt::Template);
+    let sys = refine::plane_system::<true>(template, subset, pose, lim, LinearisedAt::Template);
     if sys.pairs < 6 {
         return None;
     }

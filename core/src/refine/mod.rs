@@ -299,9 +299,9 @@ pub(crate) struct PlaneSystem {
     /// Pairs summed.
     pub pairs: u32,
     /// The sum of the points `x` the rotation was linearised at (model
-    /// units, in point order).
+    /// units, in point order); zero unless asked for (`MOMENTS`).
     pub sum: [f32; 3],
-    /// The sum of their squared norms.
+    /// The sum of their squared norms; zero unless asked for.
     pub sum_squares: f32,
 }
 
@@ -328,8 +328,10 @@ pub(crate) fn for_each_plane_pair(
 }
 
 /// Accumulates the [`PlaneSystem`] of `pose` on the subset, pairing points
-/// within the squared step limit `lim`.
-pub(crate) fn plane_system(
+/// within the squared step limit `lim`; its moments (`sum`,
+/// `sum_squares`) only with `MOMENTS` (an ICP step has no use for them,
+/// and without them the loop's sums fit the FPU's registers better).
+pub(crate) fn plane_system<const MOMENTS: bool>(
     template: &Template<'_>,
     subset: &Subset<'_>,
     pose: &Pose,
@@ -365,10 +367,12 @@ pub(crate) fn plane_system(
             }
             sys.b[i] += j[i] * r;
         }
-        for (s, v) in sys.sum.iter_mut().zip(p) {
-            *s += v;
+        if MOMENTS {
+            for (s, v) in sys.sum.iter_mut().zip(p) {
+                *s += v;
+            }
+            sys.sum_squares += p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
         }
-        sys.sum_squares += p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
         sys.pairs += 1;
     });
     sys
@@ -382,7 +386,7 @@ pub(crate) fn plane_system(
 /// applied as the exact rotation of angle `|omega|`. `None` with fewer
 /// than 6 pairs or a singular system.
 fn plane_step(template: &Template<'_>, subset: &Subset<'_>, pose: &Pose, lim: u64) -> Option<Pose> {
-    let sys = plane_system(template, subset, pose, lim, LinearisedAt::Source);
+    let sys = plane_system::<false>(template, subset, pose, lim, LinearisedAt::Source);
     if sys.pairs < 6 {
         return None;
     }

@@ -87,21 +87,32 @@ impl TableShape {
         self.dims.iter().map(|&d| d as usize).product()
     }
 
-    /// Whether `p` lies within [`MAX_REACH`] steps, along every axis, of
-    /// every place in cell `at`: a list may name it (see [`Table::new`]).
-    fn reaches(&self, at: [i32; 3], p: [i16; 3]) -> bool {
-        let (lo, hi) = self.cell_box(at);
-        (0..3).all(|k| {
-            let v = p[k] as i64;
-            v - lo[k] <= MAX_REACH as i64 && hi[k] - v <= MAX_REACH as i64
-        })
-    }
-
     /// The inclusive int16-step corners of cell `(i, j, k)`.
     fn cell_box(&self, at: [i32; 3]) -> ([i64; 3], [i64; 3]) {
         let lo = [0, 1, 2].map(|k| self.origin[k] as i64 + at[k] as i64 * self.edge as i64);
         (lo, lo.map(|v| v + self.edge as i64 - 1))
     }
+}
+
+/// Where a point must lie to be within [`MAX_REACH`] steps, along every
+/// axis, of every place in the cell of inclusive corners `lo` and `hi`
+/// ([`TableShape::cell_box`]): per axis `hi - MAX_REACH ..= lo +
+/// MAX_REACH`. Only such points may be listed (see [`Table::new`]).
+fn reach_span((lo, hi): ([i64; 3], [i64; 3])) -> [(i32, i32); 3] {
+    let clamp = |v: i64| v.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+    [0, 1, 2].map(|k| {
+        (
+            clamp(hi[k] - MAX_REACH as i64),
+            clamp(lo[k] + MAX_REACH as i64),
+        )
+    })
+}
+
+/// Whether `p` lies in a [`reach_span`].
+#[inline(always)]
+fn within(span: [(i32, i32); 3], p: [i16; 3]) -> bool {
+    let inside = |(lo, hi): (i32, i32), v: i16| lo <= v as i32 && v as i32 <= hi;
+    inside(span[0], p[0]) && inside(span[1], p[1]) && inside(span[2], p[2])
 }
 
 /// `u16` slots of work [`build_table`] and [`table_len`] need for a
@@ -238,7 +249,8 @@ fn for_each_list(
                     if !dominated {
                         // Too long a list, or a point too far for the
                         // search's 32-bit distances: the grid answers here.
-                        if len == max_list || !shape.reaches([i, j, k], template.point(a as usize))
+                        if len == max_list
+                            || !within(reach_span((lo, hi)), template.point(a as usize))
                         {
                             len = 0;
                             break;
@@ -301,28 +313,33 @@ impl<'a> Table<'a> {
             dims: t.dims,
         };
         let [nx, ny, nz] = t.dims.map(i32::from);
-        let cell_of =
-            (0..nx).flat_map(|x| (0..ny).flat_map(move |y| (0..nz).map(move |z| [x, y, z])));
-        for (c, cell) in cell_of.enumerate() {
-            let end = table.offset(c + 1);
-            if end < start || 2 * end > t.candidates.len() {
-                return bad("closest-point table offsets");
-            }
-            let mut last = None;
-            for e in t.candidates[2 * start..2 * end].chunks_exact(2) {
-                let i = u16::from_le_bytes([e[0], e[1]]) as usize;
-                if i >= points || last.is_some_and(|l| l >= i) {
-                    return bad("closest-point table entries");
+        let mut c = 0;
+        for x in 0..nx {
+            for y in 0..ny {
+                for z in 0..nz {
+                    let span = reach_span(shape.cell_box([x, y, z]));
+                    let end = table.offset(c + 1);
+                    if end < start || 2 * end > t.candidates.len() {
+                        return bad("closest-point table offsets");
+                    }
+                    let mut last = None;
+                    for e in t.candidates[2 * start..2 * end].chunks_exact(2) {
+                        let i = u16::from_le_bytes([e[0], e[1]]) as usize;
+                        if i >= points || last.is_some_and(|l| l >= i) {
+                            return bad("closest-point table entries");
+                        }
+                        let p = stored
+                            .get(6 * i..6 * i + 6)
+                            .map_or([0; 3], super::stored_point);
+                        if !within(span, p) {
+                            return bad("closest-point table entry too far from its cell");
+                        }
+                        last = Some(i);
+                    }
+                    start = end;
+                    c += 1;
                 }
-                let p = stored
-                    .get(6 * i..6 * i + 6)
-                    .map_or([0; 3], super::stored_point);
-                if !shape.reaches(cell, p) {
-                    return bad("closest-point table entry too far from its cell");
-                }
-                last = Some(i);
             }
-            start = end;
         }
         if 2 * start != t.candidates.len() {
             return bad("closest-point table offsets");
