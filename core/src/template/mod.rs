@@ -345,6 +345,13 @@ impl<'a> Template<'a> {
             v: v as i32,
         };
         let axes = [axis(ox, x), axis(oy, y), axis(oz, z)];
+        // A query whose distance to the grid's box (which holds every
+        // point) is already at the limit has no point below it: the shells
+        // below would find none either, after walking them all.
+        let outside: u64 = axes.iter().map(|a| a.outside(self.grid) as u64).sum();
+        if outside >= limit {
+            return None;
+        }
         let centre = axes.map(|a| self.axis_cell(a.origin, a.v));
         let mut best = Best {
             index: usize::MAX,
@@ -507,6 +514,16 @@ impl Axis {
         self.origin + c * self.cell
     }
 
+    /// The squared distance from the query to the grid's `grid` cells
+    /// along this axis (0 inside them), capped at `u32::MAX` as
+    /// [`Self::slab`] is.
+    #[inline(always)]
+    fn outside(self, grid: i32) -> u32 {
+        let (lo, hi) = (self.corner(0), self.corner(grid) - 1);
+        let d = (lo - self.v).max(self.v - hi).max(0) as u32;
+        if d > 0xFFFF { u32::MAX } else { d * d }
+    }
+
     /// The squared distance from the query to the slab of cells `c` along
     /// this axis (0 inside it), capped at `u32::MAX`: a cell's box is at
     /// least the sum of its three slabs' away. (The cap can only make a
@@ -589,8 +606,11 @@ mod tests {
                     let n = t.nearest(q, u64::MAX).unwrap();
                     assert_eq!(n.distance_squared, brute(&points, q));
                     assert_eq!(distance_squared(t.point(n.index), q), n.distance_squared);
-                    // With a limit, points at or beyond it are not returned.
+                    // With a limit, points at or beyond it are not returned;
+                    // just above it the same point is (also from outside
+                    // the grid's box, where the search may stop early).
                     assert_eq!(t.nearest(q, n.distance_squared), None);
+                    assert_eq!(t.nearest(q, n.distance_squared + 1), Some(n));
                 }
             });
         }
