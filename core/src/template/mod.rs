@@ -278,11 +278,6 @@ impl<'a> Template<'a> {
     /// the nearest anywhere in the cell, ties included; a tie goes to the
     /// point the grid search would meet first: the one in the nearer grid
     /// shell around `q`'s cell, then the lower index (the list ascends).
-    ///
-    /// Not inlined, and the tie rule out of line: on its own the loop keeps
-    /// the query and the bound in registers instead of spilling the grid
-    /// walk's state.
-    #[inline(never)]
     fn nearest_listed(&self, list: &[u8], q: [i16; 3], limit: u64) -> Option<Neighbour> {
         let [x, y, z] = q.map(i32::from);
         // A limit above every listed distance (see `scan_list`) is one no
