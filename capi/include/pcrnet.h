@@ -291,10 +291,12 @@ typedef struct {
   uint32_t lk_iterations;
   /*
    Most source points each network pass and LK step encodes (every
-   k-th point; at least 1). The default 256 halves the network's cost
-   at 512 points with the same accuracy; exported template features
-   are pooled over 256 of the template's points, so other values pool
-   the head's two inputs over different counts.
+   k-th point; at least 1). The default 128 (a blob with a head; 256
+   for a PointNetLK blob, which `pcrnet_options_for_model` sets) is a
+   quarter of the network's cost at 512 points with the same accuracy;
+   exported template features are pooled over that many of the
+   template's points, so other values pool the two compared features
+   over different counts.
    */
   uint32_t network_points;
 } PcrnetOptions;
@@ -728,8 +730,8 @@ const char *pcrnet_status_message(int32_t status);
  in the network's feature space: the relative distance between the
  encoder's feature of the moved points and the template's (0: the same
  feature; see `Int8Model::feature_distance`). One encoder pass over at most
- 256 points (every k-th: the sample a default registration encodes, as
- the template's feature was pooled). Writes it to `out` on success; a pose that is not finite is
+ 128 points (256 for a PointNetLK blob; every k-th: the sample the blob's
+ registrations encode, as the template's feature was pooled). Writes it to `out` on success; a pose that is not finite is
  `PCRNET_ERROR_NON_FINITE_RESULT`.
 
  # Safety

@@ -11,8 +11,8 @@ use crate::{PcrnetModel, cloud, scratch_mut, slice};
 /// in the network's feature space: the relative distance between the
 /// encoder's feature of the moved points and the template's (0: the same
 /// feature; see `Int8Model::feature_distance`). One encoder pass over at most
-/// 256 points (every k-th: the sample a default registration encodes, as
-/// the template's feature was pooled). Writes it to `out` on success; a pose that is not finite is
+/// 128 points (256 for a PointNetLK blob; every k-th: the sample the blob's
+/// registrations encode, as the template's feature was pooled). Writes it to `out` on success; a pose that is not finite is
 /// `PCRNET_ERROR_NON_FINITE_RESULT`.
 ///
 /// # Safety

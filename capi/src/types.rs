@@ -144,10 +144,12 @@ pub struct PcrnetOptions {
     /// 0 and one hypothesis; LK then ICP: both.
     pub lk_iterations: u32,
     /// Most source points each network pass and LK step encodes (every
-    /// k-th point; at least 1). The default 256 halves the network's cost
-    /// at 512 points with the same accuracy; exported template features
-    /// are pooled over 256 of the template's points, so other values pool
-    /// the head's two inputs over different counts.
+    /// k-th point; at least 1). The default 128 (a blob with a head; 256
+    /// for a PointNetLK blob, which `pcrnet_options_for_model` sets) is a
+    /// quarter of the network's cost at 512 points with the same accuracy;
+    /// exported template features are pooled over that many of the
+    /// template's points, so other values pool the two compared features
+    /// over different counts.
     pub network_points: u32,
 }
 

@@ -325,7 +325,9 @@ fn centring_models_see_the_centred_source() {
         Int8Model::from_bytes(&plain).unwrap(),
     );
     assert!(mc.centres_source() && !mp.centres_source());
-    let pts: Vec<[f32; 3]> = cloud(82, 200, 0.5)
+    // No more points than the network's sample, so `network_pose` encodes
+    // every one of them, as `infer` does.
+    let pts: Vec<[f32; 3]> = cloud(82, pcrnet_core::registration::NETWORK_POINTS, 0.5)
         .iter()
         .map(|p| [p[0] + 1.0, p[1] - 0.7, p[2] + 0.3])
         .collect();
@@ -474,15 +476,17 @@ fn the_network_encodes_a_sample_and_every_point_is_checked() {
     // others are there or not (this random model does not centre its
     // sources; one that does takes the centroid of the whole cloud), with
     // scoring on the same 200 points.
-    let alone = model
-        .register(&sample, &Options::network_only(), &mut s)
-        .unwrap();
+    let network_only = Options {
+        network_points: 256,
+        ..Options::network_only()
+    };
+    let alone = model.register(&sample, &network_only, &mut s).unwrap();
     let among = model
         .register(
             &pts,
             &Options {
                 max_points: 200,
-                ..Options::network_only()
+                ..network_only
             },
             &mut s,
         )

@@ -75,21 +75,25 @@ fn unusual_options() -> Options {
 }
 
 /// PointNetLK alone: `steps` LK steps from the centring start, the start
-/// kept (one hypothesis, no ICP).
+/// kept (one hypothesis, no ICP), on a headless blob's sample
+/// (`registration::network_points(false)`, as `trained_options` sets it).
 pub fn lk_only(steps: usize) -> Options {
     Options {
         passes: 0,
         lk_iterations: steps,
+        network_points: pcrnet_core::registration::network_points(false),
         ..Options::network_only()
     }
 }
 
 /// `passes` network passes, then `steps` LK steps, then the default
-/// hypotheses and ICP.
+/// hypotheses and ICP; the sample of a blob with a head when `passes > 0`,
+/// else a headless one's.
 fn lk_then_default(passes: usize, steps: usize) -> Options {
     Options {
         passes,
         lk_iterations: steps,
+        network_points: pcrnet_core::registration::network_points(passes > 0),
         ..Options::default()
     }
 }

@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::format::{self, F32Layer, F32Payload, Frame, ModelKind, Trailer, expect_len};
 use crate::lk::Solver;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, NETWORK_POINTS, Options, PassCounts, Registration, Sample, Step};
+use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -492,8 +492,9 @@ impl<P: Params> F32Network<P> {
 
     /// Encodes `source` as a registration's network pass does: centred on
     /// the whole cloud first if the network says so, then moved by
-    /// `motion`, max-pooled over the default sample of [`NETWORK_POINTS`]
-    /// points: the exporter's encodings of the template's stored feature
+    /// `motion`, max-pooled over the sample of
+    /// [`registration::network_points`] points (the blob's own: with a
+    /// head or without): the exporter's encodings of the template's stored feature
     /// (`motion` the identity) and of its six small moves for PointNetLK's
     /// Jacobian. ([`Self::encode`] pools every point it is given.)
     pub fn encode_moved<'s>(
@@ -504,7 +505,8 @@ impl<P: Params> F32Network<P> {
     ) -> Result<&'s [f32]> {
         let centring = pose::centring(source, self.centring(), &Frame::IDENTITY)?;
         let map = PointMap::new(Frame::IDENTITY, &centring.then(motion));
-        self.encode_mapped(Sample::new(source, NETWORK_POINTS), &map, scratch)
+        let points = registration::network_points(self.has_head());
+        self.encode_mapped(Sample::new(source, points), &map, scratch)
     }
 
     /// Encodes `sample`, each point first moved by `map`, into its global

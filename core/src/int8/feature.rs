@@ -7,7 +7,7 @@
 use super::{Int8Model, Ready};
 use crate::error::{Error, Result};
 use crate::pose::{PointMap, Pose};
-use crate::registration::{self, NETWORK_POINTS, Sample};
+use crate::registration::{self, Sample};
 
 impl Int8Model<'_> {
     /// The relative feature distance of `source` moved by `pose` (user
@@ -17,9 +17,9 @@ impl Int8Model<'_> {
     /// zero point cancels in the difference), sums of squares in f32 in
     /// feature order, one `libm::sqrtf` each. The source is not centred:
     /// the pose already places it on the template. The encoder sees the
-    /// sample a default registration's network pass takes
-    /// ([`crate::registration::NETWORK_POINTS`] points at most, every k-th),
-    /// as the template's feature was pooled: one encoder pass over it (the
+    /// sample the blob's network passes and LK steps take
+    /// ([`crate::registration::network_points`] points at most, every
+    /// k-th), as the template's feature was pooled: one encoder pass over it (the
     /// network's cost without its head); bit-exact on every target.
     ///
     /// Errors as [`Self::encode`]; [`Error::NonFiniteResult`] for a pose
@@ -37,7 +37,7 @@ impl Int8Model<'_> {
         registration::all_finite(source)?;
         let tile = self.tile_for(scratch.len())?;
         let map = PointMap::new(self.p.frame, &self.p.frame.pose_to_model(pose));
-        let sample = Sample::new(source, NETWORK_POINTS);
+        let sample = Sample::new(source, registration::network_points(self.has_head()));
         let (feature, _) = self.encode_mapped(sample, &map, tile, scratch, Ready::default())?;
         let (zero, scale) = self
             .p

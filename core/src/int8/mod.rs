@@ -43,7 +43,7 @@ use crate::kernel::{Requant, bytes_of};
 use crate::lk::Solver;
 use crate::locate::Start;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::registration::{self, NETWORK_POINTS, Options, PassCounts, Registration, Sample, Step};
+use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
 use crate::template::Template;
 use crate::track::{self, Tracking};
 
@@ -434,8 +434,9 @@ impl<'a> Int8Model<'a> {
 
     /// Encodes `source` as a registration's network pass does: centred on
     /// the whole cloud's centroid first if the model says so, then moved
-    /// by `motion` (model frame), max-pooled over the default sample of
-    /// [`NETWORK_POINTS`] points (every k-th), into its int8 global feature
+    /// by `motion` (model frame), max-pooled over the sample of
+    /// [`registration::network_points`] points (every k-th; the blob's own:
+    /// with a head or without), into its int8 global feature
     /// (a view into `scratch`). How the exporter encodes the template's
     /// stored feature (`motion` the identity) and its six small moves for
     /// PointNetLK's Jacobian, as a device LK step encodes a moved source.
@@ -449,7 +450,7 @@ impl<'a> Int8Model<'a> {
         let tile = self.tile_for(scratch.len())?;
         let (centring, _) = self.centred(source)?;
         let map = PointMap::new(self.p.frame, &centring.then(motion));
-        let sample = Sample::new(source, NETWORK_POINTS);
+        let sample = Sample::new(source, registration::network_points(self.has_head()));
         Ok(self
             .encode_mapped(sample, &map, tile, scratch, Ready::default())?
             .0)

@@ -25,7 +25,8 @@ pub(crate) struct DeviceModel {
     pub(crate) template_points: usize,
     /// The method the flags describe.
     pub(crate) method: Method,
-    /// The device options, passes as the blob was trained when not given.
+    /// The device options, counts as the blob was trained when not given
+    /// (`register::or_trained`).
     pub(crate) options: Options,
 }
 
@@ -80,11 +81,8 @@ impl DeviceModel {
         };
         let trained = Int8Model::from_bytes(&blob)
             .with_context(|| label.clone())?
-            .trained_passes();
-        let mut device = method.device_options();
-        if device.passes == 0 {
-            device.passes = trained;
-        }
+            .trained_options();
+        let device = pcrnet_eval::register::or_trained(&method.device_options(), trained);
         Ok(DeviceModel {
             blob,
             label,

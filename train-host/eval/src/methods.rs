@@ -100,7 +100,8 @@ pub struct Method {
     #[serde(default = "default_max_points")]
     pub max_points: usize,
     /// Most source points each network pass and LK step of the device
-    /// pipeline encodes.
+    /// pipeline encodes (0: as many as the blob's template feature was
+    /// pooled over, `registration::network_points`).
     #[serde(default = "default_network_points")]
     pub network_points: usize,
     /// What the device pipeline's ICP minimises.
@@ -149,8 +150,9 @@ fn default_max_points() -> usize {
     pcrnet_core::Options::default().max_points
 }
 
+/// 0: the blob's own ([`crate::register::or_trained`]).
 fn default_network_points() -> usize {
-    pcrnet_core::Options::default().network_points
+    0
 }
 
 fn default_icp_distance() -> f32 {

@@ -64,8 +64,23 @@ fn model_for(blob: &[u8], template: Option<Bound<'_>>) -> Result<Vec<u8>, Templa
     }
 }
 
-/// The device pipeline on the host: see the module docs. `options.passes`
-/// 0 means the passes the blob was trained for.
+/// `options` with each count left at 0 (passes, LK steps, network points)
+/// taken from the blob's `trained` options (`trained_options`: for a blob
+/// without a head, PointNetLK, no network pass, its trained LK steps and
+/// its larger network sample).
+pub fn or_trained(options: &Options, trained: Options) -> Options {
+    let pick = |asked: usize, trained: usize| if asked == 0 { trained } else { asked };
+    Options {
+        passes: pick(options.passes, trained.passes),
+        lk_iterations: pick(options.lk_iterations, trained.lk_iterations),
+        network_points: pick(options.network_points, trained.network_points),
+        ..*options
+    }
+}
+
+/// The device pipeline on the host: see the module docs. A count of 0 in
+/// `options` (passes, LK steps, network points) means the blob's own
+/// ([`or_trained`]).
 pub fn pipeline(
     blob: &[u8],
     template: Option<Bound<'_>>,
@@ -73,15 +88,7 @@ pub fn pipeline(
     options: &Options,
 ) -> Result<(Registration, Precision), TemplateError> {
     let blob = model_for(blob, template)?;
-    // A count of 0 (passes, LK steps): as the blob was trained
-    // (`trained_options`: for a blob without a head, PointNetLK, no network
-    // pass and its trained LK steps).
-    let or_trained = |asked: usize, trained: usize| if asked == 0 { trained } else { asked };
-    let with = |trained: Options| Options {
-        passes: or_trained(options.passes, trained.passes),
-        lk_iterations: or_trained(options.lk_iterations, trained.lk_iterations),
-        ..*options
-    };
+    let with = |trained: Options| or_trained(options, trained);
     match Int8Model::from_bytes(&blob) {
         Ok(model) => {
             let mut scratch = vec![0i8; model.host_scratch_len()];

@@ -116,12 +116,13 @@ fn degenerate_and_hostile_sources_are_errors_or_flagged() {
     assert_eq!(check("planar", &plane).unwrap().degenerate, None);
     // Stray points far away (issue 10, item 7): left out of the network
     // and of the centring, counted, and the pose is the clean cloud's.
-    // Both lie where the network's sample takes them (every third point
-    // of 514 at the default `network_points`).
+    // Both lie where the network's sample takes them (every k-th point at
+    // the default `network_points`).
     let clean = random_transform(&template, 20.0, 0.1, 3);
+    let k = (clean.len() + 2).div_ceil(Options::default().network_points);
     let mut stray = clean.clone();
-    stray.insert(99, [40.0, 0.0, 0.0]);
-    stray.push([1e9, -1e9, 5.0]);
+    stray.insert(20 * k, [40.0, 0.0, 0.0]);
+    stray.insert(100 * k, [1e9, -1e9, 5.0]);
     let sampled = Options::default()
         .network_sample(&stray)
         .filter(|p| p[0] >= 40.0)

@@ -75,7 +75,9 @@ fn measure(enc: &[u16], head: &[u16], seed: u64, coarsen: Option<f32>) -> Errors
         let mut deq = vec![0f32; qi.feature.len()];
         q.dequantize_feature(qi.feature, &mut deq);
         let qhead = q.head_to_real(&qi.head);
-        let qpose = q.pose(&qi.head).unwrap();
+        // Both poses from `network_pose`: on the sample a registration
+        // encodes, over as many points as the template's stored feature.
+        let (qpose, _) = q.network_pose(&qsrc, 1, 0.0, &mut qs).unwrap();
         // The template's frame is (nearly) the identity: compare in it.
         let ff = f.network().encode(&src, &mut fs).unwrap().to_vec();
         let fhead = f.network().infer(&src, &mut fs).unwrap();
@@ -100,9 +102,12 @@ fn measure(enc: &[u16], head: &[u16], seed: u64, coarsen: Option<f32>) -> Errors
 fn int8_tracks_f32_within_tolerance() {
     // Tolerances, worst case over 64 clouds and two random (untrained)
     // architectures: relative L2 error of the global feature <= 3%, of the
-    // raw head output <= 6%, rotation difference <= 5 degrees, relative
-    // translation difference <= 6%. (A random head amplifies feature errors
-    // more than a trained one; trained-model figures are in the README.)
+    // raw head output <= 6% (both on every point), rotation difference <= 6
+    // degrees, relative translation difference <= 8% (the pose on the
+    // network's 128-point sample, as a registration takes it: measured 3.2
+    // / 5.1 degrees and 4.8% / 7.0%; on 256 points these bounds were 5
+    // degrees and 6%). (A random head amplifies feature errors more than a
+    // trained one; trained-model figures are in the README.)
     for (enc, head, seed) in [
         (&[32u16, 64, 128, 256][..], &[256u16, 128, 64][..], 1u64),
         (&[64, 64, 64, 128, 1024][..], &[1024, 512, 256][..], 2),
@@ -114,8 +119,8 @@ fn int8_tracks_f32_within_tolerance() {
         );
         assert!(e.feature <= 0.03, "feature error {}", e.feature);
         assert!(e.head <= 0.06, "head error {}", e.head);
-        assert!(e.rot_deg <= 5.0, "rotation error {}", e.rot_deg);
-        assert!(e.trans <= 0.06, "translation error {}", e.trans);
+        assert!(e.rot_deg <= 6.0, "rotation error {}", e.rot_deg);
+        assert!(e.trans <= 0.08, "translation error {}", e.trans);
     }
 }
 
