@@ -111,7 +111,7 @@ fn main() -> ! {
                 register_stack,
                 stack::in_use(baseline)
             );
-            // locate(&model, &counter, SCRATCH_BUF);
+            locate(&model, &counter, SCRATCH_BUF);
             match result {
                 Ok(r) if r.reliable => {
                     log!("pose reliable: acting on it");
