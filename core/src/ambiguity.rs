@@ -33,7 +33,7 @@
 use crate::eigen;
 use crate::format::Frame;
 use crate::pose::Pose;
-use crate::refine::{self, LinearisedAt, Resolved, Subset};
+use crate::refine::{self, Resolved, Subset};
 use crate::template::Template;
 
 /// A rotation of the source about [`FreeAxis`]'s axis with stiffness below
@@ -122,7 +122,7 @@ pub fn assess(
 /// The least stiff rotation axis at `pose` if it is free.
 ///
 /// The normal equations are linearised at the matched template points
-/// ([`LinearisedAt::Template`]): about a surface of revolution's axis
+/// ([`refine::plane_system`]): about a surface of revolution's axis
 /// `q x n` then has no component at all, whatever the source's noise.
 /// The rotation block of the point-to-plane normal equations with the
 /// translation eliminated (its Schur complement
@@ -162,7 +162,7 @@ fn least_stiff_twist(
     pose: &Pose,
     lim: u64,
 ) -> Option<([f32; 3], [f32; 3], f32)> {
-    let sys = refine::plane_system::<true>(template, subset, pose, lim, LinearisedAt::Template);
+    let sys = refine::plane_system(template, subset, pose, lim);
     if sys.pairs < 6 {
         return None;
     }

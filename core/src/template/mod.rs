@@ -195,19 +195,31 @@ impl<'a> Template<'a> {
     }
 
     /// How far `q` (int16 steps) lies from the tangent plane at point `i`,
-    /// `n . (point_i - q)` in steps (signed), and that unit normal. The dot
-    /// product is exact in integers; the one division by `|n|` rounds.
+    /// `n . (point_i - q)` in steps (signed), and that unit normal: the
+    /// [`Self::stored_plane_offset`] divided by the stored normal's length
+    /// (one `libm::sqrtf`, four divisions, each rounding once).
     pub fn plane_offset(&self, i: usize, q: [i16; 3]) -> (f32, [f32; 3]) {
-        let (t, ni) = (self.point(i), self.normal(i));
-        let norm = libm::sqrtf((ni[0] * ni[0] + ni[1] * ni[1] + ni[2] * ni[2]) as f32);
-        // Exact in i32: |t - q| <= 65534 and |n| <= 128 per axis, so the
+        let (dot, n) = self.stored_plane_offset(i, q);
+        let norm = libm::sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        (dot / norm, n.map(|v| v / norm))
+    }
+
+    /// [`Self::plane_offset`] with the normal as stored (127 times a unit
+    /// vector, each component rounded: `|m|^2` between 14,500 and 17,800,
+    /// checked at load, so `|m| / 127` lies in 0.948..1.051) instead of the
+    /// unit normal: `m . (point_i - q)`
+    /// and `m`, exact (the dot product in integers).
+    #[inline(always)]
+    pub fn stored_plane_offset(&self, i: usize, q: [i16; 3]) -> (f32, [f32; 3]) {
+        let (t, m) = (self.point(i), self.normal(i));
+        // Exact in i32: |t - q| <= 65534 and |m| <= 128 per axis, so the
         // sum is at most 3 x 65534 x 128 < 2^25 (and converts to f32 with
         // one instruction, where an i64 takes a library call on the M4).
         let mut dot = 0i32;
         for k in 0..3 {
-            dot += (t[k] as i32 - q[k] as i32) * ni[k];
+            dot += (t[k] as i32 - q[k] as i32) * m[k];
         }
-        (dot as f32 / norm, ni.map(|v| v as f32 / norm))
+        (dot as f32, m.map(|v| v as f32))
     }
 
     /// A model-frame point on the int16 grid, `round(x / step)` (half away
