@@ -16,9 +16,21 @@ fn shipped() -> Vec<u8> {
     std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// The angle between two rotations (unit quaternions), in degrees:
+/// `4 atan2(|a - s b|, |a + s b|)` in f64 with `s` the sign of `a . b`,
+/// accurate near 0 where `2 acos(|a . b|)` in f32 resolves only about
+/// 0.03 degrees.
 fn angle_deg(a: &[f32; 4], b: &[f32; 4]) -> f32 {
-    let d: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
-    2.0 * d.abs().min(1.0).acos().to_degrees()
+    let d: f64 = a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum();
+    let s = if d < 0.0 { -1.0 } else { 1.0 };
+    let norm = |sign: f64| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (*x as f64 - sign * s * *y as f64).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    (4.0 * norm(1.0).atan2(norm(-1.0))).to_degrees() as f32
 }
 
 fn register(template: &[[f32; 3]], source: &[[f32; 3]]) -> Result<Registration, TemplateError> {
