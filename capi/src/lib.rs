@@ -265,8 +265,9 @@ pub unsafe extern "C" fn pcrnet_options_default(out: *mut PcrnetOptions) {
 
 /// Writes the recommended options with the steps `model` was trained for
 /// (`Int8Model::trained_options`): its passes (PCRNet 1, i-PCRNet more),
-/// or for a model trained as PointNetLK, which has no head, `passes` 0 and
-/// its LK steps in `lk_iterations`. `PCRNET_ERROR_NULL_POINTER` or
+/// or for a model trained as PointNetLK, which has no head, `passes` 0,
+/// its LK steps in `lk_iterations` and its larger sample in
+/// `network_points` (256 against 128). `PCRNET_ERROR_NULL_POINTER` or
 /// `PCRNET_ERROR_NOT_LOADED`, writing nothing, otherwise.
 ///
 /// # Safety
@@ -371,9 +372,9 @@ unsafe fn register_into(
 
 /// The network alone (no check, no refinement): up to `passes` passes
 /// (1: PCRNet; more: i-PCRNet, composing the estimates, stopping once a
-/// pass moves the pose by less than `tolerance`), each on at most 256
-/// points of the cloud (every k-th, the sample a registration's pass
-/// takes). Writes the pose `[qw, qx, qy, qz, tx, ty, tz]` (source units)
+/// pass moves the pose by less than `tolerance`), each on at most 128
+/// points of the cloud (`NETWORK_POINTS`; every k-th, the sample a
+/// registration's pass takes). Writes the pose `[qw, qx, qy, qz, tx, ty, tz]` (source units)
 /// to `pose` and the passes run to `passes_run` on success.
 ///
 /// # Safety

@@ -242,7 +242,8 @@ fn displacement_quantile(
     // u16 counters: a subset holds at most `refine::MAX_SUBSET` (65,535) points.
     let mut bins = [0u16; BINS];
     let mut total = 0u16;
-    refine::for_each_plane_pair(template, subset, pose, lim, |_, index, n, _| {
+    refine::for_each_pair(template, subset, pose, lim, |pq, index| {
+        let (_, n) = template.plane_offset(index, pq);
         let q = template.point(index).map(|v| v as f32 * step);
         let qn = cross(q, n);
         let d =

@@ -74,10 +74,10 @@ pub struct Options {
     /// 0 and one hypothesis; LK then ICP: both.
     pub lk_iterations: usize,
     /// Most source points each network pass and LK step encodes: every
-    /// k-th point from the first, as for `max_points` (at least 1; a cloud
-    /// of 257 to 511 points gives `ceil(n / 2)`). The encoder's cost is
-    /// linear in its points: 256 of 512 halves the network's instructions
-    /// with the same `trust` accuracy (docs/kernels.md). Centring uses
+    /// k-th point from the first, as for `max_points` (at least 1; at 128,
+    /// a cloud of 129 to 256 points gives `ceil(n / 2)`). The encoder's cost
+    /// is linear in its points: 128 of 512 is a quarter of the network's
+    /// instructions with the `trust` accuracy of 256 (docs/kernels.md). Centring uses
     /// every point; scoring and ICP their own `max_points`. The template's
     /// stored feature is pooled over [`network_points`] of its points at
     /// export ([`NETWORK_POINTS`] with a head, [`LK_NETWORK_POINTS`]
@@ -138,7 +138,8 @@ impl Default for Options {
 impl Options {
     /// [`Options::default`] with the steps a blob was trained for: its
     /// `trained` passes when it has a head (PCRNet 1, i-PCRNet its count),
-    /// else (PointNetLK) no network pass and `trained` LK steps. What
+    /// else (PointNetLK) no network pass and `trained` LK steps; and the
+    /// blob's [`network_points`] (256 without a head). What
     /// `Int8Model::trained_options` and `F32Model::trained_options` give.
     pub fn trained(trained: usize, head: bool) -> Self {
         let (passes, lk_iterations) = if head { (trained, 0) } else { (0, trained) };
@@ -162,8 +163,9 @@ impl Options {
     /// The points of `cloud` each network pass and LK step encodes under
     /// these options: every k-th from the first, at most
     /// [`Self::network_points`]. A template's feature is encoded from the
-    /// same sample of its points at the default (the exporter does so), so
-    /// that both max-pools run over as many points, as in training.
+    /// same sample of its points at the blob's [`network_points`] (the
+    /// exporter does so: 128 with a head, 256 for PointNetLK), so that both
+    /// max-pools run over as many points, as in training.
     pub fn network_sample<'c>(
         &self,
         cloud: &'c [[f32; 3]],

@@ -85,7 +85,7 @@ impl Profile {
         println!("\n| instructions | share | block | in |\n|---|---|---|---|");
         let mut blocks: Vec<_> = self.by_block.iter().collect();
         blocks.sort_by_key(|b| std::cmp::Reverse(b.1.0));
-        for (pc, (n, s)) in blocks.iter().take(60) {
+        for (pc, (n, s)) in blocks.iter().take(15) {
             println!("| {n} | {:.1}% | {pc:#x} | `{s}` |", pct(*n));
         }
     }

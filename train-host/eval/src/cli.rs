@@ -108,7 +108,8 @@ pub struct MethodOptions {
     #[arg(long, allow_negative_numbers = true)]
     pub max_points: Option<usize>,
     /// Most source points each network pass (and LK step) of the device
-    /// pipeline encodes (every k-th point; default 256).
+    /// pipeline encodes (every k-th point; default, or 0: the blob's own,
+    /// 128 with a head, 256 for a PointNetLK blob).
     #[arg(long, allow_negative_numbers = true)]
     pub network_points: Option<usize>,
     /// Device ICP leaves out pairs farther apart than this, as a share of
