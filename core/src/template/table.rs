@@ -88,9 +88,13 @@ impl TableShape {
     }
 
     /// The inclusive int16-step corners of cell `(i, j, k)`.
+    /// (Destructured, not indexed: the loader calls it, and no panic path
+    /// may be reachable there.)
     fn cell_box(&self, at: [i32; 3]) -> ([i64; 3], [i64; 3]) {
-        let lo = [0, 1, 2].map(|k| self.origin[k] as i64 + at[k] as i64 * self.edge as i64);
-        (lo, lo.map(|v| v + self.edge as i64 - 1))
+        let ([ox, oy, oz], [x, y, z], e) = (self.origin, at, self.edge as i64);
+        let corner = |o: i16, c: i32| o as i64 + c as i64 * e;
+        let lo = [corner(ox, x), corner(oy, y), corner(oz, z)];
+        (lo, lo.map(|v| v + e - 1))
     }
 }
 
@@ -98,14 +102,13 @@ impl TableShape {
 /// axis, of every place in the cell of inclusive corners `lo` and `hi`
 /// ([`TableShape::cell_box`]): per axis `hi - MAX_REACH ..= lo +
 /// MAX_REACH`. Only such points may be listed (see [`Table::new`]).
-fn reach_span((lo, hi): ([i64; 3], [i64; 3])) -> [(i32, i32); 3] {
-    let clamp = |v: i64| v.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
-    [0, 1, 2].map(|k| {
-        (
-            clamp(hi[k] - MAX_REACH as i64),
-            clamp(lo[k] + MAX_REACH as i64),
-        )
-    })
+fn reach_span(([l0, l1, l2], [h0, h1, h2]): ([i64; 3], [i64; 3])) -> [(i32, i32); 3] {
+    let reach = MAX_REACH as i64;
+    let span = |lo: i64, hi: i64| {
+        let clamp = |v: i64| v.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+        (clamp(hi - reach), clamp(lo + reach))
+    };
+    [span(l0, h0), span(l1, h1), span(l2, h2)]
 }
 
 /// Whether `p` lies in a [`reach_span`].
