@@ -142,8 +142,8 @@ pub fn table_len(
 /// Builds the closest-point table of `shape` for `template` into
 /// `offsets` and `candidates` (sizes from [`table_len`]; `work` holds
 /// [`table_work_len`] slots). A cell whose list would be longer than
-/// `max_list`, or name a point more than [`MAX_REACH`] steps from some
-/// place in it along an axis, gets none: the grid search answers there. Deterministic; no
+/// `max_list`, or name a point more than 32,767 steps (the int16 range)
+/// from some place in it along an axis, gets none: the grid search answers there. Deterministic; no
 /// allocation. Errors when a buffer is short or the table would hold more
 /// than 65,535 entries.
 pub fn build_table<'o>(
