@@ -48,6 +48,7 @@ pub mod data;
 pub mod dataset;
 pub mod degeneracy;
 pub mod export;
+pub mod floor;
 pub mod forward;
 pub mod geometry;
 pub mod inspect;

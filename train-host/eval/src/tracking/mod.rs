@@ -12,6 +12,10 @@
 //! Shapes: seeded ModelNet10 test shapes and one ModelNet40 airplane, each
 //! its own template (512 points, the shipped model's template bound in),
 //! frames from the shape's other points (none shared with the template).
+//!
+//! Each sequence is followed twice, with two verdicts ([`Verdict`]): the
+//! default threshold, and one calibrated for its template from the
+//! template's residual floor ([`pcrnet_train::floor`]).
 
 pub mod sequence;
 
@@ -25,7 +29,7 @@ use crate::plot::{Chart, Corner, Series};
 use crate::recipes::{OBJECT_FILE, OBJECT_POINTS};
 use crate::report::{Context, POINTS, Recorder, Report, Table, folder, pair_spec};
 use crate::trust::SHIPPED_INT8;
-use pcrnet_core::Int8Model;
+use pcrnet_core::{Int8Model, Options};
 use pcrnet_train::data::PairConfig;
 use pcrnet_train::dataset::Dataset;
 use sequence::{FrameResult, Step, Trajectory, follow};
@@ -43,12 +47,48 @@ const WRONG_DEG: f64 = 5.0;
 /// Frames at the end of a sequence whose errors give its drift.
 const TAIL: usize = 30;
 
+/// A reliable pose further off than this counts as far off.
+const FAR_DEG: f64 = 30.0;
+
+/// The verdict threshold a sequence is followed with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+enum Verdict {
+    /// `Options::default().max_residual` for every template.
+    Default,
+    /// [`pcrnet_train::floor::max_residual_for`] the template's residual
+    /// floor, measured on the shape's points the template did not store.
+    Calibrated,
+}
+
+impl Verdict {
+    const ALL: [Verdict; 2] = [Verdict::Default, Verdict::Calibrated];
+
+    fn label(self) -> &'static str {
+        match self {
+            Verdict::Default => "default 0.015",
+            Verdict::Calibrated => "calibrated",
+        }
+    }
+
+    fn slug(self) -> &'static str {
+        match self {
+            Verdict::Default => "default",
+            Verdict::Calibrated => "calibrated",
+        }
+    }
+}
+
 /// One followed sequence.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct Followed {
     set: String,
     shape: String,
     rate: f32,
+    verdict: Verdict,
+    /// The template's residual floor ([`pcrnet_train::floor::residual_floor`]).
+    floor: f32,
+    /// The verdict's threshold in this run.
+    max_residual: f32,
     frames: Vec<FrameResult>,
 }
 
@@ -75,13 +115,12 @@ pub fn tracking(ctx: &Context) -> anyhow::Result<Report> {
         for rate in RATES {
             for (n, &i) in indices.iter().enumerate() {
                 let seed = pcrnet_train::data::mix_seed(ctx.seed, i as u64, rate as u64);
-                let followed = follow_shape(&blob, shapes, i, rate, seed)?;
-                all.push(Followed {
-                    set: set.to_string(),
-                    shape: shapes.names[i].clone(),
-                    rate,
-                    frames: followed,
-                });
+                for followed in follow_shape(&blob, shapes, i, rate, seed)? {
+                    all.push(Followed {
+                        set: set.to_string(),
+                        ..followed
+                    });
+                }
                 eprintln!(
                     "  {set} {rate} fps, sequence {} of {}",
                     n + 1,
@@ -97,8 +136,13 @@ pub fn tracking(ctx: &Context) -> anyhow::Result<Report> {
         serde_json::to_string(&all)?,
     )?;
     for set in ["ModelNet10", "airplane_0001"] {
-        let chart = error_chart(set, &all);
-        rec.plot(&set.to_lowercase(), &chart)?;
+        for verdict in Verdict::ALL {
+            let chart = error_chart(set, verdict, &all);
+            rec.plot(
+                &format!("{}-{}", set.to_lowercase(), verdict.slug()),
+                &chart,
+            )?;
+        }
     }
     rec.finish(
         "Tracking sensor streams",
@@ -107,37 +151,123 @@ pub fn tracking(ctx: &Context) -> anyhow::Result<Report> {
             format!("Every frame a fresh single view (point z-buffer) of {POINTS} points drawn from the shape's points the template did not keep, Gaussian noise sigma {SIGMA} per coordinate. ModelNet10: {SHAPES} seeded test shapes (512-point templates); airplane_0001: one ModelNet40 airplane (1,024-point template, 512 stored), both with the shipped model (`{SHIPPED_INT8}`) and `Options::default()`."),
             "Frames until the first reliable pose: `register`. Every later frame: `track` from the constant-velocity prediction of the last two poses (`pose::predict`; the last pose after a registration; after a lost frame, the last reliable pose: coasting), kept when reliable and within one step, else the registration in the same call (recovered if reliable). Lost: no reliable pose for the frame. Wrong: reliable but more than 5° off.".into(),
             "Acquired: a sequence with a reliable pose at some frame; lost after acquisition: the lost frames from each sequence's first reliable frame on (what tracking itself loses; a sequence's first frame is a single view of the full model in the network's range, where registration alone often fails: issue 37). Errors are of the frames with a reliable pose. Drift: the mean rotation error of a sequence's last 30 frames, the median over sequences. Host times are one thread, the int8 model with the host scratch (AVX2 kernels where the CPU has them); the device's counts are the QEMU harness's `tracking step` line.".into(),
+            format!("Verdict: every sequence is followed twice, with `Options::max_residual` at its default 0.015 and calibrated for its template (`pcrnet_train::floor`): the template's residual floor (the relative plane residual of the shape's points the template did not store, at the template's own pose, no noise) plus {} for the noise, never below 0.015. The floor is measured once per template, from points a user training for their own object has at hand.", pcrnet_train::floor::NOISE_ALLOWANCE),
         ],
-        vec![table(&all)],
+        vec![table(&all), floors(&all)],
         started,
     )
 }
 
 /// Follows shape `i` of `shapes` at `rate` with the shipped `blob`, the
-/// shape bound in as the template.
+/// shape bound in as the template, once with each [`Verdict`] (the same
+/// frames). The results' `set` is left empty for the caller.
 fn follow_shape(
     blob: &[u8],
     shapes: &Dataset,
     i: usize,
     rate: f32,
     seed: u64,
-) -> anyhow::Result<Vec<FrameResult>> {
+) -> anyhow::Result<Vec<Followed>> {
+    let name = &shapes.names[i];
     let bound = pcrnet_train::template::bind(blob, &shapes.clouds[i], 512)
-        .with_context(|| format!("binding {} as the template", shapes.names[i]))?;
+        .with_context(|| format!("binding {name} as the template"))?;
     let model = Int8Model::from_bytes(&bound)?;
+    let defaults = Options::default();
+    let floor = pcrnet_train::floor::residual_floor(&model, &shapes.rest[i], &defaults)
+        .with_context(|| format!("{name} has no finite points beside its template's"))?;
     let trajectory = Trajectory::new(seed);
-    let frames = follow(
-        &model,
-        &shapes.rest[i],
-        POINTS,
-        &trajectory,
-        FRAMES,
-        rate,
-        SIGMA,
-        seed,
-    )
-    .with_context(|| format!("following {}", shapes.names[i]))?;
-    Ok(frames)
+    let mut out = Vec::new();
+    for verdict in Verdict::ALL {
+        let max_residual = match verdict {
+            Verdict::Default => defaults.max_residual,
+            Verdict::Calibrated => {
+                pcrnet_train::floor::max_residual_for(floor, defaults.max_residual)
+            }
+        };
+        let options = Options {
+            max_residual,
+            ..defaults
+        };
+        let frames = follow(
+            &model,
+            &shapes.rest[i],
+            POINTS,
+            &trajectory,
+            FRAMES,
+            rate,
+            SIGMA,
+            &options,
+            seed,
+        )
+        .with_context(|| format!("following {name}"))?;
+        out.push(Followed {
+            set: String::new(),
+            shape: name.clone(),
+            rate,
+            verdict,
+            floor,
+            max_residual,
+            frames,
+        });
+    }
+    Ok(out)
+}
+
+/// Each ModelNet10 template's residual floor, its calibrated threshold and
+/// the frames lost and far off with each verdict, at the highest rate.
+fn floors(all: &[Followed]) -> Table {
+    let rate = RATES[RATES.len() - 1];
+    let of = |f: &Followed| {
+        let n = f.frames.len().max(1) as f64;
+        let lost = f.frames.iter().filter(|r| r.step == Step::Lost).count();
+        let wrong = f
+            .frames
+            .iter()
+            .filter(|r| r.reliable && r.rotation_deg > WRONG_DEG)
+            .count();
+        (100.0 * lost as f64 / n, wrong)
+    };
+    let mut rows = Vec::new();
+    for d in all
+        .iter()
+        .filter(|f| f.set == "ModelNet10" && f.rate == rate && f.verdict == Verdict::Default)
+    {
+        let Some(c) = all.iter().find(|f| {
+            f.set == d.set
+                && f.shape == d.shape
+                && f.rate == rate
+                && f.verdict == Verdict::Calibrated
+        }) else {
+            continue;
+        };
+        let ((dl, dw), (cl, cw)) = (of(d), of(c));
+        rows.push(vec![
+            d.shape.rsplit('/').next().unwrap_or(&d.shape).to_string(),
+            format!("{:.4}", d.floor),
+            format!("{:.4}", c.max_residual),
+            format!("{dl:.1}%"),
+            format!("{cl:.1}%"),
+            dw.to_string(),
+            cw.to_string(),
+        ]);
+    }
+    Table {
+        caption: format!(
+            "Each ModelNet10 template's residual floor (a share of its size) and what each verdict did with it, {rate} frames a second"
+        ),
+        header: [
+            "template",
+            "residual floor",
+            "calibrated max_residual",
+            "lost, default",
+            "lost, calibrated",
+            "wrong, default",
+            "wrong, calibrated",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows,
+    }
 }
 
 /// The `q`-quantile (0..=1) of `v` (sorted here), `NaN` if empty.
@@ -152,12 +282,17 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
 /// One row per set and rate.
 fn table(all: &[Followed]) -> Table {
     let mut rows = Vec::new();
-    let mut keys: Vec<(String, f32)> = all.iter().map(|f| (f.set.clone(), f.rate)).collect();
-    keys.dedup();
-    for (set, rate) in keys {
+    let mut keys: Vec<(String, f32, Verdict)> = Vec::new();
+    for f in all {
+        let key = (f.set.clone(), f.rate, f.verdict);
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
+    for (set, rate, verdict) in keys {
         let seqs: Vec<&Followed> = all
             .iter()
-            .filter(|f| f.set == set && f.rate == rate)
+            .filter(|f| f.set == set && f.rate == rate && f.verdict == verdict)
             .collect();
         let frames: Vec<&FrameResult> = seqs.iter().flat_map(|f| &f.frames).collect();
         let n = frames.len().max(1) as f64;
@@ -168,6 +303,11 @@ fn table(all: &[Followed]) -> Table {
         let wrong = reliable
             .iter()
             .filter(|f| f.rotation_deg > WRONG_DEG)
+            .count();
+        let far = reliable.iter().filter(|f| f.rotation_deg > FAR_DEG).count();
+        let far_flagged = reliable
+            .iter()
+            .filter(|f| f.rotation_deg > FAR_DEG && f.ambiguous)
             .count();
         let mut drift: Vec<f64> = seqs
             .iter()
@@ -208,6 +348,7 @@ fn table(all: &[Followed]) -> Table {
         rows.push(vec![
             set.clone(),
             format!("{rate}"),
+            verdict.label().to_string(),
             seqs.len().to_string(),
             frames.len().to_string(),
             format!("{:.1}%", 100.0 * share(Step::Kept)),
@@ -221,6 +362,7 @@ fn table(all: &[Followed]) -> Table {
             format!("{:.4}", quantile(&mut trans, 0.5)),
             format!("{:.2}", quantile(&mut drift, 0.5)),
             wrong.to_string(),
+            format!("{far} ({far_flagged})"),
             ms(Step::Kept),
             ms(Step::Recovered),
         ]);
@@ -231,6 +373,7 @@ fn table(all: &[Followed]) -> Table {
         header: [
             "shapes",
             "fps",
+            "verdict",
             "sequences",
             "frames",
             "kept",
@@ -244,6 +387,7 @@ fn table(all: &[Followed]) -> Table {
             "translation median",
             "drift °",
             "wrong (reliable, > 5°)",
+            "far off (reliable, > 30°; of them reported ambiguous)",
             "ms kept step",
             "ms fallback step",
         ]
@@ -255,13 +399,13 @@ fn table(all: &[Followed]) -> Table {
 
 /// Rotation error over time of the first four sequences of `set` at each
 /// rate (a lost frame plotted at the chart's top).
-fn error_chart(set: &str, all: &[Followed]) -> Chart {
+fn error_chart(set: &str, verdict: Verdict, all: &[Followed]) -> Chart {
     const TOP: f64 = 5.0;
     let mut series = Vec::new();
     for rate in RATES {
         for f in all
             .iter()
-            .filter(|f| f.set == set && f.rate == rate)
+            .filter(|f| f.set == set && f.rate == rate && f.verdict == verdict)
             .take(4)
         {
             series.push(Series {
@@ -285,7 +429,10 @@ fn error_chart(set: &str, all: &[Followed]) -> Chart {
         }
     }
     Chart {
-        title: format!("Tracking {set}: rotation error per frame (lost: at the top)"),
+        title: format!(
+            "Tracking {set}, verdict {}: rotation error per frame (lost: at the top)",
+            verdict.label()
+        ),
         x_label: "time (s)".into(),
         y_label: "rotation error (°)".into(),
         x_range: (0.0, FRAMES as f64 / RATES[0] as f64),

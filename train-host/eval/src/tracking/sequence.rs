@@ -127,6 +127,11 @@ pub struct FrameResult {
     pub translation: f64,
     /// Whether the pose was marked reliable.
     pub reliable: bool,
+    /// The pose's relative plane residual (what the verdict judges).
+    pub residual: f32,
+    /// Whether the result reported the pose ambiguous (a free axis or a
+    /// turn that fits about as well).
+    pub ambiguous: bool,
     /// Points the camera saw.
     pub points: usize,
     /// Host time of the call, microseconds (one thread).
@@ -134,7 +139,7 @@ pub struct FrameResult {
 }
 
 /// Follows a sequence of `frames` frames at `rate` frames a second with
-/// `model` (the template bound in): frames registered afresh until one is
+/// `model` (the template bound in) and `options`: frames registered afresh until one is
 /// reliable; then every frame a tracking step from the constant-velocity
 /// prediction of the last two poses (the last pose alone after a
 /// registration or a lost frame). After a lost frame the next is tracked
@@ -149,9 +154,9 @@ pub fn follow(
     frames: usize,
     rate: f32,
     sigma: f32,
+    options: &Options,
     seed: u64,
 ) -> Result<Vec<FrameResult>, pcrnet_core::Error> {
-    let options = Options::default();
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let (mut last, mut before): (Option<Pose>, Option<Pose>) = (None, None);
     let mut out = Vec::with_capacity(frames);
@@ -168,7 +173,7 @@ pub fn follow(
         let started = Instant::now();
         let (r, step) = match last {
             None => {
-                let r = model.register(&source, &options, &mut scratch)?;
+                let r = model.register(&source, options, &mut scratch)?;
                 let step = if r.reliable {
                     Step::Registered
                 } else {
@@ -178,7 +183,7 @@ pub fn follow(
             }
             Some(last) => {
                 let start = before.map_or(last, |b| pose::predict(&b, &last));
-                let tracked = model.track(&source, &start, &options, &mut scratch)?;
+                let tracked = model.track(&source, &start, options, &mut scratch)?;
                 let step = match tracked.outcome {
                     TrackOutcome::Kept => Step::Kept,
                     TrackOutcome::Recovered => Step::Recovered,
@@ -203,6 +208,8 @@ pub fn follow(
             rotation_deg: rotation_error_deg(&quat_to_mat(r.pose.rotation), &r_gt),
             translation: translation_error(&r.pose.translation, &t_gt),
             reliable: r.reliable,
+            residual: r.relative_plane_residual,
+            ambiguous: r.ambiguity.is_ambiguous(),
             points: source.len(),
             micros,
         });
