@@ -10,6 +10,8 @@ use pcrnet_eval::cli::MethodOptions;
 use pcrnet_eval::methods::{Method, MethodKind};
 
 use crate::register::{Reading, shipped_model};
+use pcrnet_train::floor::max_residual_for;
+use pcrnet_train::template::{Reference, bind_reference};
 
 /// A loaded device model.
 pub(crate) struct DeviceModel {
@@ -28,6 +30,10 @@ pub(crate) struct DeviceModel {
     /// The device options, counts as the blob was trained when not given
     /// (`register::or_trained`).
     pub(crate) options: Options,
+    /// The template's residual floor, measured on the template file's
+    /// points that were not stored (`pcrnet_train::floor`); `None` without
+    /// a file or when every point was stored.
+    pub(crate) floor: Option<f32>,
 }
 
 impl DeviceModel {
@@ -69,20 +75,31 @@ impl DeviceModel {
             eprintln!("warning: {warning}");
         }
         let method = options.method(MethodKind::Device);
-        let (blob, origin, template_points) = match template {
+        let (blob, origin, template_points, unstored) = match template {
             Some(path) => {
                 let cloud = reading.load(path, None)?;
-                let bound =
-                    pcrnet_train::template::bind(&blob, &cloud.points, method.template_points)
-                        .with_context(|| format!("binding {} into {label}", path.display()))?;
-                (bound, cloud.origin, cloud.points.len())
+                let binding = || format!("binding {} into {label}", path.display());
+                let reference =
+                    Reference::new(&cloud.points, method.template_points).with_context(binding)?;
+                let bound = bind_reference(&blob, &reference).with_context(binding)?;
+                (
+                    bound,
+                    cloud.origin,
+                    cloud.points.len(),
+                    reference.unstored(),
+                )
             }
-            None => (blob, [0.0; 3], 0),
+            None => (blob, [0.0; 3], 0, Vec::new()),
         };
-        let trained = Int8Model::from_bytes(&blob)
-            .with_context(|| label.clone())?
-            .trained_options();
-        let device = pcrnet_eval::register::or_trained(&method.device_options(), trained);
+        let (device, floor) = {
+            let model = Int8Model::from_bytes(&blob).with_context(|| label.clone())?;
+            let device = pcrnet_eval::register::or_trained(
+                &method.device_options(),
+                model.trained_options(),
+            );
+            let floor = pcrnet_train::floor::residual_floor(&model, &unstored, &device);
+            (device, floor)
+        };
         Ok(DeviceModel {
             blob,
             label,
@@ -91,6 +108,25 @@ impl DeviceModel {
             template_points,
             method,
             options: device,
+            floor,
+        })
+    }
+
+    /// What the template's residual floor says of the verdict, for a
+    /// person: the floor, and a warning with the calibrated threshold
+    /// when right poses would score above `options.max_residual`.
+    pub(crate) fn floor_line(&self) -> Option<String> {
+        let floor = self.floor?;
+        let threshold = self.options.max_residual;
+        let calibrated = max_residual_for(floor, threshold);
+        Some(if calibrated > threshold {
+            format!(
+                "template residual floor: {floor:.4} of its size (its unstored points at its own pose): with the noise a right pose may score above the verdict's --max-residual {threshold}, and be marked not reliable; --max-residual {calibrated:.4} calibrates the verdict for this template (docs/tracking.md)"
+            )
+        } else {
+            format!(
+                "template residual floor: {floor:.4} of its size (its unstored points at its own pose), within the verdict's --max-residual {threshold}"
+            )
         })
     }
 

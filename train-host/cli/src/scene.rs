@@ -167,6 +167,9 @@ fn find<F: Organised>(
     let to_stdout = json_on_stdout(json);
     let say = |line: String| say(to_stdout, &line);
     say(loaded.model_line());
+    if let Some(line) = loaded.floor_line() {
+        say(line);
+    }
     say(format!(
         "frame: {} ({width} x {height}); object radius {:.4} (the template's, user units); grid every {} pixels; time {:.1} ms",
         args.frame.display(),
@@ -236,6 +239,7 @@ fn find<F: Organised>(
         v["object_radius"] = model.object_radius().into();
         v["seconds"] = seconds.into();
         v["origin"] = origin.into();
+        v["template_floor"] = loaded.floor.into();
         if let Some(best) = &located.best {
             v["translation"] = file_translation(best.registration.pose.translation).into();
             v["ambiguity"] = crate::ambiguity::json(&best.registration.ambiguity, origin);

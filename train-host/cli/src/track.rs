@@ -126,6 +126,9 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
         template.display(),
         loaded.method.template_points.min(loaded.template_points),
     ));
+    if let Some(line) = loaded.floor_line() {
+        say(line);
+    }
     say(format!(
         "{} frame(s); each step starts from {}; time: the registration or tracking call alone",
         frames.len(),
@@ -199,6 +202,8 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
             "model": model_label,
             "template": template.display().to_string(),
             "origin": origin,
+            "template_floor": loaded.floor,
+            "max_residual": device.max_residual,
             "predict": predict,
             "frames": results,
         });

@@ -119,6 +119,9 @@ fn a_slow_motion_is_kept_frame_after_frame() {
         "{stderr}"
     );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // Every template point stored: no floor to measure.
+    assert!(report["template_floor"].is_null(), "{report}");
+    assert!(!stderr.contains("template residual floor"), "{stderr}");
     let frames = report["frames"].as_array().unwrap();
     assert_eq!(frames.len(), FRAMES, "{report}");
     for (k, frame) in frames.iter().enumerate() {
@@ -231,4 +234,32 @@ fn missing_frames_and_empty_folders_are_named() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("<FRAME>"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A template stored sparsely (64 of its 512 points) has a residual floor
+/// measured on the other 448, above what the default verdict leaves room
+/// for: `track` says so, names the calibrated `--max-residual`, and
+/// carries both figures in its JSON.
+#[test]
+fn a_sparse_template_reports_its_residual_floor() {
+    let template = models().join("embedded-default-template.xyz");
+    let out = pcrnet()
+        .arg("track")
+        .arg(&template)
+        .arg(models().join("embedded-default-source.xyz"))
+        .args(["--template-points", "64", "--json", "-"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let floor = report["template_floor"].as_f64().unwrap();
+    let threshold = report["max_residual"].as_f64().unwrap();
+    assert!((threshold - 0.015).abs() < 1e-6, "{report}");
+    assert!(floor > threshold && floor < 0.1, "{report}");
+    let calibrated = format!("--max-residual {:.4} calibrates", floor + 0.008);
+    assert!(
+        stderr.contains("template residual floor: ") && stderr.contains(&calibrated),
+        "{stderr}"
+    );
 }

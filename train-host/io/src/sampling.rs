@@ -32,6 +32,20 @@ pub fn farthest_point_sampling_with(
     start: usize,
     progress: Option<&crate::progress::Progress>,
 ) -> Vec<[f32; 3]> {
+    farthest_point_indices(cloud, k, start, progress)
+        .into_iter()
+        .map(|i| cloud[i])
+        .collect()
+}
+
+/// The indices into `cloud` of the points [`farthest_point_sampling_with`]
+/// picks, in pick order.
+pub fn farthest_point_indices(
+    cloud: &[[f32; 3]],
+    k: usize,
+    start: usize,
+    progress: Option<&crate::progress::Progress>,
+) -> Vec<usize> {
     if cloud.is_empty() || k == 0 {
         return Vec::new();
     }
@@ -44,9 +58,8 @@ pub fn farthest_point_sampling_with(
         if let Some(p) = progress {
             p.inc(1);
         }
-        let c = cloud[cur];
-        out.push(c);
-        cur = farthest(&xs, &ys, &zs, c, &mut dist);
+        out.push(cur);
+        cur = farthest(&xs, &ys, &zs, cloud[cur], &mut dist);
     }
     out
 }

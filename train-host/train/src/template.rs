@@ -16,7 +16,7 @@ use pcrnet_core::{F32Model, Frame, Int8Model, Pose};
 
 use crate::lk_solver;
 use crate::shapes::frame_of;
-use pcrnet_io::sampling::farthest_point_sampling;
+use pcrnet_io::sampling::farthest_point_indices;
 
 /// Model units per int16 step of stored template points: the template fills
 /// `[-0.5, 0.5]^3`, and a moved source point stays representable up to
@@ -85,6 +85,8 @@ pub struct Reference {
     cell: u16,
     turns: Vec<[f32; 4]>,
     table: Option<OwnedTable>,
+    /// Indices into `points` of the stored points.
+    stored: Vec<usize>,
 }
 
 /// A closest-point table's shape and owned bytes.
@@ -151,7 +153,8 @@ impl Reference {
         }
         let frame = frame_of(template).ok_or(TemplateError::NoExtent)?;
         let model: Vec<[f32; 3]> = template.iter().map(|&p| frame.to_model(p)).collect();
-        let kept = farthest_point_sampling(&model, stored, 0);
+        let stored = farthest_point_indices(&model, stored, 0, None);
+        let kept: Vec<[f32; 3]> = stored.iter().map(|&i| model[i]).collect();
         let quantized: Vec<[i16; 3]> = kept
             .iter()
             .map(|p| p.map(|x| (x / TEMPLATE_STEP).round().clamp(-32767.0, 32767.0) as i16))
@@ -182,12 +185,28 @@ impl Reference {
             cell,
             turns,
             table: None,
+            stored,
         };
         if let Some(layout) = table {
             let t = template::Template::new(reference.cloud(), None)?;
             reference.table = Some(OwnedTable::build(&t, layout)?);
         }
         Ok(reference)
+    }
+
+    /// The template's points (user units) that were not stored: what
+    /// [`crate::floor::residual_floor`] scores. Empty when every point was
+    /// stored.
+    pub fn unstored(&self) -> Vec<[f32; 3]> {
+        let mut kept = vec![false; self.points.len()];
+        for &i in &self.stored {
+            kept[i] = true;
+        }
+        self.points
+            .iter()
+            .zip(kept)
+            .filter_map(|(p, k)| (!k).then_some(*p))
+            .collect()
     }
 
     /// The closest-point table a blob stores beside the cloud, if any.
@@ -430,6 +449,10 @@ mod tests {
         let t = template::Template::new(r.cloud(), r.table()).unwrap();
         assert!(t.table().is_some());
         assert_eq!(t.len(), 256);
+        // The points not stored are the rest of the cloud.
+        let unstored = r.unstored();
+        assert_eq!(unstored.len(), 600 - 256);
+        assert!(unstored.iter().all(|p| metres.contains(p)));
         assert_eq!(t.turns().len(), PRINCIPAL_TURNS);
         // Stored points lie in the unit box of the model frame.
         for i in 0..t.len() {
