@@ -646,6 +646,18 @@ size_t pcrnet_model_host_scratch_len(const PcrnetModel *model);
 uint32_t pcrnet_model_trained_passes(const PcrnetModel *model);
 
 /*
+ The template's residual floor, a share of its size, when the blob
+ carries one (format 6, measured by the exporter on the template's
+ points beyond those stored); -1 when it does not or for a handle that
+ is not loaded. `pcrnet_options_for_model` calibrates `max_residual`
+ with it.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`.
+ */
+float pcrnet_model_residual_floor(const PcrnetModel *model);
+
+/*
  Writes the recommended options (`pcrnet_core::Options::default()`:
  one pass, 10 starts, point-to-plane ICP). Does nothing if `out` is null.
 
@@ -659,7 +671,9 @@ void pcrnet_options_default(PcrnetOptions *out);
  (`Int8Model::trained_options`): its passes (PCRNet 1, i-PCRNet more),
  or for a model trained as PointNetLK, which has no head, `passes` 0,
  its LK steps in `lk_iterations` and its larger sample in
- `network_points` (256 against 128). `PCRNET_ERROR_NULL_POINTER` or
+ `network_points` (256 against 128); and `max_residual` calibrated by
+ the template's residual floor when the blob carries one
+ (`pcrnet_model_residual_floor`). `PCRNET_ERROR_NULL_POINTER` or
  `PCRNET_ERROR_NOT_LOADED`, writing nothing, otherwise.
 
  # Safety

@@ -250,6 +250,22 @@ pub unsafe extern "C" fn pcrnet_model_trained_passes(model: *const PcrnetModel) 
     self::model(model).map_or(0, |m| u32::try_from(m.trained_passes()).unwrap_or(u32::MAX))
 }
 
+/// The template's residual floor, a share of its size, when the blob
+/// carries one (format 6, measured by the exporter on the template's
+/// points beyond those stored); -1 when it does not or for a handle that
+/// is not loaded. `pcrnet_options_for_model` calibrates `max_residual`
+/// with it.
+///
+/// # Safety
+/// `model` must be null or point to a `PcrnetModel`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_model_residual_floor(model: *const PcrnetModel) -> f32 {
+    self::model(model)
+        .ok()
+        .and_then(|m| m.residual_floor())
+        .unwrap_or(-1.0)
+}
+
 /// Writes the recommended options (`pcrnet_core::Options::default()`:
 /// one pass, 10 starts, point-to-plane ICP). Does nothing if `out` is null.
 ///
@@ -267,7 +283,9 @@ pub unsafe extern "C" fn pcrnet_options_default(out: *mut PcrnetOptions) {
 /// (`Int8Model::trained_options`): its passes (PCRNet 1, i-PCRNet more),
 /// or for a model trained as PointNetLK, which has no head, `passes` 0,
 /// its LK steps in `lk_iterations` and its larger sample in
-/// `network_points` (256 against 128). `PCRNET_ERROR_NULL_POINTER` or
+/// `network_points` (256 against 128); and `max_residual` calibrated by
+/// the template's residual floor when the blob carries one
+/// (`pcrnet_model_residual_floor`). `PCRNET_ERROR_NULL_POINTER` or
 /// `PCRNET_ERROR_NOT_LOADED`, writing nothing, otherwise.
 ///
 /// # Safety

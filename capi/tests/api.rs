@@ -454,3 +454,35 @@ fn prepared_calls_are_bit_identical_to_the_plain_ones() {
         "{message:?}"
     );
 }
+
+/// A blob carrying the template's residual floor (format 6): the C API
+/// reads it, and the options for the model carry the calibrated verdict;
+/// the shipped blob (format 4) and a null handle have none.
+#[test]
+fn the_residual_floor_reaches_the_options_for_the_model() {
+    use pcrnet_core::format::{self, ModelKind, Trailer};
+    let shipped = shipped_blob();
+    let rust = Int8Model::from_bytes(&shipped).unwrap();
+    let trailer = Trailer {
+        table: rust.template().table(),
+        residual_floor: Some(0.02),
+        ..Trailer::default()
+    };
+    let mut blob = vec![0u8; format::blob_len(rust.payload(), &trailer).unwrap()];
+    format::write_blob(ModelKind::Int8, rust.payload(), &trailer, &mut blob).unwrap();
+    let model = loaded(&blob);
+    assert_eq!(unsafe { pcrnet_model_residual_floor(&*model) }, 0.02);
+    let mut for_model = options_default();
+    let status = unsafe { pcrnet_options_for_model(&*model, &mut for_model) };
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    assert_eq!(
+        for_model.max_residual,
+        0.02 + pcrnet_core::registration::NOISE_ALLOWANCE
+    );
+    let plain = loaded(&shipped);
+    assert_eq!(unsafe { pcrnet_model_residual_floor(&*plain) }, -1.0);
+    assert_eq!(
+        unsafe { pcrnet_model_residual_floor(std::ptr::null()) },
+        -1.0
+    );
+}

@@ -184,8 +184,9 @@ pub struct LkSolver<'a> {
     pub rows: &'a [u8],
 }
 
-/// What follows the payload: the closest-point table (format 4) and
-/// PointNetLK's solver (format 5), each optional.
+/// What follows the payload: the closest-point table (format 4),
+/// PointNetLK's solver (format 5) and the template's residual floor
+/// (format 6), each optional.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Trailer<'a> {
     /// The template's closest-point table.
@@ -194,6 +195,12 @@ pub struct Trailer<'a> {
     /// PointNetLK's solver.
     #[serde(borrow)]
     pub lk: Option<LkSolver<'a>>,
+    /// The template's residual floor, a share of its size: the relative
+    /// plane residual of the object's points the template did not store,
+    /// at the template's own pose, measured by the exporter (finite, at
+    /// least 0). The recommended options calibrate the verdict with it
+    /// ([`crate::registration::max_residual_for`]).
+    pub residual_floor: Option<f32>,
 }
 
 /// One quantized hidden layer (encoder or head).
@@ -295,7 +302,8 @@ pub struct F32Payload<'a> {
 
 /// Checks a model blob's envelope (magic, a version this build reads, kind,
 /// length, CRC) and decodes its payload and [`Trailer`] (from format 4 the
-/// template's closest-point table, from format 5 PointNetLK's solver). The
+/// template's closest-point table, from format 5 PointNetLK's solver, from
+/// format 6 the template's residual floor). The
 /// payload and trailer must use every payload byte.
 pub fn decode_model<'a, T: Deserialize<'a>>(
     blob: &'a [u8],
@@ -309,7 +317,8 @@ pub fn decode_model<'a, T: Deserialize<'a>>(
 }
 
 /// The [`Trailer`] of a blob of format `version`: nothing in format 3, the
-/// table in format 4, both parts from format 5. Not inlined: its
+/// table in format 4, the table and the solver in format 5, all three
+/// parts from format 6. Not inlined: its
 /// temporaries stay out of the loaders' frames (the load stack counts on a
 /// 16 KiB device).
 #[inline(never)]
@@ -318,8 +327,16 @@ fn decode_trailer(version: u16, rest: &[u8]) -> Result<Trailer<'_>> {
         3 => decode::<()>(rest).map(|()| Trailer::default())?,
         4 => Trailer {
             table: decode(rest)?,
-            lk: None,
+            ..Trailer::default()
         },
+        5 => {
+            let (table, lk) = decode(rest)?;
+            Trailer {
+                table,
+                lk,
+                residual_floor: None,
+            }
+        }
         _ => decode(rest)?,
     })
 }

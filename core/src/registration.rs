@@ -113,6 +113,45 @@ pub struct Options {
     pub max_residual: f32,
 }
 
+/// What [`max_residual_for`] allows above a template's residual floor for
+/// the sensor's noise, a share of the template's size: the mean distance
+/// of Gaussian noise of sigma 0.01 per coordinate from a plane,
+/// `0.01 sqrt(2 / pi)`, the noise of the `trust` and `tracking`
+/// experiments. (The default threshold, 0.015, is this plus a floor of
+/// 0.007.)
+pub const NOISE_ALLOWANCE: f32 = 0.008;
+
+/// The verdict threshold ([`Options::max_residual`]) for a template whose
+/// residual floor is `floor` ([`crate::format::Trailer::residual_floor`]):
+/// the floor plus [`NOISE_ALLOWANCE`], never below `default`. A right pose
+/// scores the noise plus what the template's stored points cannot
+/// represent of the object (edges between sparse samples, inner surfaces,
+/// normals estimated across a fold); with the default threshold, templates
+/// whose floor is near 0.015 have their right poses marked not reliable.
+/// Measured on the `tracking` experiment (RESULTS.md, docs/tracking.md):
+/// the frames lost fall from 18-20% to 0.8-2.2%, and more reliable frames
+/// are off by more than 5 degrees: at 30 frames a second 5-12 degrees (a
+/// template that represents its object coarsely also aligns it coarsely),
+/// at 10 a box-like dresser tracked 90 degrees turned.
+pub fn max_residual_for(floor: f32, default: f32) -> f32 {
+    let calibrated = floor + NOISE_ALLOWANCE;
+    if calibrated > default {
+        calibrated
+    } else {
+        default
+    }
+}
+
+/// Checks a blob's residual floor: finite and at least 0.
+pub(crate) fn checked_floor(floor: Option<f32>) -> Result<Option<f32>> {
+    match floor {
+        Some(f) if !(f.is_finite() && f >= 0.0) => Err(Error::InconsistentDimensions {
+            what: "the template's residual floor must be finite and at least 0",
+        }),
+        f => Ok(f),
+    }
+}
+
 impl Default for Options {
     /// The recommended device pipeline (see the README for the measurements
     /// behind each number).
@@ -141,13 +180,21 @@ impl Options {
     /// else (PointNetLK) no network pass and `trained` LK steps; and the
     /// blob's [`network_points`] (256 without a head). What
     /// `Int8Model::trained_options` and `F32Model::trained_options` give.
-    pub fn trained(trained: usize, head: bool) -> Self {
+    ///
+    /// With the template's `residual_floor` (a blob of format 6 whose
+    /// exporter measured one), the verdict's threshold is calibrated for
+    /// the template ([`max_residual_for`]).
+    pub fn trained(trained: usize, head: bool, residual_floor: Option<f32>) -> Self {
         let (passes, lk_iterations) = if head { (trained, 0) } else { (0, trained) };
+        let defaults = Options::default();
         Options {
             passes,
             lk_iterations,
             network_points: network_points(head),
-            ..Options::default()
+            max_residual: residual_floor.map_or(defaults.max_residual, |floor| {
+                max_residual_for(floor, defaults.max_residual)
+            }),
+            ..defaults
         }
     }
 

@@ -269,6 +269,7 @@ pub fn with_random_lk_solver<'o>(
             damping: 0.0,
             rows,
         }),
+        ..trailer
     };
     Int8Model::from_payload(payload.clone(), trailer)?;
     let n = write_blob(ModelKind::Int8, &payload, &trailer, out)?;

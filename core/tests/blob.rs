@@ -234,6 +234,7 @@ fn write_then_read_round_trips() {
         &format::Trailer {
             table: model.template().table(),
             lk: model.lk_solver().map(|s| s.stored()),
+            residual_floor: model.residual_floor(),
         },
         &mut out,
     )
@@ -288,7 +289,7 @@ fn a_headless_blob_needs_its_solver() {
     assert!(!model.has_head() && model.lk_solver().is_some());
     let trailer = format::Trailer {
         table: model.template().table(),
-        lk: None,
+        ..format::Trailer::default()
     };
     let mut without = vec![0u8; format::blob_len(model.payload(), &trailer).unwrap()];
     format::write_blob(ModelKind::Int8, model.payload(), &trailer, &mut without).unwrap();
@@ -298,4 +299,78 @@ fn a_headless_blob_needs_its_solver() {
             what: "a blob without a head needs PointNetLK's solver"
         })
     );
+}
+
+/// A blob of `payload` with `trailer`, written by this build (format 6).
+fn with_trailer(model: &Int8Model<'_>, trailer: &format::Trailer<'_>) -> Vec<u8> {
+    let mut out = vec![0u8; format::blob_len(model.payload(), trailer).unwrap()];
+    format::write_blob(ModelKind::Int8, model.payload(), trailer, &mut out).unwrap();
+    out
+}
+
+/// Format 6 carries the template's residual floor: a blob with one
+/// recommends a verdict calibrated by it (the floor plus the noise
+/// allowance, never below the default), one without keeps the default,
+/// and a floor that is not finite or below 0 is refused by name.
+#[test]
+fn the_residual_floor_calibrates_the_recommended_verdict() {
+    let good = int8_blob();
+    let model = Int8Model::from_bytes(&good).unwrap();
+    assert_eq!(model.residual_floor(), None);
+    let default = pcrnet_core::Options::default().max_residual;
+    assert_eq!(model.trained_options().max_residual, default);
+    let floored = |floor: f32| format::Trailer {
+        table: model.template().table(),
+        residual_floor: Some(floor),
+        ..format::Trailer::default()
+    };
+    let high = with_trailer(&model, &floored(0.02));
+    let m = Int8Model::from_bytes(&high).unwrap();
+    assert_eq!(m.residual_floor(), Some(0.02));
+    let want = 0.02 + pcrnet_core::registration::NOISE_ALLOWANCE;
+    assert_eq!(m.trained_options().max_residual, want);
+    // A low floor leaves the default alone.
+    let low = with_trailer(&model, &floored(0.001));
+    let m = Int8Model::from_bytes(&low).unwrap();
+    assert_eq!(m.trained_options().max_residual, default);
+    for bad in [f32::NAN, f32::INFINITY, -0.01] {
+        assert_eq!(
+            Int8Model::from_bytes(&with_trailer(&model, &floored(bad))).err(),
+            Some(Error::InconsistentDimensions {
+                what: "the template's residual floor must be finite and at least 0"
+            }),
+            "{bad}"
+        );
+    }
+}
+
+/// A format-5 blob (the table and the solver, no floor), written by hand
+/// as format 5's exporter did, still reads: no floor, the default verdict.
+#[test]
+fn a_format_5_blob_still_reads() {
+    let good = int8_blob();
+    let model = Int8Model::from_bytes(&good).unwrap();
+    let mut buffer = vec![0u8; good.len() + 64];
+    let payload = postcard::to_slice(model.payload(), &mut buffer)
+        .unwrap()
+        .to_vec();
+    let mut rest = vec![0u8; 64];
+    let trailer = postcard::to_slice(
+        &(model.template().table(), None::<format::LkSolver<'_>>),
+        &mut rest,
+    )
+    .unwrap()
+    .to_vec();
+    let mut blob = b"PCRN".to_vec();
+    blob.extend_from_slice(&5u16.to_le_bytes());
+    blob.push(ModelKind::Int8 as u8);
+    blob.extend_from_slice(&((payload.len() + trailer.len()) as u32).to_le_bytes());
+    blob.extend_from_slice(&payload);
+    blob.extend_from_slice(&trailer);
+    blob.extend_from_slice(&[0; 4]);
+    reseal(&mut blob);
+    let old = Int8Model::from_bytes(&blob).unwrap();
+    assert_eq!(old.residual_floor(), None);
+    assert_eq!(old.payload(), model.payload());
+    assert_eq!(old.template().table(), model.template().table());
 }

@@ -140,6 +140,7 @@ pub struct F32Model<'a> {
     frame: Frame,
     template: Template<'a>,
     lk: Option<Solver<'a>>,
+    residual_floor: Option<f32>,
 }
 
 impl<'a> F32Model<'a> {
@@ -173,7 +174,17 @@ impl<'a> F32Model<'a> {
     /// The recommended options with the steps this blob was trained for,
     /// as [`crate::Int8Model::trained_options`].
     pub fn trained_options(&self) -> Options {
-        Options::trained(self.trained_passes(), self.network.has_head())
+        Options::trained(
+            self.trained_passes(),
+            self.network.has_head(),
+            self.residual_floor,
+        )
+    }
+
+    /// The template's residual floor when the exporter measured one, as
+    /// [`crate::Int8Model::residual_floor`].
+    pub fn residual_floor(&self) -> Option<f32> {
+        self.residual_floor
     }
 
     /// One step on the source moved by `map`: a network pass or a
@@ -296,12 +307,14 @@ impl<'a> F32Model<'a> {
         let network = F32Network::new(p.arch, layers, LeF32(p.template_feature))?
             .with_centring(p.centre_source);
         let lk = crate::lk::solver(trailer.lk, network.arch.feature_dim(), network.has_head())?;
+        let residual_floor = crate::registration::checked_floor(trailer.residual_floor)?;
         Ok(F32Model {
             network,
             passes: p.passes,
             frame: p.frame,
             template: Template::new(p.template, trailer.table)?,
             lk,
+            residual_floor,
         })
     }
 }

@@ -53,6 +53,7 @@ pub struct Int8Model<'a> {
     p: Int8Payload<'a>,
     template: Template<'a>,
     lk: Option<Solver<'a>>,
+    residual_floor: Option<f32>,
 }
 
 /// Everything one inference produces besides the pose.
@@ -101,9 +102,15 @@ impl<'a> Int8Model<'a> {
     #[inline(always)]
     pub fn from_payload(p: Int8Payload<'a>, trailer: Trailer<'a>) -> Result<Self> {
         let lk = crate::lk::solver(trailer.lk, p.arch.feature_dim(), !check::headless(&p))?;
+        let residual_floor = registration::checked_floor(trailer.residual_floor)?;
         // Checked by reference, then moved once into the model.
         let template = Self::validate(&p, trailer.table)?;
-        Ok(Int8Model { p, template, lk })
+        Ok(Int8Model {
+            p,
+            template,
+            lk,
+            residual_floor,
+        })
     }
 
     /// Whether the blob has a head (PCRNet, i-PCRNet); a model trained as
@@ -119,9 +126,16 @@ impl<'a> Int8Model<'a> {
 
     /// The recommended options with the steps this blob was trained for
     /// ([`Options::trained`]): i-PCRNet's passes, or a PointNetLK blob's
-    /// LK steps with no network pass.
+    /// LK steps with no network pass; and the verdict calibrated by the
+    /// template's residual floor when the blob has one.
     pub fn trained_options(&self) -> Options {
-        Options::trained(self.trained_passes(), self.has_head())
+        Options::trained(self.trained_passes(), self.has_head(), self.residual_floor)
+    }
+
+    /// The template's residual floor (a share of its size) when the
+    /// exporter measured one ([`format::Trailer::residual_floor`]).
+    pub fn residual_floor(&self) -> Option<f32> {
+        self.residual_floor
     }
 
     /// The template's points (model frame) used to check and refine poses.

@@ -10,8 +10,7 @@ use pcrnet_eval::cli::MethodOptions;
 use pcrnet_eval::methods::{Method, MethodKind};
 
 use crate::register::{Reading, shipped_model};
-use pcrnet_train::floor::max_residual_for;
-use pcrnet_train::template::{Reference, bind_reference};
+use pcrnet_core::registration::{NOISE_ALLOWANCE, max_residual_for};
 
 /// A loaded device model.
 pub(crate) struct DeviceModel {
@@ -75,30 +74,26 @@ impl DeviceModel {
             eprintln!("warning: {warning}");
         }
         let method = options.method(MethodKind::Device);
-        let (blob, origin, template_points, unstored) = match template {
+        let (blob, origin, template_points) = match template {
             Some(path) => {
                 let cloud = reading.load(path, None)?;
-                let binding = || format!("binding {} into {label}", path.display());
-                let reference =
-                    Reference::new(&cloud.points, method.template_points).with_context(binding)?;
-                let bound = bind_reference(&blob, &reference).with_context(binding)?;
-                (
-                    bound,
-                    cloud.origin,
-                    cloud.points.len(),
-                    reference.unstored(),
-                )
+                let bound =
+                    pcrnet_train::template::bind(&blob, &cloud.points, method.template_points)
+                        .with_context(|| format!("binding {} into {label}", path.display()))?;
+                (bound, cloud.origin, cloud.points.len())
             }
-            None => (blob, [0.0; 3], 0, Vec::new()),
+            None => (blob, [0.0; 3], 0),
         };
         let (device, floor) = {
             let model = Int8Model::from_bytes(&blob).with_context(|| label.clone())?;
-            let device = pcrnet_eval::register::or_trained(
-                &method.device_options(),
-                model.trained_options(),
-            );
-            let floor = pcrnet_train::floor::residual_floor(&model, &unstored, &device);
-            (device, floor)
+            let trained = model.trained_options();
+            let mut device = pcrnet_eval::register::or_trained(&method.device_options(), trained);
+            // Without --max-residual, the blob's verdict: calibrated by the
+            // template's residual floor when binding measured one.
+            if options.max_residual.is_none() {
+                device.max_residual = trained.max_residual;
+            }
+            (device, model.residual_floor())
         };
         Ok(DeviceModel {
             blob,
@@ -113,20 +108,26 @@ impl DeviceModel {
     }
 
     /// What the template's residual floor says of the verdict, for a
-    /// person: the floor, and a warning with the calibrated threshold
-    /// when right poses would score above `options.max_residual`.
+    /// person: the floor, whether the verdict in force was calibrated by
+    /// it, and a warning when right poses would score above the verdict.
     pub(crate) fn floor_line(&self) -> Option<String> {
         let floor = self.floor?;
         let threshold = self.options.max_residual;
-        let calibrated = max_residual_for(floor, threshold);
-        Some(if calibrated > threshold {
+        let default = Options::default().max_residual;
+        let calibrated = max_residual_for(floor, default);
+        let measured = format!(
+            "template residual floor: {floor:.4} of its size (its points beyond those stored, at its own pose)"
+        );
+        Some(if threshold < calibrated {
             format!(
-                "template residual floor: {floor:.4} of its size (its unstored points at its own pose): with the noise a right pose may score above the verdict's --max-residual {threshold}, and be marked not reliable; --max-residual {calibrated:.4} calibrates the verdict for this template (docs/tracking.md)"
+                "{measured}: with the noise a right pose may score above the verdict's --max-residual {threshold} and be marked not reliable; the blob's own verdict, {calibrated:.4}, is calibrated for it (leave --max-residual out to use it; docs/tracking.md)"
+            )
+        } else if calibrated > default && threshold == calibrated {
+            format!(
+                "{measured}: the verdict is calibrated for it, --max-residual {calibrated:.4} instead of {default} (the floor plus {NOISE_ALLOWANCE} for the noise; pass --max-residual {default} for the default; docs/tracking.md)"
             )
         } else {
-            format!(
-                "template residual floor: {floor:.4} of its size (its unstored points at its own pose), within the verdict's --max-residual {threshold}"
-            )
+            format!("{measured}, within the verdict's --max-residual {threshold}")
         })
     }
 
@@ -141,4 +142,10 @@ impl DeviceModel {
             format!("model: {}", self.label)
         }
     }
+}
+
+/// `v` as the f64 its shortest decimal form reads as (`0.015`, not the
+/// f32's `0.014999999664723873`), for JSON.
+pub(crate) fn short(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::NAN)
 }

@@ -239,7 +239,8 @@ fn find<F: Organised>(
         v["object_radius"] = model.object_radius().into();
         v["seconds"] = seconds.into();
         v["origin"] = origin.into();
-        v["template_floor"] = loaded.floor.into();
+        v["template_floor"] = loaded.floor.map(crate::device::short).into();
+        v["verdict_max_residual"] = crate::device::short(loaded.options.max_residual).into();
         if let Some(best) = &located.best {
             v["translation"] = file_translation(best.registration.pose.translation).into();
             v["ambiguity"] = crate::ambiguity::json(&best.registration.ambiguity, origin);

@@ -202,8 +202,8 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
             "model": model_label,
             "template": template.display().to_string(),
             "origin": origin,
-            "template_floor": loaded.floor,
-            "max_residual": device.max_residual,
+            "template_floor": loaded.floor.map(crate::device::short),
+            "verdict_max_residual": crate::device::short(device.max_residual),
             "predict": predict,
             "frames": results,
         });

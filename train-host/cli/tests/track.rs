@@ -237,29 +237,45 @@ fn missing_frames_and_empty_folders_are_named() {
 }
 
 /// A template stored sparsely (64 of its 512 points) has a residual floor
-/// measured on the other 448, above what the default verdict leaves room
-/// for: `track` says so, names the calibrated `--max-residual`, and
-/// carries both figures in its JSON.
+/// measured on the other 448 and carried in the bound blob: `track` uses
+/// the blob's verdict, calibrated by it, unless `--max-residual` is given,
+/// and says which; the JSON carries the floor and the verdict in force.
 #[test]
-fn a_sparse_template_reports_its_residual_floor() {
-    let template = models().join("embedded-default-template.xyz");
-    let out = pcrnet()
-        .arg("track")
-        .arg(&template)
-        .arg(models().join("embedded-default-source.xyz"))
-        .args(["--template-points", "64", "--json", "-"])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(0), "{stderr}");
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let floor = report["template_floor"].as_f64().unwrap();
-    let threshold = report["max_residual"].as_f64().unwrap();
-    assert!((threshold - 0.015).abs() < 1e-6, "{report}");
-    assert!(floor > threshold && floor < 0.1, "{report}");
-    let calibrated = format!("--max-residual {:.4} calibrates", floor + 0.008);
+fn a_sparse_template_calibrates_the_verdict_by_its_residual_floor() {
+    use pcrnet_core::registration::{NOISE_ALLOWANCE, max_residual_for};
+    let run = |extra: &[&str]| {
+        let out = pcrnet()
+            .arg("track")
+            .arg(models().join("embedded-default-template.xyz"))
+            .arg(models().join("embedded-default-source.xyz"))
+            .args(["--template-points", "64", "--json", "-"])
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert_eq!(out.status.code(), Some(0), "{stderr}");
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let floor = report["template_floor"].as_f64().unwrap() as f32;
+        let threshold = report["verdict_max_residual"].as_f64().unwrap() as f32;
+        (floor, threshold, stderr)
+    };
+    let (floor, threshold, stderr) = run(&[]);
+    assert!(floor > 0.015 && floor < 0.1, "{floor}");
     assert!(
-        stderr.contains("template residual floor: ") && stderr.contains(&calibrated),
+        (threshold - max_residual_for(floor, 0.015)).abs() < 1e-6,
+        "{threshold} vs {floor} + {NOISE_ALLOWANCE}"
+    );
+    assert!(
+        stderr.contains("template residual floor: ")
+            && stderr.contains("the verdict is calibrated for it"),
+        "{stderr}"
+    );
+    // Asked for the default verdict: kept, with a warning.
+    let (again, threshold, stderr) = run(&["--max-residual", "0.015"]);
+    assert_eq!(again, floor);
+    assert_eq!(threshold, 0.015);
+    assert!(
+        stderr.contains("may score above the verdict's --max-residual 0.015"),
         "{stderr}"
     );
 }

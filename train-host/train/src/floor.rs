@@ -9,57 +9,42 @@
 //! sampler put points on, normals estimated across a fold. That second
 //! part, the floor, is a property of the template, and it varies: over the
 //! `tracking` experiment's twenty ModelNet10 templates (512 stored points)
-//! from 0.003 to 0.030 of the size. A template whose floor is near or above
+//! from 0.003 to 0.028 of the size. A template whose floor is near or above
 //! 0.015 has its right poses marked not reliable; in that experiment those
 //! templates were most of the frames lost.
 //!
 //! [`residual_floor`] measures it on the host, where the object's other
 //! points are at hand: the points of the object the template did not store,
-//! scored at the template's own pose with no noise. [`max_residual_for`]
-//! turns it into a verdict threshold for that template.
+//! scored at the template's own pose with no noise. The exporter stores it
+//! in the blob (format 6, `Trailer::residual_floor`; `Reference::new`
+//! measures it on the template file's points beyond those stored), and
+//! `pcrnet_core::registration::max_residual_for` turns it into the
+//! verdict threshold of the blob's recommended options.
 
 use pcrnet_core::refine::{MAX_SUBSET, Subset, score};
-use pcrnet_core::{Int8Model, Options, Pose};
-
-/// What [`max_residual_for`] allows above the floor for the sensor's
-/// noise, a share of the template's size: the mean distance of Gaussian
-/// noise of sigma 0.01 per coordinate from a plane, `0.01 sqrt(2 / pi)`,
-/// the noise of the `trust` and `tracking` experiments. (The default
-/// threshold, 0.015, is this plus a floor of 0.007.)
-pub const NOISE_ALLOWANCE: f32 = 0.008;
+use pcrnet_core::template::Template;
+use pcrnet_core::{Frame, Pose};
 
 /// The relative plane residual of `others` (user units: the object's
-/// points that the template of `model` did not store) at the template's
-/// own pose, each point's distance capped at `options.inlier_distance`
-/// as a registration's residual is: what a perfect, noiseless pose of a
-/// view of the object scores at best. At most [`MAX_SUBSET`] points are
-/// scored (every k-th). `None` when `others` is empty or holds a
-/// non-finite point.
+/// points that `template` did not store; `frame` maps user units to the
+/// model frame) at the template's own pose, each point's distance capped
+/// at `inlier_distance` (model units) as a registration's residual is:
+/// what a perfect, noiseless pose of a view of the object scores at best.
+/// At most [`MAX_SUBSET`] points are scored (every k-th). `None` when
+/// `others` is empty or holds a non-finite point.
 pub fn residual_floor(
-    model: &Int8Model<'_>,
+    template: &Template<'_>,
+    frame: &Frame,
     others: &[[f32; 3]],
-    options: &Options,
+    inlier_distance: f32,
 ) -> Option<f32> {
     if others.is_empty() || others.iter().flatten().any(|v| !v.is_finite()) {
         return None;
     }
-    let frame = *model.frame();
-    let subset = Subset::new(others, frame, MAX_SUBSET);
+    let subset = Subset::new(others, *frame, MAX_SUBSET);
     let at_rest = frame.pose_to_model(&Pose::IDENTITY);
-    let fit = score(model.template(), &subset, &at_rest, options.inlier_distance);
+    let fit = score(template, &subset, &at_rest, inlier_distance);
     Some(fit.plane_residual).filter(|r| r.is_finite())
-}
-
-/// The verdict threshold (`Options::max_residual`) for a template whose
-/// [`residual_floor`] is `floor`: its floor plus [`NOISE_ALLOWANCE`], and
-/// never below `default` (the options' own threshold): a well-sampled
-/// template keeps the default verdict, a sparse or folded one gets room
-/// for its right poses. Measured on the `tracking` experiment (RESULTS.md):
-/// the frames lost fall from about 18-20% to 0.2-2.3%, and more of the
-/// reliable frames are 5-30 degrees off (a template that represents its
-/// object coarsely also aligns it coarsely).
-pub fn max_residual_for(floor: f32, default: f32) -> f32 {
-    (floor + NOISE_ALLOWANCE).max(default)
 }
 
 #[cfg(test)]
@@ -67,6 +52,8 @@ mod tests {
     use super::*;
     use crate::shapes::{Shape, sample};
     use crate::template::bind;
+    use pcrnet_core::registration::{NOISE_ALLOWANCE, max_residual_for};
+    use pcrnet_core::{Int8Model, Options};
     use std::path::PathBuf;
 
     fn shipped() -> Vec<u8> {
@@ -84,9 +71,35 @@ mod tests {
         let floor = |n: usize| {
             let bound = bind(&blob, stored, n).unwrap();
             let model = Int8Model::from_bytes(&bound).unwrap();
-            residual_floor(&model, others, &options).unwrap()
+            let floor = residual_floor(
+                model.template(),
+                model.frame(),
+                others,
+                options.inlier_distance,
+            )
+            .unwrap();
+            // The blob carries the floor of the template file's points left
+            // out (`stored` beyond `n`), and its options are calibrated by it.
+            let carried = model.residual_floor().unwrap();
+            assert_eq!(
+                model.trained_options().max_residual,
+                max_residual_for(carried, 0.015)
+            );
+            floor
         };
         let (dense, sparse) = (floor(1024), floor(64));
+        // The same in other units and place: the floor is a share of the
+        // template's size, measured in its own frame.
+        let moved = |c: &[[f32; 3]]| -> Vec<[f32; 3]> {
+            c.iter().map(|p| p.map(|v| v * 3.0 + 100.0)).collect()
+        };
+        let bound = bind(&blob, &moved(stored), 64).unwrap();
+        let model = Int8Model::from_bytes(&bound).unwrap();
+        let far = residual_floor(model.template(), model.frame(), &moved(others), 0.05).unwrap();
+        assert!(
+            (far - sparse).abs() < 1e-3 * sparse.max(1e-3) + 2e-4,
+            "{far} vs {sparse}"
+        );
         // A box's faces are planes: a dense template represents them to
         // the quantisation step; 64 points leave edges to wrong planes.
         assert!(dense < 0.005, "{dense}");
@@ -99,11 +112,9 @@ mod tests {
     fn no_points_or_non_finite_ones_have_no_floor() {
         let blob = shipped();
         let model = Int8Model::from_bytes(&blob).unwrap();
-        let options = Options::default();
-        assert_eq!(residual_floor(&model, &[], &options), None);
-        assert_eq!(
-            residual_floor(&model, &[[0.0, f32::NAN, 0.0]], &options),
-            None
-        );
+        let floor =
+            |others: &[[f32; 3]]| residual_floor(model.template(), model.frame(), others, 0.05);
+        assert_eq!(floor(&[]), None);
+        assert_eq!(floor(&[[0.0, f32::NAN, 0.0]]), None);
     }
 }

@@ -117,6 +117,7 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
         passes: m.trained_passes(),
         head: m.has_head(),
         lk: m.lk_solver(),
+        floor: m.residual_floor(),
     };
     template_lines(&method, m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "flash (blob, weights used in place): {flash} bytes");
@@ -129,12 +130,14 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
     s
 }
 
-/// How a model was trained to run: its passes, whether it has a head, and
-/// PointNetLK's solver if the blob has one.
+/// How a model was trained to run: its passes, whether it has a head,
+/// PointNetLK's solver and the template's residual floor if the blob has
+/// them.
 struct Method<'m, 'a> {
     passes: usize,
     head: bool,
     lk: Option<&'m pcrnet_core::lk::Solver<'a>>,
+    floor: Option<f32>,
 }
 
 /// How the model runs and what it records of its template.
@@ -183,6 +186,18 @@ fn template_lines(
             );
         }
     }
+    let default = pcrnet_core::Options::default().max_residual;
+    let _ = match method.floor {
+        Some(floor) => writeln!(
+            s,
+            "  residual floor: {floor:.4} of the template's size (its points beyond those stored, at its own pose): recommended verdict max_residual {:.4} (default {default})",
+            pcrnet_core::registration::max_residual_for(floor, default)
+        ),
+        None => writeln!(
+            s,
+            "  residual floor: not measured (every template point stored, or a blob before format 6): the default verdict, max_residual {default}"
+        ),
+    };
     let _ = writeln!(
         s,
         "  frame: p_model = {:e} x (p - {:?}); the template spans about {:.4} user units",
@@ -232,6 +247,7 @@ fn describe_f32(m: &F32Model<'_>, size: usize) -> String {
         passes: m.trained_passes(),
         head: m.network().has_head(),
         lk: m.lk_solver(),
+        floor: m.residual_floor(),
     };
     template_lines(&method, m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "size: {size} bytes");

@@ -131,7 +131,7 @@ fn with_table(
 ) -> Result<(ModelKind, Vec<u8>), UpgradeError> {
     let trailer = format::Trailer {
         table: Some(table.view()),
-        lk: None,
+        ..format::Trailer::default()
     };
     let mut out =
         vec![0u8; format::blob_len(payload, &trailer).map_err(UpgradeError::DamagedFormat3)?];
@@ -235,7 +235,7 @@ mod tests {
     /// A format-3 blob of either kind gains the default table and nothing
     /// else: the shipped blobs (format 4) are their format-3 forms
     /// upgraded, the same payload and table (the current format adds only
-    /// an empty PointNetLK slot).
+    /// an empty PointNetLK slot and an empty residual floor).
     #[test]
     fn format_3_blobs_gain_their_table() {
         let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
@@ -249,9 +249,10 @@ mod tests {
             assert_eq!(found, kind);
             let new = format::open_version(&upgraded, kind, format::FORMAT_VERSION).unwrap();
             let old4 = format::open_version(&shipped, kind, 4).unwrap();
-            // Payload and table byte for byte, then `None` for the solver.
+            // Payload and table byte for byte, then `None` for the solver
+            // and for the residual floor.
             assert!(
-                new[..new.len() - 1] == *old4 && new[new.len() - 1] == 0,
+                new[..new.len() - 2] == *old4 && new[new.len() - 2..] == [0, 0],
                 "{name}: upgrade differs from the shipped blob"
             );
             assert!(matches!(add_table(&shipped), Err(UpgradeError::Current(4))));

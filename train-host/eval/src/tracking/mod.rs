@@ -13,7 +13,7 @@
 //! its own template (512 points, the shipped model's template bound in),
 //! frames from the shape's other points (none shared with the template).
 //!
-//! Each sequence is followed twice, with two verdicts ([`Verdict`]): the
+//! Each sequence is followed twice, with two verdicts (`Verdict`): the
 //! default threshold, and one calibrated for its template from the
 //! template's residual floor ([`pcrnet_train::floor`]).
 
@@ -55,7 +55,7 @@ const FAR_DEG: f64 = 30.0;
 enum Verdict {
     /// `Options::default().max_residual` for every template.
     Default,
-    /// [`pcrnet_train::floor::max_residual_for`] the template's residual
+    /// [`pcrnet_core::registration::max_residual_for`] the template's residual
     /// floor, measured on the shape's points the template did not store.
     Calibrated,
 }
@@ -148,10 +148,10 @@ pub fn tracking(ctx: &Context) -> anyhow::Result<Report> {
         "Tracking sensor streams",
         vec![
             format!("{FRAMES} frames per sequence at {} frames a second; the object turns up to 90 deg/s and shifts up to half its size a second along a smooth random trajectory (each Euler angle and coordinate a sine about a start in the network's range: Euler U[-45°, 45°], translation U[-0.5, 0.5]; periods 5 to 20 s), seen by a fixed depth camera.", RATES.map(|r| r.to_string()).join(" and ")),
-            format!("Every frame a fresh single view (point z-buffer) of {POINTS} points drawn from the shape's points the template did not keep, Gaussian noise sigma {SIGMA} per coordinate. ModelNet10: {SHAPES} seeded test shapes (512-point templates); airplane_0001: one ModelNet40 airplane (1,024-point template, 512 stored), both with the shipped model (`{SHIPPED_INT8}`) and `Options::default()`."),
+            format!("Every frame a fresh single view (point z-buffer) of {POINTS} points drawn from the shape's points the template did not keep, Gaussian noise sigma {SIGMA} per coordinate. ModelNet10: {SHAPES} seeded test shapes (512-point templates); airplane_0001: one ModelNet40 airplane (1,024-point template, 512 stored), both with the shipped model (`{SHIPPED_INT8}`) and `Options::default()` (its `max_residual` replaced in the calibrated runs, below)."),
             "Frames until the first reliable pose: `register`. Every later frame: `track` from the constant-velocity prediction of the last two poses (`pose::predict`; the last pose after a registration; after a lost frame, the last reliable pose: coasting), kept when reliable and within one step, else the registration in the same call (recovered if reliable). Lost: no reliable pose for the frame. Wrong: reliable but more than 5° off.".into(),
             "Acquired: a sequence with a reliable pose at some frame; lost after acquisition: the lost frames from each sequence's first reliable frame on (what tracking itself loses; a sequence's first frame is a single view of the full model in the network's range, where registration alone often fails: issue 37). Errors are of the frames with a reliable pose. Drift: the mean rotation error of a sequence's last 30 frames, the median over sequences. Host times are one thread, the int8 model with the host scratch (AVX2 kernels where the CPU has them); the device's counts are the QEMU harness's `tracking step` line.".into(),
-            format!("Verdict: every sequence is followed twice, with `Options::max_residual` at its default 0.015 and calibrated for its template (`pcrnet_train::floor`): the template's residual floor (the relative plane residual of the shape's points the template did not store, at the template's own pose, no noise) plus {} for the noise, never below 0.015. The floor is measured once per template, from points a user training for their own object has at hand.", pcrnet_train::floor::NOISE_ALLOWANCE),
+            format!("Verdict: every sequence is followed twice, with `Options::max_residual` at its default 0.015 and calibrated for its template (`pcrnet_train::floor`): the template's residual floor (the relative plane residual of the shape's points the template did not store, at the template's own pose, no noise) plus {} for the noise, never below 0.015. The floor is measured once per template, from points a user training for their own object has at hand.", pcrnet_core::registration::NOISE_ALLOWANCE),
         ],
         vec![table(&all), floors(&all)],
         started,
@@ -173,15 +173,20 @@ fn follow_shape(
         .with_context(|| format!("binding {name} as the template"))?;
     let model = Int8Model::from_bytes(&bound)?;
     let defaults = Options::default();
-    let floor = pcrnet_train::floor::residual_floor(&model, &shapes.rest[i], &defaults)
-        .with_context(|| format!("{name} has no finite points beside its template's"))?;
+    let floor = pcrnet_train::floor::residual_floor(
+        model.template(),
+        model.frame(),
+        &shapes.rest[i],
+        defaults.inlier_distance,
+    )
+    .with_context(|| format!("{name} has no finite points beside its template's"))?;
     let trajectory = Trajectory::new(seed);
     let mut out = Vec::new();
     for verdict in Verdict::ALL {
         let max_residual = match verdict {
             Verdict::Default => defaults.max_residual,
             Verdict::Calibrated => {
-                pcrnet_train::floor::max_residual_for(floor, defaults.max_residual)
+                pcrnet_core::registration::max_residual_for(floor, defaults.max_residual)
             }
         };
         let options = Options {
