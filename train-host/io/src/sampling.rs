@@ -39,7 +39,8 @@ pub fn farthest_point_sampling_with(
 }
 
 /// The indices into `cloud` of the points [`farthest_point_sampling_with`]
-/// picks, in pick order.
+/// picks, in pick order. Once every point lies at distance 0 from a pick
+/// (a cloud with fewer distinct points than `k`), indices repeat.
 pub fn farthest_point_indices(
     cloud: &[[f32; 3]],
     k: usize,
