@@ -107,28 +107,9 @@ impl DeviceModel {
         })
     }
 
-    /// What the template's residual floor says of the verdict, for a
-    /// person: the floor, whether the verdict in force was calibrated by
-    /// it, and a warning when right poses would score above the verdict.
+    /// [`floor_line`] of this model's floor and verdict.
     pub(crate) fn floor_line(&self) -> Option<String> {
-        let floor = self.floor?;
-        let threshold = self.options.max_residual;
-        let default = Options::default().max_residual;
-        let calibrated = max_residual_for(floor, default);
-        let measured = format!(
-            "template residual floor: {floor:.4} of its size (its points beyond those stored, at its own pose)"
-        );
-        Some(if threshold < calibrated {
-            format!(
-                "{measured}: with the noise a right pose may score above the verdict's --max-residual {threshold} and be marked not reliable; the blob's own verdict, {calibrated:.4}, is calibrated for it (leave --max-residual out to use it; docs/tracking.md)"
-            )
-        } else if calibrated > default && threshold == calibrated {
-            format!(
-                "{measured}: the verdict is calibrated for it, --max-residual {calibrated:.4} instead of {default} (the floor plus {NOISE_ALLOWANCE} for the noise; pass --max-residual {default} for the default; docs/tracking.md)"
-            )
-        } else {
-            format!("{measured}, within the verdict's --max-residual {threshold}")
-        })
+        floor_line(self.floor, self.options.max_residual)
     }
 
     /// The line saying which model runs.
@@ -148,4 +129,45 @@ impl DeviceModel {
 /// f32's `0.014999999664723873`), for JSON.
 pub(crate) fn short(v: f32) -> f64 {
     v.to_string().parse().unwrap_or(f64::NAN)
+}
+
+/// What a template's residual `floor` says of the verdict `threshold` in
+/// force, for a person: the floor, whether the verdict was calibrated by
+/// it, and a warning when right poses would score above the verdict.
+/// `None` without a floor.
+pub(crate) fn floor_line(floor: Option<f32>, threshold: f32) -> Option<String> {
+    let floor = floor?;
+    let default = Options::default().max_residual;
+    let calibrated = max_residual_for(floor, default);
+    let measured = format!(
+        "template residual floor: {floor:.4} of its size (its points beyond those stored, at its own pose)"
+    );
+    Some(if threshold < calibrated {
+        format!(
+            "{measured}: with the noise a right pose may score above the verdict's --max-residual {threshold} and be marked not reliable; the blob's own verdict, {calibrated:.4}, is calibrated for it (leave --max-residual out to use it; docs/tracking.md)"
+        )
+    } else if calibrated > default && threshold == calibrated {
+        format!(
+            "{measured}: the verdict is calibrated for it, --max-residual {calibrated:.4} instead of {default} (the floor plus {NOISE_ALLOWANCE} for the noise; pass --max-residual {default} for the default; docs/tracking.md)"
+        )
+    } else {
+        format!("{measured}, within the verdict's --max-residual {threshold}")
+    })
+}
+
+/// The residual floor of the device model `blob` with `template` (if
+/// given) bound in as `template_points` stored points: the floor binding
+/// stores ([`pcrnet_train::template::Reference::residual_floor`]), or the
+/// blob's own. `None` when neither has one or the blob is not int8.
+pub(crate) fn device_floor(
+    blob: &[u8],
+    template: Option<&[[f32; 3]]>,
+    template_points: usize,
+) -> Option<f32> {
+    match template {
+        Some(t) => pcrnet_train::template::Reference::new(t, template_points)
+            .ok()?
+            .residual_floor(),
+        None => Int8Model::from_bytes(blob).ok()?.residual_floor(),
+    }
 }

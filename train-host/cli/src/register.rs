@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use pcrnet_core::registration::max_residual_for;
 use pcrnet_eval::cli::MethodOptions;
 use pcrnet_eval::methods::{self, MethodKind};
 use pcrnet_io::frame::FilePose;
@@ -158,7 +159,7 @@ pub(crate) fn register(
     Output { aligned, json }: Output,
 ) -> anyhow::Result<()> {
     options.check()?;
-    let method = options.method(kind);
+    let mut method = options.method(kind);
     let (blob, model_note) = match options.read_model()? {
         Some(blob) => (Some(blob), None),
         None => match shipped_model(kind) {
@@ -174,6 +175,18 @@ pub(crate) fn register(
     options.check_hypotheses(kind, blob.as_deref(), template.is_some())?;
     if let Some(warning) = options.mode_warning(kind, blob.as_deref()) {
         eprintln!("warning: {warning}");
+    }
+    // The device pipeline's verdict: calibrated by the template's residual
+    // floor (the one binding stores, or the blob's) unless --max-residual
+    // is given, as `track` and `--scene` do.
+    let floor = match (kind, &blob) {
+        (MethodKind::Device, Some(blob)) => {
+            crate::device::device_floor(blob, template.as_deref(), method.template_points)
+        }
+        _ => None,
+    };
+    if let (Some(floor), None) = (floor, options.max_residual) {
+        method.max_residual = max_residual_for(floor, method.max_residual);
     }
     let registering = Progress::spinner(format!("registering with {}", method.name(None)));
     let out = methods::run(&method, blob.as_deref(), template.as_deref(), source);
@@ -198,6 +211,9 @@ pub(crate) fn register(
     ));
     if let Some(note) = model_note {
         say(note);
+    }
+    if let Some(line) = crate::device::floor_line(floor, method.max_residual) {
+        say(line);
     }
     say(format!("time: {:.3} ms", out.seconds * 1e3));
     say(format!("quaternion (w, x, y, z): {:?}", out.pose.rotation));
@@ -284,10 +300,12 @@ pub(crate) fn register(
         say(format!("aligned source written to {}", out_path.display()));
     }
     if let Some(path) = json {
-        write_json(
-            &path,
-            &report_json(&method.name(out.precision), &out, &pose),
-        )?;
+        let mut v = report_json(&method.name(out.precision), &out, &pose);
+        if kind == MethodKind::Device {
+            v["template_floor"] = floor.map(crate::device::short).into();
+            v["verdict_max_residual"] = crate::device::short(method.max_residual).into();
+        }
+        write_json(&path, &v)?;
     }
     Ok(())
 }

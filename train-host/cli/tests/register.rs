@@ -167,3 +167,54 @@ fn running_a_blob_in_another_mode_than_trained_warns() {
         .unwrap();
     assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
 }
+
+/// With the device method, a template file with twice the points stored
+/// has its residual floor measured at binding, and the verdict is
+/// calibrated by it unless `--max-residual` is given, as `track` does; the
+/// JSON says which verdict was in force. Another method has no verdict.
+#[test]
+fn the_device_verdict_is_calibrated_by_the_templates_residual_floor() {
+    use pcrnet_core::registration::max_residual_for;
+    let m = models();
+    let run = |extra: &[&str]| {
+        let stored = if extra.contains(&"--template-points") {
+            &[][..]
+        } else {
+            &["--template-points", "64"][..]
+        };
+        let out = pcrnet()
+            .arg("register")
+            .arg(m.join("embedded-default-template.xyz"))
+            .arg(m.join("embedded-default-source.xyz"))
+            .args(["--json", "-"])
+            .args(stored)
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert_eq!(out.status.code(), Some(0), "{stderr}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (v, stderr)
+    };
+    let (v, stderr) = run(&[]);
+    let floor = v["template_floor"].as_f64().unwrap() as f32;
+    let threshold = v["verdict_max_residual"].as_f64().unwrap() as f32;
+    assert!(floor > 0.015, "{v}");
+    assert!(
+        (threshold - max_residual_for(floor, 0.015)).abs() < 1e-6,
+        "{v}"
+    );
+    assert!(
+        stderr.contains("the verdict is calibrated for it"),
+        "{stderr}"
+    );
+    let (v, _) = run(&["--max-residual", "0.015"]);
+    assert_eq!(v["verdict_max_residual"].as_f64(), Some(0.015), "{v}");
+    // Every template point stored: nothing measured, the default verdict.
+    let (v, stderr) = run(&["--template-points", "512"]);
+    assert!(v["template_floor"].is_null(), "{v}");
+    assert_eq!(v["verdict_max_residual"].as_f64(), Some(0.015), "{v}");
+    assert!(!stderr.contains("residual floor"), "{stderr}");
+    let (v, _) = run(&["--method", "icp"]);
+    assert!(v.get("template_floor").is_none(), "{v}");
+}
