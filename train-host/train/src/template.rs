@@ -196,22 +196,33 @@ impl Reference {
             let t = template::Template::new(reference.cloud(), None)?;
             reference.table = Some(OwnedTable::build(&t, layout)?);
         }
-        // Farthest point sampling leaves out the points nearest the stored
-        // ones: only a cloud with at least as many points again gives a
-        // floor that is not biased low (measured on a night stand, 512
-        // stored: 576 points in the file gave 0.0095, 768 0.0267, 1,024
-        // 0.0296, independent points 0.0284).
-        let unstored = reference.unstored();
-        if unstored.len() >= reference.stored.len() {
-            let t = template::Template::new(reference.cloud(), reference.table())?;
-            reference.residual_floor = crate::floor::residual_floor(
+        let points = reference.points.clone();
+        reference.measure_floor(&points)?;
+        Ok(reference)
+    }
+
+    /// Measures the template's residual floor on `cloud` (user units: the
+    /// object's points, the template's own or a denser scan of it), its
+    /// points other than the stored ones ([`Self::unstored_of`]), and keeps
+    /// it for the blob; no floor unless there are at least as many of
+    /// them as stored points. Farthest point sampling leaves out the points
+    /// nearest the stored ones, so a cloud barely larger than the stored
+    /// count gives a floor biased low (a night stand, 512 stored: 576
+    /// points in the file gave 0.0095, 768 0.0267, 1,024 0.0296, against
+    /// 0.0284 from independent points).
+    pub fn measure_floor(&mut self, cloud: &[[f32; 3]]) -> Result<(), TemplateError> {
+        let unstored = self.unstored_of(cloud);
+        self.residual_floor = None;
+        if unstored.len() >= self.stored.len() {
+            let t = template::Template::new(self.cloud(), self.table())?;
+            self.residual_floor = crate::floor::residual_floor(
                 &t,
-                &reference.frame,
+                &self.frame,
                 &unstored,
                 Options::default().inlier_distance,
             );
         }
-        Ok(reference)
+        Ok(())
     }
 
     /// The template's points (user units) that were not stored, leaving
@@ -219,13 +230,19 @@ impl Reference {
     /// [`crate::floor::residual_floor`] scores. Empty when every point was
     /// stored.
     pub fn unstored(&self) -> Vec<[f32; 3]> {
+        self.unstored_of(&self.points)
+    }
+
+    /// The points of `cloud` (user units) that are not stored points of
+    /// the template (compared bit for bit).
+    pub fn unstored_of(&self, cloud: &[[f32; 3]]) -> Vec<[f32; 3]> {
         let bits = |p: &[f32; 3]| p.map(f32::to_bits);
         let stored: std::collections::HashSet<[u32; 3]> = self
             .stored
             .iter()
             .filter_map(|&i| self.points.get(i).map(bits))
             .collect();
-        self.points
+        cloud
             .iter()
             .filter(|p| !stored.contains(&bits(p)))
             .copied()
@@ -505,7 +522,22 @@ mod tests {
         assert!(r2.unstored().is_empty());
         assert_eq!(r2.residual_floor(), None);
         // Fewer unstored points than stored: no floor (it would be biased low).
-        assert_eq!(Reference::new(&metres, 400).unwrap().residual_floor(), None);
+        let mut r3 = Reference::new(&metres, 400).unwrap();
+        assert_eq!(r3.residual_floor(), None);
+        // A denser scan of the same object gives one; the stored points
+        // alone give none again.
+        let denser: Vec<[f32; 3]> = sample(Shape::Ell, 1200, 5)
+            .iter()
+            .map(|p| [p[0] * 3.0 + 100.0, p[1] * 3.0 - 50.0, p[2] * 3.0 + 7.0])
+            .collect();
+        r3.measure_floor(&denser).unwrap();
+        assert!(
+            r3.residual_floor()
+                .is_some_and(|f| f.is_finite() && f >= 0.0)
+        );
+        let stored: Vec<[f32; 3]> = r3.stored.iter().map(|&i| r3.points[i]).collect();
+        r3.measure_floor(&stored).unwrap();
+        assert_eq!(r3.residual_floor(), None);
         assert_eq!(t.turns().len(), PRINCIPAL_TURNS);
         // Stored points lie in the unit box of the model frame.
         for i in 0..t.len() {

@@ -51,7 +51,19 @@ pub(super) fn load_template(
     let raw = pcrnet_io::read_cloud(path)?;
     let reduced = data::reduce(&raw, points, Sampling::Fps, seed)
         .with_context(|| format!("{}: no finite point", path.display()))?;
-    Reference::new(&reduced, stored).with_context(|| format!("{}", path.display()))
+    let mut reference =
+        Reference::new(&reduced, stored).with_context(|| format!("{}", path.display()))?;
+    // The floor on the whole file: the reduced cloud's other points are
+    // farthest-point picks too, the nearest to the stored ones.
+    let finite: Vec<[f32; 3]> = raw
+        .iter()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .copied()
+        .collect();
+    reference
+        .measure_floor(&finite)
+        .with_context(|| format!("{}", path.display()))?;
+    Ok(reference)
 }
 
 /// Arguments of `pcrnet upgrade`.
