@@ -481,6 +481,9 @@ fn the_residual_floor_reaches_the_options_for_the_model() {
     );
     let plain = loaded(&shipped);
     assert_eq!(unsafe { pcrnet_model_residual_floor(&*plain) }, -1.0);
+    let status = unsafe { pcrnet_options_for_model(&*plain, &mut for_model) };
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    assert_eq!(for_model.max_residual, Options::default().max_residual);
     assert_eq!(
         unsafe { pcrnet_model_residual_floor(std::ptr::null()) },
         -1.0

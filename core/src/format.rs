@@ -3,12 +3,13 @@
 //! ```text
 //! offset  size  field
 //! 0       4     magic  b"PCRN"
-//! 4       2     format version, u16 little-endian (currently 5; 3 and 4 are read too)
+//! 4       2     format version, u16 little-endian (currently 6; 3, 4 and 5 are read too)
 //! 6       1     kind: 0 = int8 (device), 1 = f32 (host reference)
 //! 7       4     payload length P, u32 little-endian
 //! 11      P     payload: postcard encoding of Int8Payload or F32Payload,
 //!               then (format 4) of Option<NearestTable>,
-//!               then (format 5) of Option<LkSolver>
+//!               then (format 5) of Option<LkSolver>,
+//!               then (format 6) of Option<f32>, the residual floor
 //! 11+P    4     CRC-32 (ISO-HDLC, as zlib) of bytes 0 .. 11+P, little-endian
 //! ```
 //!
@@ -23,6 +24,13 @@
 //! pose in feature space ([`crate::Options::lk_iterations`]). A blob of a
 //! model trained as PointNetLK has it and no head (the payload's head and
 //! output layer are empty). Blobs of formats 3 and 4 read as having none.
+//!
+//! Format 6 adds the template's residual floor ([`Trailer::residual_floor`]):
+//! what a right pose scores beyond the noise because the stored points
+//! cannot represent the object exactly, measured by the exporter; the
+//! recommended options calibrate the verdict with it
+//! ([`crate::registration::max_residual_for`]). Blobs of formats 3 to 5
+//! read as having none.
 //!
 //! The payload starts with the architecture ([`Arch`]), the template's
 //! [`Frame`] and [`TemplateCloud`] and, for int8, the quantization

@@ -333,6 +333,14 @@ fn the_residual_floor_calibrates_the_recommended_verdict() {
     let low = with_trailer(&model, &floored(0.001));
     let m = Int8Model::from_bytes(&low).unwrap();
     assert_eq!(m.trained_options().max_residual, default);
+    // A floor of a noisy or cluttered file: capped, never near the
+    // residual's own cap (the inlier distance).
+    let huge = with_trailer(&model, &floored(0.2));
+    let m = Int8Model::from_bytes(&huge).unwrap();
+    assert_eq!(
+        m.trained_options().max_residual,
+        pcrnet_core::registration::MAX_CALIBRATED
+    );
     for bad in [f32::NAN, f32::INFINITY, -0.01] {
         assert_eq!(
             Int8Model::from_bytes(&with_trailer(&model, &floored(bad))).err(),
@@ -371,6 +379,10 @@ fn a_format_5_blob_still_reads() {
     reseal(&mut blob);
     let old = Int8Model::from_bytes(&blob).unwrap();
     assert_eq!(old.residual_floor(), None);
+    assert_eq!(
+        old.trained_options().max_residual,
+        pcrnet_core::Options::default().max_residual
+    );
     assert_eq!(old.payload(), model.payload());
     assert_eq!(old.template().table(), model.template().table());
 }

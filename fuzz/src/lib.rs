@@ -5,7 +5,7 @@
 //! A target fails (libFuzzer reports a crash) on a panic, on an allocation
 //! failure, or on an `Ok` result holding a non-finite value.
 
-use pcrnet_core::format::{CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, ModelKind};
+use pcrnet_core::format::{CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, ModelKind, OLDEST_READABLE};
 use pcrnet_core::{F32Model, Int8Model, Metric, Options, Registration};
 
 /// Fewer ICP iterations than the default: the same code, faster runs.
@@ -109,14 +109,15 @@ pub fn run_blob(blob: &[u8], cloud: &[[f32; 3]], options: &Options) {
     }
 }
 
-/// A blob around arbitrary payload bytes: header (magic, this format
-/// version, `kind`, length) and a correct CRC, so the payload reaches the
-/// decoder and the validation behind it.
-pub fn seal(kind: ModelKind, payload: &[u8]) -> Vec<u8> {
+/// A blob around arbitrary payload bytes: header (magic, format
+/// `version`, `kind`, length) and a correct CRC, so the payload reaches the
+/// decoder and the validation behind it (each readable version decodes
+/// its own trailer).
+pub fn seal(kind: ModelKind, version: u16, payload: &[u8]) -> Vec<u8> {
     const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len() + CRC_LEN);
     out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(&version.to_le_bytes());
     out.push(kind as u8);
     out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
     out.extend_from_slice(payload);
@@ -127,3 +128,10 @@ pub fn seal(kind: ModelKind, payload: &[u8]) -> Vec<u8> {
 
 /// The shipped embedded default (int8), for the targets that vary the cloud.
 pub const SHIPPED: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
+
+/// The readable format version a fuzzer's byte picks: the current one for
+/// 0, then older ones down to [`OLDEST_READABLE`], cycling.
+pub fn version_of(byte: u8) -> u16 {
+    let readable = FORMAT_VERSION - OLDEST_READABLE + 1;
+    FORMAT_VERSION - u16::from(byte) % readable
+}

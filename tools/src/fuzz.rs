@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use pcrnet_core::format::{CRC_LEN, HEADER_LEN};
+use pcrnet_core::format::{CRC_LEN, FORMAT_VERSION, HEADER_LEN};
 use pcrnet_core::testing::{random_f32_blob_into, random_int8_blob_into};
 
 /// The targets, in `fuzz/Cargo.toml`'s order.
@@ -215,9 +215,17 @@ fn seeds(root: &Path) -> Result<Vec<Seed>, String> {
         ("shipped-f32", &shipped_f32),
     ] {
         s.push(("blob", name.to_string(), blob.clone()));
+        // The first byte: the kind, and how many formats back the blob's
+        // own is (`pcrnet_fuzz::version_of`), so the seed decodes.
         let kind = u8::from(name.ends_with("f32"));
+        let version = u16::from_le_bytes([blob[4], blob[5]]);
+        let back = u8::try_from(FORMAT_VERSION - version).map_err(|e| e.to_string())?;
         let payload = &blob[HEADER_LEN..blob.len() - CRC_LEN];
-        s.push(("blob_sealed", name.to_string(), [&[kind], payload].concat()));
+        s.push((
+            "blob_sealed",
+            name.to_string(),
+            [&[kind | back << 1], payload].concat(),
+        ));
     }
     let cloud_bytes: Vec<u8> = cloud
         .iter()

@@ -164,6 +164,7 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
         black_box(capi::pcrnet_model_load(blob, blob_len, model));
         black_box(capi::pcrnet_model_scratch_len(model, black_box(8)));
         black_box(capi::pcrnet_model_trained_passes(model));
+        black_box(capi::pcrnet_model_residual_floor(model));
         capi::pcrnet_options_default(black_box(options.as_mut_ptr()));
         capi::pcrnet_options_network_only(black_box(options.as_mut_ptr()));
         black_box(capi::pcrnet_options_for_model(

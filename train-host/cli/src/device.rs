@@ -10,7 +10,7 @@ use pcrnet_eval::cli::MethodOptions;
 use pcrnet_eval::methods::{Method, MethodKind};
 
 use crate::register::{Reading, shipped_model};
-use pcrnet_core::registration::{NOISE_ALLOWANCE, max_residual_for};
+use pcrnet_core::registration::{MAX_CALIBRATED, NOISE_ALLOWANCE, max_residual_for};
 
 /// A loaded device model.
 pub(crate) struct DeviceModel {
@@ -29,9 +29,10 @@ pub(crate) struct DeviceModel {
     /// The device options, counts as the blob was trained when not given
     /// (`register::or_trained`).
     pub(crate) options: Options,
-    /// The template's residual floor, measured on the template file's
-    /// points that were not stored (`pcrnet_train::floor`); `None` without
-    /// a file or when every point was stored.
+    /// The template's residual floor: the one binding the template file
+    /// measured (`pcrnet_train::floor`), or the blob's own without a file;
+    /// `None` when neither has one (a file with fewer than twice the
+    /// stored points, or a blob before format 6).
     pub(crate) floor: Option<f32>,
 }
 
@@ -139,8 +140,15 @@ pub(crate) fn floor_line(floor: Option<f32>, threshold: f32) -> Option<String> {
     let floor = floor?;
     let default = Options::default().max_residual;
     let calibrated = max_residual_for(floor, default);
+    let capped = if floor + NOISE_ALLOWANCE > MAX_CALIBRATED {
+        format!(
+            "; a floor this high usually means a noisy or cluttered template file (the calibrated verdict stops at {MAX_CALIBRATED}): give a clean sample of the object's surface"
+        )
+    } else {
+        String::new()
+    };
     let measured = format!(
-        "template residual floor: {floor:.4} of its size (its points beyond those stored, at its own pose)"
+        "template residual floor: {floor:.4} of its size (its points beyond those stored, at its own pose){capped}"
     );
     Some(if threshold < calibrated {
         format!(
@@ -158,7 +166,7 @@ pub(crate) fn floor_line(floor: Option<f32>, threshold: f32) -> Option<String> {
 /// The residual floor of the device model `blob` with `template` (if
 /// given) bound in as `template_points` stored points: the floor binding
 /// stores ([`pcrnet_train::template::Reference::residual_floor`]), or the
-/// blob's own. `None` when neither has one or the blob is not int8.
+/// blob's own (int8 or f32). `None` when neither has one.
 pub(crate) fn device_floor(
     blob: &[u8],
     template: Option<&[[f32; 3]]>,
@@ -168,6 +176,11 @@ pub(crate) fn device_floor(
         Some(t) => pcrnet_train::template::Reference::new(t, template_points)
             .ok()?
             .residual_floor(),
-        None => Int8Model::from_bytes(blob).ok()?.residual_floor(),
+        None => match Int8Model::from_bytes(blob) {
+            Ok(m) => m.residual_floor(),
+            Err(_) => pcrnet_core::F32Model::from_bytes(blob)
+                .ok()?
+                .residual_floor(),
+        },
     }
 }

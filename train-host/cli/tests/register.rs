@@ -208,6 +208,9 @@ fn the_device_verdict_is_calibrated_by_the_templates_residual_floor() {
         stderr.contains("the verdict is calibrated for it"),
         "{stderr}"
     );
+    // The verdict reported is the one applied.
+    let residual = v["relative_plane_residual"].as_f64().unwrap() as f32;
+    assert_eq!(v["reliable"].as_bool(), Some(residual <= threshold), "{v}");
     let (v, _) = run(&["--max-residual", "0.015"]);
     assert_eq!(v["verdict_max_residual"].as_f64(), Some(0.015), "{v}");
     // Every template point stored: nothing measured, the default verdict.

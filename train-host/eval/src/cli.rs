@@ -126,7 +126,10 @@ pub struct MethodOptions {
     #[arg(long, allow_negative_numbers = true)]
     pub inlier_distance: Option<f32>,
     /// The device pipeline calls a pose reliable when its relative plane
-    /// residual is at most this (a share of the template's size).
+    /// residual is at most this (a share of the template's size). Without
+    /// it: `register`, `track` and `register --scene` use the blob's verdict
+    /// (calibrated by the template's residual floor when there is one),
+    /// `eval` and the experiments 0.015.
     #[arg(long, allow_negative_numbers = true)]
     pub max_residual: Option<f32>,
     /// Template points the device pipeline stores when a template cloud is

@@ -195,7 +195,7 @@ fn template_lines(
         ),
         None => writeln!(
             s,
-            "  residual floor: not measured (every template point stored, or a blob before format 6): the default verdict, max_residual {default}"
+            "  residual floor: not measured (the template file had fewer than twice the stored points, or a blob before format 6): the default verdict, max_residual {default}"
         ),
     };
     let _ = writeln!(

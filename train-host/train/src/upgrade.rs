@@ -3,9 +3,10 @@
 //! A format-3 blob of either kind differs from format 4 only in lacking
 //! the template's closest-point table ([`add_table`]): its payload is kept
 //! byte for byte and the table is built from its stored template, and it
-//! is written in the current format (5: no PointNetLK solver; `pcrnet
-//! export --lk` makes one from a checkpoint). Format-4 blobs need nothing:
-//! this build reads them as they are.
+//! is written in the current format (6: no PointNetLK solver, `pcrnet
+//! export --lk` makes one from a checkpoint; no residual floor, which needs
+//! the object's other points). Blobs of formats 4 and 5 need nothing: this
+//! build reads them as they are.
 //!
 //! A format-2 f32 blob (before frames and template points) needs its
 //! template recorded afresh.
@@ -53,11 +54,13 @@ pub enum UpgradeError {
     Table(#[source] crate::template::TemplateError),
     /// The blob is of another format.
     #[error(
-        "the blob is format {found}, not 2: only format-2 f32 blobs are exported afresh (a format-3 blob gains its closest-point table; format 4 is current)"
+        "the blob is format {found}, not 2: only format-2 f32 blobs are exported afresh (a format-3 blob gains its closest-point table; formats 4 to {current} read as they are)"
     )]
     NotFormat2 {
         /// The format found.
         found: u16,
+        /// The current format (`FORMAT_VERSION`).
+        current: u16,
     },
     /// Not a sound format-2 f32 blob (not f32, truncated, CRC mismatch, a
     /// payload that does not decode or does not fit its architecture).
@@ -70,7 +73,10 @@ pub enum UpgradeError {
 impl From<pcrnet_core::Error> for UpgradeError {
     fn from(e: pcrnet_core::Error) -> Self {
         match e {
-            pcrnet_core::Error::UnsupportedVersion { found } => UpgradeError::NotFormat2 { found },
+            pcrnet_core::Error::UnsupportedVersion { found } => UpgradeError::NotFormat2 {
+                found,
+                current: format::FORMAT_VERSION,
+            },
             e => UpgradeError::Damaged(e),
         }
     }
@@ -204,7 +210,7 @@ mod tests {
         )
         .unwrap();
         let e = read_v2_f32(&shipped).unwrap_err();
-        assert!(matches!(e, UpgradeError::NotFormat2 { found: 4 }));
+        assert!(matches!(e, UpgradeError::NotFormat2 { found: 4, .. }));
         assert!(e.to_string().contains("format 4, not 2"), "{e}");
     }
 
