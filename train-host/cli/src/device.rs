@@ -87,14 +87,13 @@ impl DeviceModel {
         };
         let (device, floor) = {
             let model = Int8Model::from_bytes(&blob).with_context(|| label.clone())?;
-            let trained = model.trained_options();
-            let mut device = pcrnet_eval::register::or_trained(&method.device_options(), trained);
-            // Without --max-residual, the blob's verdict: calibrated by the
-            // template's residual floor when binding measured one.
-            if options.max_residual.is_none() {
-                device.max_residual = trained.max_residual;
-            }
-            (device, model.residual_floor())
+            let mut device = pcrnet_eval::register::or_trained(
+                &method.device_options(),
+                model.trained_options(),
+            );
+            let floor = model.residual_floor();
+            device.max_residual = verdict(options, floor, device.max_residual);
+            (device, floor)
         };
         Ok(DeviceModel {
             blob,
@@ -123,6 +122,17 @@ impl DeviceModel {
         } else {
             format!("model: {}", self.label)
         }
+    }
+}
+
+/// The device pipeline's verdict threshold: `in_force` (the flag's or the
+/// default) calibrated by the template's residual `floor`
+/// ([`max_residual_for`]) when there is one and `--max-residual` was not
+/// given. The rule of `register`, `track` and `register --scene`.
+pub(crate) fn verdict(options: &MethodOptions, floor: Option<f32>, in_force: f32) -> f32 {
+    match (options.max_residual, floor) {
+        (None, Some(floor)) => max_residual_for(floor, in_force),
+        _ => in_force,
     }
 }
 

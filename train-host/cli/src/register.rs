@@ -7,7 +7,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use pcrnet_core::registration::max_residual_for;
 use pcrnet_eval::cli::MethodOptions;
 use pcrnet_eval::methods::{self, MethodKind};
 use pcrnet_io::frame::FilePose;
@@ -185,9 +184,7 @@ pub(crate) fn register(
         }
         _ => None,
     };
-    if let (Some(floor), None) = (floor, options.max_residual) {
-        method.max_residual = max_residual_for(floor, method.max_residual);
-    }
+    method.max_residual = crate::device::verdict(options, floor, method.max_residual);
     let registering = Progress::spinner(format!("registering with {}", method.name(None)));
     let out = methods::run(&method, blob.as_deref(), template.as_deref(), source);
     drop(registering);

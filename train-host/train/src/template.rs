@@ -196,8 +196,7 @@ impl Reference {
             let t = template::Template::new(reference.cloud(), None)?;
             reference.table = Some(OwnedTable::build(&t, layout)?);
         }
-        let points = reference.points.clone();
-        reference.measure_floor(&points)?;
+        reference.residual_floor = reference.floor_of(&reference.points)?;
         Ok(reference)
     }
 
@@ -211,18 +210,23 @@ impl Reference {
     /// points in the file gave 0.0095, 768 0.0267, 1,024 0.0296, against
     /// 0.0284 from independent points).
     pub fn measure_floor(&mut self, cloud: &[[f32; 3]]) -> Result<(), TemplateError> {
-        let unstored = self.unstored_of(cloud);
-        self.residual_floor = None;
-        if unstored.len() >= self.stored.len() {
-            let t = template::Template::new(self.cloud(), self.table())?;
-            self.residual_floor = crate::floor::residual_floor(
-                &t,
-                &self.frame,
-                &unstored,
-                Options::default().inlier_distance,
-            );
-        }
+        self.residual_floor = self.floor_of(cloud)?;
         Ok(())
+    }
+
+    /// The floor [`Self::measure_floor`] keeps.
+    fn floor_of(&self, cloud: &[[f32; 3]]) -> Result<Option<f32>, TemplateError> {
+        let unstored = self.unstored_of(cloud);
+        if unstored.len() < self.stored.len() {
+            return Ok(None);
+        }
+        let t = template::Template::new(self.cloud(), self.table())?;
+        Ok(crate::floor::residual_floor(
+            &t,
+            &self.frame,
+            &unstored,
+            Options::default().inlier_distance,
+        ))
     }
 
     /// The template's points (user units) that were not stored, leaving
