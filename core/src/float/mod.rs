@@ -187,6 +187,28 @@ impl<'a> F32Model<'a> {
         self.residual_floor
     }
 
+    /// Checks `pose` against the cut single view `source` seen from
+    /// `viewpoint`, as [`crate::Int8Model::check_view`].
+    ///
+    /// # Errors
+    /// As [`crate::scene::View::render`].
+    pub fn check_view(
+        &self,
+        source: &[[f32; 3]],
+        viewpoint: [f32; 3],
+        pose: &Pose,
+        buffer: &mut [f32],
+    ) -> Result<crate::scene::Verification> {
+        crate::scene::view::check_model(
+            &self.template,
+            &self.frame,
+            source,
+            viewpoint,
+            pose,
+            buffer,
+        )
+    }
+
     /// One step on the source moved by `map`: a network pass or a
     /// PointNetLK step (`exp(P r)^-1` for the f32 feature residual).
     fn step(

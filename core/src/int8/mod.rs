@@ -320,6 +320,34 @@ impl<'a> Int8Model<'a> {
         )
     }
 
+    /// Checks `pose` (a registration of `source`, user units) against the
+    /// cut single view `source` seen from `viewpoint` (the sensor's
+    /// position in the source's frame, user units): the view rendered into
+    /// `buffer` ([`crate::scene::view::buffer_len`]) and judged with
+    /// [`crate::scene::VerifySettings::for_object`] of
+    /// [`Self::object_radius`] (see [`crate::scene::view`]). A pose that
+    /// passes explains the view both ways; combine it with the
+    /// registration's own verdict.
+    ///
+    /// # Errors
+    /// As [`crate::scene::View::render`].
+    pub fn check_view(
+        &self,
+        source: &[[f32; 3]],
+        viewpoint: [f32; 3],
+        pose: &Pose,
+        buffer: &mut [f32],
+    ) -> Result<crate::scene::Verification> {
+        crate::scene::view::check_model(
+            &self.template,
+            &self.p.frame,
+            source,
+            viewpoint,
+            pose,
+            buffer,
+        )
+    }
+
     /// The largest distance of the template's stored points from the
     /// template's centre, user units: the radius the scene stages expect of
     /// the object ([`crate::scene::SceneOptions::for_object`]).

@@ -11,6 +11,7 @@
 //! | clusters | [`cluster`] | connected components of what is off the plane, kept when their extent fits the object |
 //! | points | [`cluster::gather`] | one cluster's points at full resolution, for registration |
 //! | verify | [`verify`] | a pose against the frame: the template's points seen where they should be, none in free space |
+//! | view | [`view`] | a cut single view rendered from its sensor's viewpoint, for the same check when there is no frame |
 //!
 //! Working memory is one caller-owned `u16` slice of [`labels_len`]
 //! elements (4 bytes a grid cell: 9.6 KB for a 224 x 172 frame at step 4).
@@ -20,12 +21,14 @@ pub mod depth;
 pub mod grid;
 pub mod plane;
 pub mod verify;
+pub mod view;
 
 pub use cluster::{Cluster, ClusterSearch, Clusters};
 pub use depth::{DepthImage, Intrinsics, Organised, OrganisedPoints};
 pub use grid::{Grid, Region};
 pub use plane::{FoundPlane, Plane, PlaneSearch};
 pub use verify::{Verification, VerifySettings};
+pub use view::View;
 
 use crate::error::Result;
 

@@ -84,7 +84,8 @@ impl VerifySettings {
 /// Checks `pose` (mapping sensor-frame points onto the template, user
 /// units) against `frame` seen with `intrinsics`: every stored template
 /// point in `template` (model frame `model`) is moved into the sensor frame
-/// and compared with the depth seen at its pixel.
+/// and compared with the depth seen at its pixel. A pixel without depth is
+/// no evidence: a sensor frame's invalid pixels.
 pub fn verify<F: Organised>(
     frame: &F,
     intrinsics: &Intrinsics,
@@ -94,6 +95,30 @@ pub fn verify<F: Organised>(
     settings: &VerifySettings,
 ) -> Verification {
     let back = pose.inverse();
+    let points = (0..template.len()).map(|i| back.transform_point(template.user_point(i, model)));
+    tally(points, frame, intrinsics, settings, Empty::Unobserved)
+}
+
+/// What a pixel without depth says of a template point projected there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Empty {
+    /// Nothing: the sensor gave no reading there (a depth frame).
+    Unobserved,
+    /// The sensor saw through it: a cut view holds every point the sensor
+    /// saw of the object, so where it has none the object is not
+    /// ([`super::view`]).
+    FreeSpace,
+}
+
+/// Judges each of `points` (sensor frame, user units) against `frame` and
+/// gives the counts and the verdict of [`verify`].
+pub(crate) fn tally<F: Organised>(
+    points: impl Iterator<Item = [f32; 3]>,
+    frame: &F,
+    intrinsics: &Intrinsics,
+    settings: &VerifySettings,
+    empty: Empty,
+) -> Verification {
     let mut counts = Verification {
         supported: 0,
         violations: 0,
@@ -101,9 +126,8 @@ pub fn verify<F: Organised>(
         unobserved: 0,
         passed: false,
     };
-    for i in 0..template.len() {
-        let p = back.transform_point(template.user_point(i, model));
-        match judge(frame, intrinsics, p, settings.tolerance) {
+    for p in points {
+        match judge(frame, intrinsics, p, settings.tolerance, empty) {
             Judgement::Supported => counts.supported += 1,
             Judgement::Violation => counts.violations += 1,
             Judgement::Occluded => counts.occluded += 1,
@@ -130,8 +154,16 @@ enum Judgement {
 /// pixels about its projection: supported when any agrees within
 /// `tolerance`, a violation when it lies in front of the nearest of them,
 /// occluded when behind; so that a point at the object's silhouette is not
-/// judged on the background beside it.
-fn judge<F: Organised>(frame: &F, k: &Intrinsics, p: [f32; 3], tolerance: f32) -> Judgement {
+/// judged on the background beside it. Without depth in the window (or
+/// outside the frame) it is unobserved, or a violation when `empty` is
+/// [`Empty::FreeSpace`]; a point behind the sensor is unobserved.
+fn judge<F: Organised>(
+    frame: &F,
+    k: &Intrinsics,
+    p: [f32; 3],
+    tolerance: f32,
+    empty: Empty,
+) -> Judgement {
     let Some(([u, v], _)) = project(k, p) else {
         return Judgement::Unobserved;
     };
@@ -152,7 +184,10 @@ fn judge<F: Organised>(frame: &F, k: &Intrinsics, p: [f32; 3], tolerance: f32) -
         }
     }
     if !seen {
-        Judgement::Unobserved
+        match empty {
+            Empty::Unobserved => Judgement::Unobserved,
+            Empty::FreeSpace => Judgement::Violation,
+        }
     } else if agrees {
         Judgement::Supported
     } else if p[2] < nearest - tolerance {

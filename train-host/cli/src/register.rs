@@ -186,7 +186,7 @@ pub(crate) fn register(
     };
     method.max_residual = crate::device::verdict(options, floor, method.max_residual);
     let registering = Progress::spinner(format!("registering with {}", method.name(None)));
-    let out = methods::run(&method, blob.as_deref(), template.as_deref(), source);
+    let out = methods::run(&method, blob.as_deref(), template.as_deref(), source, None);
     drop(registering);
     let out = out.with_context(|| match &options.model {
         Some(path) => format!("registering with {}", path.display()),

@@ -106,6 +106,34 @@ pub struct PairScore {
     /// ([`symmetry::explains`]); `None` when none was reported.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub explained: Option<bool>,
+    /// The check against the single view from its viewpoint, when the
+    /// method ran it ([`methods::Method::view_check`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view: Option<ViewCheck>,
+}
+
+/// What [`PairScore::view`] records of a [`pcrnet_core::scene::Verification`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ViewCheck {
+    /// Template points the view supports.
+    pub supported: u32,
+    /// Template points in free space.
+    pub violations: u32,
+    /// Template points behind the view's surface.
+    pub occluded: u32,
+    /// The check passed.
+    pub passed: bool,
+}
+
+impl From<pcrnet_core::scene::Verification> for ViewCheck {
+    fn from(v: pcrnet_core::scene::Verification) -> Self {
+        ViewCheck {
+            supported: v.supported,
+            violations: v.violations,
+            occluded: v.occluded,
+            passed: v.passed,
+        }
+    }
 }
 
 /// A method's scores on a set of pairs.
@@ -163,8 +191,8 @@ pub fn score(
     let one = |(index, p): (usize, &Pair)| -> Result<Scored, ScoreError> {
         progress.inc(1);
         let started = std::time::Instant::now();
-        let (pose, iterations, seconds, precision, check, feature_distance, failure) =
-            match methods::run(method, blob, Some(&p.template), &p.source) {
+        let (pose, iterations, seconds, precision, check, feature_distance, view, failure) =
+            match methods::run(method, blob, Some(&p.template), &p.source, p.viewpoint) {
                 Ok(o) => (
                     o.pose,
                     o.iterations,
@@ -172,6 +200,7 @@ pub fn score(
                     o.precision,
                     o.check,
                     o.feature_distance,
+                    o.view,
                     None,
                 ),
                 Err(error @ methods::MethodError::NoModel(_)) => {
@@ -185,6 +214,7 @@ pub fn score(
                     Pose::IDENTITY,
                     0,
                     started.elapsed().as_secs_f64(),
+                    None,
                     None,
                     None,
                     None,
@@ -214,6 +244,7 @@ pub fn score(
                 explained: check
                     .filter(|c| c.ambiguity.is_ambiguous())
                     .map(|c| symmetry::explains(&c.ambiguity, &pose, &p.r_gt)),
+                view: view.map(ViewCheck::from),
             },
             precision,
             failure,

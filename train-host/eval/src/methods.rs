@@ -25,7 +25,9 @@ use pcrnet_core::{Degeneracy, Pose};
 use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
-use crate::register::{ITERATIVE_TOLERANCE, Precision, network, pipeline, register_pointnetlk};
+use crate::register::{
+    ITERATIVE_TOLERANCE, Precision, check_view, network, pipeline, register_pointnetlk,
+};
 use pcrnet_train::degeneracy::source_degeneracy;
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError, bind_reference};
 
@@ -132,6 +134,11 @@ pub struct Method {
     /// PointNetLK's solver.
     #[serde(default)]
     pub lk_iterations: usize,
+    /// The device pipeline's pose is reliable only if it also passes the
+    /// check against the single view from the pair's viewpoint
+    /// ([`pcrnet_core::scene::view`]); needs a viewpoint.
+    #[serde(default)]
+    pub view_check: bool,
 }
 
 fn default_hypotheses() -> usize {
@@ -204,6 +211,7 @@ impl Method {
             max_residual: default_max_residual(),
             template_points: default_template_points(),
             lk_iterations: 0,
+            view_check: false,
         }
     }
 
@@ -290,6 +298,9 @@ impl Method {
             if self.template_points != default_template_points() {
                 points += &format!(", {}-point template", self.template_points);
             }
+            if self.view_check {
+                points += ", view check";
+            }
             if self.icp_iterations == 0 {
                 format!("{precision} K={}{points}, scored, no ICP", self.hypotheses)
             } else {
@@ -335,6 +346,10 @@ pub struct Outcome {
     /// rule ([`pcrnet_core::refine::degeneracy`]) in the template's frame:
     /// the pose is then not to be acted on, whatever the method returned.
     pub degenerate: Option<Degeneracy>,
+    /// The check against the single view from its viewpoint
+    /// ([`Method::view_check`]), which the device pipeline's verdict then
+    /// includes.
+    pub view: Option<pcrnet_core::scene::Verification>,
 }
 
 /// Why a registration failed.
@@ -359,17 +374,24 @@ pub enum MethodError {
     /// Host ICP refinement needs the template as a cloud.
     #[error("ICP (and --refine-icp) needs the template as a cloud: give TEMPLATE SOURCE")]
     NoTemplate,
+    /// The view check was asked for without the sensor's viewpoint.
+    #[error(
+        "the view check needs the sensor's viewpoint in the source's frame (--viewpoint X,Y,Z)"
+    )]
+    NoViewpoint,
 }
 
 /// Registers `source` onto `template` with `method` (and the model `blob`
 /// for network methods; its kind picks the int8 or f32 path). Without a
 /// template, network methods use the blob's own (as a device does); ICP
-/// needs one.
+/// needs one. `viewpoint` is the sensor's position in the source's frame,
+/// when the source is a cut single view: what [`Method::view_check`] needs.
 pub fn run(
     method: &Method,
     blob: Option<&[u8]>,
     template: Option<&[[f32; 3]]>,
     source: &[[f32; 3]],
+    viewpoint: Option<[f32; 3]>,
 ) -> Result<Outcome, MethodError> {
     let start = Instant::now();
     let mut untimed = std::time::Duration::ZERO;
@@ -410,11 +432,22 @@ pub fn run(
                 check: None,
                 feature_distance: None,
                 degenerate,
+                view: None,
             }
         }
         MethodKind::Device => {
             let blob = bound(model()?)?;
-            let (r, precision) = pipeline(&blob, None, source, &method.device_options())?;
+            let (mut r, precision) = pipeline(&blob, None, source, &method.device_options())?;
+            let view = match (method.view_check, viewpoint) {
+                (false, _) => None,
+                (true, None) => return Err(MethodError::NoViewpoint),
+                (true, Some(v)) => {
+                    let seen =
+                        check_view(&blob, source, v, &r.pose).map_err(TemplateError::from)?;
+                    r.reliable &= seen.passed;
+                    Some(seen)
+                }
+            };
             let checking = Instant::now();
             let feature_distance = feature_distance(&blob, source, &r.pose);
             untimed = checking.elapsed();
@@ -427,6 +460,7 @@ pub fn run(
                 check: Some(r),
                 feature_distance,
                 degenerate,
+                view,
             }
         }
         MethodKind::Pointnetlk => {
@@ -448,6 +482,7 @@ pub fn run(
                 check: None,
                 feature_distance: Some(r.feature_distance),
                 degenerate,
+                view: None,
             }
         }
         MethodKind::Pcrnet | MethodKind::Ipcrnet => {
@@ -465,6 +500,7 @@ pub fn run(
                 check: None,
                 feature_distance: None,
                 degenerate,
+                view: None,
             }
         }
     };
@@ -541,12 +577,19 @@ mod tests {
     fn networks_need_a_model_and_icp_refines() {
         let t = sample(Shape::Ell, 200, 1);
         assert!(matches!(
-            run(&Method::new(MethodKind::Pcrnet), None, Some(&t), &t),
+            run(&Method::new(MethodKind::Pcrnet), None, Some(&t), &t, None),
             Err(MethodError::NoModel(MethodKind::Pcrnet))
         ));
         // ICP on a small known offset: exact, with a trajectory.
         let shifted: Vec<[f32; 3]> = t.iter().map(|p| [p[0] + 0.02, p[1], p[2]]).collect();
-        let r = run(&Method::new(MethodKind::Icp), None, Some(&t), &shifted).unwrap();
+        let r = run(
+            &Method::new(MethodKind::Icp),
+            None,
+            Some(&t),
+            &shifted,
+            None,
+        )
+        .unwrap();
         assert!((r.pose.translation[0] + 0.02).abs() < 1e-4, "{:?}", r.pose);
         assert_eq!(r.trajectory.map(|v| v.len()), Some(r.iterations));
         assert!(r.seconds > 0.0);
@@ -580,10 +623,10 @@ mod tests {
             for stored in [DEFAULT_TEMPLATE_POINTS, 100] {
                 let mut m = Method::new(MethodKind::Pcrnet);
                 m.template_points = stored;
-                let got = run(&m, Some(blob), Some(&template), &source).unwrap();
+                let got = run(&m, Some(blob), Some(&template), &source, None).unwrap();
                 assert_eq!(got.pose, want, "PCRNet, {stored} stored points");
                 m.kind = MethodKind::Device;
-                let got = run(&m, Some(blob), Some(&template), &source).unwrap();
+                let got = run(&m, Some(blob), Some(&template), &source, None).unwrap();
                 let bound = Bound {
                     cloud: &template,
                     stored,

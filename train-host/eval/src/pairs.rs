@@ -125,6 +125,9 @@ pub struct Pair {
     pub t_gt: [f32; 3],
     /// The template's class.
     pub label: String,
+    /// A single-view source's viewpoint (source frame,
+    /// [`pcrnet_train::data::MadePair::viewpoint`]).
+    pub viewpoint: Option<[f32; 3]>,
 }
 
 /// Why a pair set could not be made, read or used.
@@ -295,7 +298,8 @@ impl PairSet {
                         index,
                         what: "the shape's other points (--resample needs shapes with more points than --points)",
                     })?;
-                let (source, r_gt, t_gt) = data::make_pair(&base, &cfg, rec.seed);
+                let made = data::make_pair_seen(&base, &cfg, rec.seed);
+                let (source, r_gt, t_gt) = (made.source, made.r_gt, made.t_gt);
                 if r_gt != rec.rotation || t_gt != rec.translation {
                     return Err(PairSetError::Mismatch {
                         index,
@@ -308,6 +312,7 @@ impl PairSet {
                     r_gt,
                     t_gt,
                     label: rec.label.clone(),
+                    viewpoint: made.viewpoint,
                 })
             })
             .collect()

@@ -13,6 +13,7 @@
 //! template's), `p_template = R p_source + t`.
 
 use pcrnet_core::pose;
+use pcrnet_core::scene::Verification;
 use pcrnet_core::{F32Model, Int8Model, Options, Pose, Registration};
 
 use crate::pointnetlk::{LkResult, PointNetLk};
@@ -104,6 +105,29 @@ pub fn pipeline(
             Ok((r, Precision::F32))
         }
         Err(e) => Err(e.into()),
+    }
+}
+
+/// Pixels a side of the view [`check_view`] renders: 32, enough for
+/// sources of up to about 500 points at full resolution.
+pub const VIEW_SIDE: usize = 32;
+
+/// Checks `pose` (a registration of `source`, user units) against the cut
+/// single view `source` seen from `viewpoint` (the source's frame), with
+/// either kind of blob (`Int8Model::check_view`).
+pub fn check_view(
+    blob: &[u8],
+    source: &[[f32; 3]],
+    viewpoint: [f32; 3],
+    pose: &Pose,
+) -> Result<Verification, pcrnet_core::Error> {
+    let mut buffer = vec![0f32; pcrnet_core::scene::view::buffer_len(VIEW_SIDE)];
+    match Int8Model::from_bytes(blob) {
+        Ok(m) => m.check_view(source, viewpoint, pose, &mut buffer),
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            F32Model::from_bytes(blob)?.check_view(source, viewpoint, pose, &mut buffer)
+        }
+        Err(e) => Err(e),
     }
 }
 

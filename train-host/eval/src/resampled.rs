@@ -57,11 +57,20 @@ pub fn resampled(ctx: &Context) -> anyhow::Result<Report> {
                 ..folder(ctx, "ModelNet10", None, cfg)
             };
             let pairs = pair_set(ctx, &file_name("mn10", slug, resample), spec)?;
+            // A single view's sensor stood at a known place: the device
+            // pipeline's pose checked against the view from there too.
+            let viewed = cfg.single_view.then_some(Method {
+                view_check: true,
+                ..device(recommended)
+            });
             for method in [
                 Method::new(MethodKind::Icp),
                 Method::new(MethodKind::Pcrnet),
                 device(recommended),
-            ] {
+            ]
+            .into_iter()
+            .chain(viewed)
+            {
                 let model = (method.kind != MethodKind::Icp)
                     .then_some(shipped)
                     .flatten();

@@ -41,6 +41,7 @@ fn a_template_without_extent_is_an_error_in_every_method() {
                 Some(&blob(kind)),
                 Some(&template),
                 &source,
+                None,
             );
             assert!(
                 matches!(r, Err(MethodError::Model(_))),
@@ -72,7 +73,7 @@ fn a_degenerate_source_is_flagged_in_every_method() {
                 templates.push(None);
             }
             for t in templates {
-                let out = methods::run(&Method::new(kind), Some(&blob), t, source)
+                let out = methods::run(&Method::new(kind), Some(&blob), t, source, None)
                     .unwrap_or_else(|e| panic!("{kind:?}: {e}"));
                 assert_eq!(
                     out.degenerate,

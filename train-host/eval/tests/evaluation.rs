@@ -128,18 +128,20 @@ fn one_pass_ipcrnet_is_pcrnet() {
             Some(&int8),
             Some(&p.template),
             &p.source,
+            None,
         )
         .unwrap();
-        let b = run(&one, Some(&int8), Some(&p.template), &p.source).unwrap();
+        let b = run(&one, Some(&int8), Some(&p.template), &p.source, None).unwrap();
         assert_eq!(a.pose, b.pose);
         let c = run(
             &Method::new(MethodKind::Pcrnet),
             Some(&f32),
             Some(&p.template),
             &p.source,
+            None,
         )
         .unwrap();
-        let d = run(&one, Some(&f32), Some(&p.template), &p.source).unwrap();
+        let d = run(&one, Some(&f32), Some(&p.template), &p.source, None).unwrap();
         assert_eq!(c.pose, d.pose);
     }
 }

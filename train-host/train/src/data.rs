@@ -291,6 +291,32 @@ pub fn make_pair_with_centroid(
     cfg: &PairConfig,
     seed: u64,
 ) -> (Vec<[f32; 3]>, Mat3, [f32; 3], [f32; 3]) {
+    let m = make_pair_seen(template, cfg, seed);
+    (m.source, m.r_gt, m.t_gt, m.centroid)
+}
+
+/// A pair as [`make_pair_seen`] makes it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MadePair {
+    /// The source cloud.
+    pub source: Vec<[f32; 3]>,
+    /// True rotation, source onto template.
+    pub r_gt: Mat3,
+    /// True translation, source onto template.
+    pub t_gt: [f32; 3],
+    /// The centroid the source had before centring (zero when
+    /// `cfg.centre` is off).
+    pub centroid: [f32; 3],
+    /// For a single-view source, where its camera stood, in the source's
+    /// frame ([`super::view::eye`], moved as the source was): the
+    /// viewpoint a registration of it can be checked from
+    /// (`pcrnet_core::scene::View`). A crop or thinning after the view
+    /// leaves it where it was.
+    pub viewpoint: Option<[f32; 3]>,
+}
+
+/// [`make_pair_with_centroid`], with the single view's viewpoint.
+pub fn make_pair_seen(template: &[[f32; 3]], cfg: &PairConfig, seed: u64) -> MadePair {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = template.len();
     let mut angles: [f32; 3] =
@@ -303,8 +329,10 @@ pub fn make_pair_with_centroid(
     }
     let r = euler_to_mat(angles);
     let mut pts = template.to_vec();
+    let mut eye = None;
     if cfg.single_view {
         let dir = random_direction(&mut rng);
+        eye = super::view::eye(&pts, dir);
         pts = super::view::visible_from(&pts, dir)
             .into_iter()
             .map(|i| pts[i])
@@ -360,7 +388,17 @@ pub fn make_pair_with_centroid(
         let rc = mat_vec(&r_gt, &c);
         t_gt = std::array::from_fn(|k| t_gt[k] + rc[k]);
     }
-    (source, r_gt, t_gt, c)
+    let viewpoint = eye.map(|e| {
+        let moved = apply(&r, &t, &e);
+        std::array::from_fn(|k| moved[k] - c[k])
+    });
+    MadePair {
+        source,
+        r_gt,
+        t_gt,
+        centroid: c,
+        viewpoint,
+    }
 }
 
 /// Moves `pts` so its centroid (summed in f64) is at the origin; returns

@@ -30,24 +30,12 @@ pub fn visible_from(cloud: &[[f32; 3]], dir: [f32; 3]) -> Vec<usize> {
     let finite: Vec<usize> = (0..cloud.len())
         .filter(|&i| cloud[i].iter().all(|v| v.is_finite()))
         .collect();
-    let points: Vec<[f32; 3]> = finite.iter().map(|&i| cloud[i]).collect();
-    if points.len() < 2 {
+    if finite.len() < 2 {
         return finite;
     }
-    let Ok(c) = pcrnet_core::pose::centroid(&points) else {
+    let Some((eye, f)) = camera(cloud, dir) else {
         return finite;
     };
-    let radius = finite
-        .iter()
-        .map(|&i| norm(sub(cloud[i], c)))
-        .fold(0f32, f32::max);
-    let Some(f) = normalised(dir.map(|v| -v)) else {
-        return finite;
-    };
-    if radius <= 0.0 {
-        return finite;
-    }
-    let eye = [0, 1, 2].map(|k| c[k] - f[k] * EYE_DISTANCE * radius);
     // An image basis perpendicular to the viewing direction.
     let helper = if f[0].abs() < 0.9 {
         [1.0, 0.0, 0.0]
@@ -93,6 +81,36 @@ pub fn visible_from(cloud: &[[f32; 3]], dir: [f32; 3]) -> Vec<usize> {
         })
         .map(|&(i, ..)| i)
         .collect()
+}
+
+/// Where the camera of [`visible_from`] stands for `cloud` and `dir`
+/// (the cloud's frame): [`EYE_DISTANCE`] radii from the centroid of the
+/// finite points along `dir`. `None` when it has none (fewer than two
+/// finite points, all at one place, or a zero `dir`). For a view made by
+/// `visible_from(cloud, dir)` this is the sensor's viewpoint, what
+/// `pcrnet_core::scene::View` checks a registration from.
+pub fn eye(cloud: &[[f32; 3]], dir: [f32; 3]) -> Option<[f32; 3]> {
+    camera(cloud, dir).map(|(eye, _)| eye)
+}
+
+/// The camera of [`visible_from`]: its position and its unit viewing
+/// direction (from the eye towards the centroid).
+fn camera(cloud: &[[f32; 3]], dir: [f32; 3]) -> Option<([f32; 3], [f32; 3])> {
+    let points: Vec<[f32; 3]> = cloud
+        .iter()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .copied()
+        .collect();
+    if points.len() < 2 {
+        return None;
+    }
+    let c = pcrnet_core::pose::centroid(&points).ok()?;
+    let radius = points.iter().map(|&p| norm(sub(p, c))).fold(0f32, f32::max);
+    let f = normalised(dir.map(|v| -v))?;
+    if radius <= 0.0 {
+        return None;
+    }
+    Some(([0, 1, 2].map(|k| c[k] - f[k] * EYE_DISTANCE * radius), f))
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {

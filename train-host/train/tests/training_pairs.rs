@@ -193,3 +193,52 @@ fn single_view_and_identity_pairs() {
         );
     }
 }
+
+/// A single-view pair says where its camera stood (`MadePair::viewpoint`,
+/// in the source's frame, centred or not): moved by the true pose it lies
+/// `view::EYE_DISTANCE` radii from the template's centroid, on the side
+/// the source was seen from (nearer the seen points than the unseen).
+/// Other pairs have none.
+#[test]
+fn single_view_pairs_carry_their_viewpoint() {
+    use pcrnet_train::view::EYE_DISTANCE;
+    let ds = Dataset::generated(3, 512, 5);
+    let tpl = &ds.clouds[0];
+    let mean = |c: &[[f32; 3]]| -> [f32; 3] {
+        std::array::from_fn(|k| c.iter().map(|p| p[k]).sum::<f32>() / c.len() as f32)
+    };
+    let dist = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>().sqrt();
+    let c = mean(tpl);
+    let radius = tpl.iter().map(|&p| dist(p, c)).fold(0f32, f32::max);
+    for centre in [false, true] {
+        let cfg = PairConfig {
+            single_view: true,
+            centre,
+            noise: Some([0.01, 0.01]),
+            ..PairConfig::default()
+        };
+        let made = data::make_pair_seen(tpl, &cfg, 7);
+        let (src, _, _) = data::make_pair(tpl, &cfg, 7);
+        assert_eq!(made.source, src, "the same pair");
+        let eye = apply(
+            &made.r_gt,
+            &made.t_gt,
+            &made.viewpoint.expect("a viewpoint"),
+        );
+        let d = dist(eye, c);
+        assert!(
+            (d - EYE_DISTANCE * radius).abs() < 1e-3 * d,
+            "{d} vs {radius}"
+        );
+        let seen: Vec<[f32; 3]> = src
+            .iter()
+            .map(|s| apply(&made.r_gt, &made.t_gt, s))
+            .collect();
+        let near = |p: [f32; 3]| dist(p, eye);
+        let seen_mean = seen.iter().map(|&p| near(p)).sum::<f32>() / seen.len() as f32;
+        let all_mean = tpl.iter().map(|&p| near(p)).sum::<f32>() / tpl.len() as f32;
+        assert!(seen_mean < all_mean, "{seen_mean} vs {all_mean}");
+    }
+    let plain = data::make_pair_seen(tpl, &PairConfig::default(), 7);
+    assert_eq!(plain.viewpoint, None);
+}

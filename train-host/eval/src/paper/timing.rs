@@ -154,8 +154,22 @@ fn precision_gap(
     let gaps: Vec<(f64, f64)> = pairs
         .par_iter()
         .map(|p| {
-            let a = run(method, Some(&model.int8), Some(&p.template), &p.source)?.pose;
-            let b = run(method, Some(&model.f32), Some(&p.template), &p.source)?.pose;
+            let a = run(
+                method,
+                Some(&model.int8),
+                Some(&p.template),
+                &p.source,
+                p.viewpoint,
+            )?
+            .pose;
+            let b = run(
+                method,
+                Some(&model.f32),
+                Some(&p.template),
+                &p.source,
+                p.viewpoint,
+            )?
+            .pose;
             Ok((
                 metrics::rotation_error_deg(&a.rotation_matrix(), &b.rotation_matrix()),
                 metrics::translation_error(&a.translation, &b.translation),
@@ -177,7 +191,7 @@ fn trajectory_means(
     let per_pair: Vec<Vec<f64>> = pairs
         .par_iter()
         .map(|p| {
-            let out = run(method, blob, Some(&p.template), &p.source)?;
+            let out = run(method, blob, Some(&p.template), &p.source, p.viewpoint)?;
             let traj = out.trajectory.unwrap_or_else(|| vec![out.pose]);
             Ok((0..method.iterations)
                 .map(|k| {

@@ -1,0 +1,165 @@
+//! A cut single view checked from its viewpoint (`scene::view`): a box seen
+//! from one side passes at its true pose, and fails when turned, shifted,
+//! or when the view is a fragment of it; bad viewpoints and buffers are
+//! typed errors.
+
+mod shapes;
+
+use pcrnet_core::format::Frame;
+use pcrnet_core::scene::view::{self, View};
+use pcrnet_core::scene::{Verification, VerifySettings};
+use pcrnet_core::{Error, Pose};
+
+/// Half sizes of the box (user units = model units here).
+const HALF: [f32; 3] = [0.3, 0.2, 0.125];
+
+/// The box's surface on a grid of `spacing`, shifted by `offset` (a
+/// fraction of the spacing) so that two samplings share no point; with
+/// each point's outward face normal.
+fn box_surface(spacing: f32, offset: f32) -> Vec<([f32; 3], [f32; 3])> {
+    let mut out = Vec::new();
+    for axis in 0..3 {
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        for sign in [-1.0f32, 1.0] {
+            let steps = |k: usize| (2.0 * HALF[k] / spacing) as i32;
+            for i in 0..steps(a) {
+                for j in 0..steps(b) {
+                    let mut p = [0f32; 3];
+                    p[axis] = sign * HALF[axis];
+                    p[a] = -HALF[a] + (i as f32 + offset) * spacing;
+                    p[b] = -HALF[b] + (j as f32 + offset) * spacing;
+                    let mut n = [0f32; 3];
+                    n[axis] = sign;
+                    out.push((p, n));
+                }
+            }
+        }
+    }
+    out
+}
+
+const EYE: [f32; 3] = [0.5, -0.7, 1.4];
+
+/// What a sensor at `EYE` sees of the box (a convex shape: the faces
+/// turned towards it).
+fn seen(spacing: f32, keep: impl Fn([f32; 3]) -> bool) -> Vec<[f32; 3]> {
+    box_surface(spacing, 0.5)
+        .into_iter()
+        .filter(|(p, n)| (0..3).map(|k| n[k] * (EYE[k] - p[k])).sum::<f32>() > 0.0)
+        .map(|(p, _)| p)
+        .filter(|&p| keep(p))
+        .collect()
+}
+
+fn template() -> pcrnet_core::template::Template<'static> {
+    let cloud: Vec<[f32; 3]> = box_surface(0.05, 0.0).into_iter().map(|(p, _)| p).collect();
+    shapes::template_of(&cloud, &[])
+}
+
+fn settings(t: &pcrnet_core::template::Template<'_>) -> VerifySettings {
+    VerifySettings::for_object(t.radius())
+}
+
+fn check(source: &[[f32; 3]], viewpoint: [f32; 3], pose: &Pose) -> Verification {
+    let t = template();
+    let mut buffer = vec![0f32; view::buffer_len(32)];
+    let v = View::render(source, viewpoint, &mut buffer).unwrap();
+    v.check(&t, &Frame::IDENTITY, pose, &settings(&t))
+}
+
+/// A turn of `deg` degrees about the unit axis `axis`.
+fn turn(axis: [f32; 3], deg: f32) -> Pose {
+    let h = deg.to_radians() / 2.0;
+    Pose {
+        rotation: [
+            h.cos(),
+            axis[0] * h.sin(),
+            axis[1] * h.sin(),
+            axis[2] * h.sin(),
+        ],
+        translation: [0.0; 3],
+    }
+}
+
+#[test]
+fn the_true_pose_explains_the_view() {
+    let source = seen(0.03, |_| true);
+    let v = check(&source, EYE, &Pose::IDENTITY);
+    assert!(v.passed, "{v:?}");
+    assert!(
+        v.supported > 100 && v.violations <= v.supported / 20,
+        "{v:?}"
+    );
+    // The far faces are behind the seen ones.
+    assert!(v.occluded > 50, "{v:?}");
+}
+
+#[test]
+fn the_true_pose_passes_in_any_frame() {
+    // The source and its viewpoint moved together: the pose maps them back.
+    let moved = Pose {
+        translation: [0.4, -1.0, 2.5],
+        ..turn([0.48, 0.6, 0.64], 70.0)
+    };
+    let source: Vec<[f32; 3]> = seen(0.03, |_| true)
+        .iter()
+        .map(|&p| moved.transform_point(p))
+        .collect();
+    let v = check(&source, moved.transform_point(EYE), &moved.inverse());
+    assert!(v.passed, "{v:?}");
+}
+
+#[test]
+fn a_turned_or_shifted_pose_leaves_template_points_in_free_space() {
+    let source = seen(0.03, |_| true);
+    let quarter = check(&source, EYE, &turn([0.0, 0.0, 1.0], 90.0));
+    assert!(!quarter.passed, "{quarter:?}");
+    let shifted = Pose {
+        translation: [0.15, 0.0, 0.0],
+        ..Pose::IDENTITY
+    };
+    let shifted = check(&source, EYE, &shifted);
+    assert!(!shifted.passed, "{shifted:?}");
+    assert!(shifted.violations > shifted.supported / 5, "{shifted:?}");
+}
+
+#[test]
+fn a_fragment_cannot_pass_for_the_object() {
+    // A quarter of the box, cut along x and y: fitted where it belongs, the
+    // rest of the box's near side lies where the sensor saw nothing.
+    let fragment = seen(0.015, |p| p[0] > 0.0 && p[1] < 0.0);
+    let v = check(&fragment, EYE, &Pose::IDENTITY);
+    assert!(!v.passed, "{v:?}");
+    assert!(v.violations > v.supported, "{v:?}");
+}
+
+#[test]
+fn bad_viewpoints_buffers_and_clouds_are_typed_errors() {
+    let source = seen(0.03, |_| true);
+    let mut buffer = vec![0f32; view::buffer_len(32)];
+    let invalid = |r: Result<View<'_>, Error>| matches!(r, Err(Error::InvalidOption { .. }));
+    assert!(invalid(View::render(
+        &source,
+        [f32::NAN, 0.0, 1.0],
+        &mut buffer
+    )));
+    // Inside the box: points on every side.
+    assert!(invalid(View::render(
+        &source,
+        [0.01, 0.02, 0.03],
+        &mut buffer
+    )));
+    assert!(invalid(View::render(&source, EYE, &mut [0f32; 63])));
+    assert!(matches!(
+        View::render(&[], EYE, &mut buffer),
+        Err(Error::EmptyCloud)
+    ));
+    assert!(matches!(
+        View::render(&[[f32::INFINITY; 3]], EYE, &mut buffer),
+        Err(Error::EmptyCloud)
+    ));
+    // A smaller buffer renders coarser pixels, still a check.
+    let mut small = vec![0f32; view::buffer_len(view::MIN_SIDE)];
+    let v = View::render(&source, EYE, &mut small).unwrap();
+    assert_eq!(v.side(), view::MIN_SIDE);
+}
