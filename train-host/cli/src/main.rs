@@ -186,6 +186,14 @@ enum Command {
         /// plane found in the frame, for a view from one side in any yaw.
         #[arg(long, requires = "scene", allow_hyphen_values = true, value_parser = scene::parse_axis)]
         up: Option<[f32; 3]>,
+        /// SOURCE is one object as a depth sensor saw it from X,Y,Z (the
+        /// sensor's position in the source file's frame; 0,0,0 for points
+        /// in the camera's own frame), everything else cut away: the
+        /// device pipeline's pose is then reliable only if it also
+        /// explains that view (the template's points it puts in view lie
+        /// on the seen surface, none where the sensor saw past the object).
+        #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = register::parse_point, conflicts_with = "scene")]
+        viewpoint: Option<[f64; 3]>,
         /// How the clouds are read.
         #[command(flatten)]
         reading: Reading,
@@ -324,6 +332,7 @@ fn run(command: Command) -> anyhow::Result<()> {
             intrinsics,
             candidates,
             up,
+            viewpoint,
             reading,
         } => {
             reading.check()?;
@@ -361,7 +370,8 @@ fn run(command: Command) -> anyhow::Result<()> {
             let source = reading.load(source, Some(origin))?.points;
             let template = template.map(|t| t.points);
             let out = Output { aligned, json };
-            register(template, &source, origin, method, &options, out)?
+            let seen = register::Seen { origin, viewpoint };
+            register(template, &source, seen, method, &options, out)?
         }
         Command::Track(args) => track::track(args)?,
         Command::Frame { out, model } => scene::write_frame(&out, model.as_deref())?,

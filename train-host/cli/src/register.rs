@@ -146,19 +146,50 @@ pub(crate) fn shipped_model(kind: MethodKind) -> Option<(&'static [u8], &'static
     }
 }
 
+/// Where the clouds of [`register`] lie and were seen from.
+pub(crate) struct Seen {
+    /// Both clouds were moved by this (the files' frame) before rounding to f32.
+    pub origin: [f64; 3],
+    /// `--viewpoint`: the sensor's position, the files' frame.
+    pub viewpoint: Option<[f64; 3]>,
+}
+
+/// Parses `X,Y,Z` (finite numbers).
+pub(crate) fn parse_point(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e}; give three numbers X,Y,Z"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("`{s}`: give three finite numbers X,Y,Z")),
+    }
+}
+
 /// Registers `source` onto `template` (the blob's own when `None`), both
-/// given about `origin` in the files' frame, and reports the pose in the
+/// given about `seen.origin` in the files' frame, and reports the pose in the
 /// files' frame.
 pub(crate) fn register(
     template: Option<Vec<[f32; 3]>>,
     source: &[[f32; 3]],
-    origin: [f64; 3],
+    seen: Seen,
     kind: MethodKind,
     options: &MethodOptions,
     Output { aligned, json }: Output,
 ) -> anyhow::Result<()> {
     options.check()?;
+    let origin = seen.origin;
+    anyhow::ensure!(
+        seen.viewpoint.is_none() || kind == MethodKind::Device,
+        "--viewpoint checks the device pipeline's pose against the view: leave out --method or give --method device"
+    );
+    // In the clouds' local frame, as the points were moved.
+    let viewpoint = seen
+        .viewpoint
+        .map(|v| [0, 1, 2].map(|k| (v[k] - origin[k]) as f32));
     let mut method = options.method(kind);
+    method.view_check = viewpoint.is_some();
     let (blob, model_note) = match options.read_model()? {
         Some(blob) => (Some(blob), None),
         None => match shipped_model(kind) {
@@ -186,7 +217,13 @@ pub(crate) fn register(
     };
     method.max_residual = crate::device::verdict(options, floor, method.max_residual);
     let registering = Progress::spinner(format!("registering with {}", method.name(None)));
-    let out = methods::run(&method, blob.as_deref(), template.as_deref(), source, None);
+    let out = methods::run(
+        &method,
+        blob.as_deref(),
+        template.as_deref(),
+        source,
+        viewpoint,
+    );
     drop(registering);
     let out = out.with_context(|| match &options.model {
         Some(path) => format!("registering with {}", path.display()),
@@ -273,10 +310,20 @@ pub(crate) fn register(
         for line in crate::ambiguity::lines(&c.ambiguity, origin) {
             say(line);
         }
-        say(if c.reliable {
-            "trust: RELIABLE (relative plane residual within the threshold)".into()
-        } else {
-            "trust: NOT RELIABLE - do not act on this pose (plane residual above the threshold, or a degenerate source)".into()
+        if let Some(v) = &out.view {
+            say(format!(
+                "view check from the viewpoint: {} template point(s) on the seen surface, {} where the sensor saw past the object, {} behind the seen surface: {}",
+                v.supported,
+                v.violations,
+                v.occluded,
+                if v.passed { "passed" } else { "FAILED" }
+            ));
+        }
+        say(match (c.reliable, &out.view) {
+            (true, Some(_)) => "trust: RELIABLE (relative plane residual within the threshold, and the pose explains the view)".into(),
+            (true, None) => "trust: RELIABLE (relative plane residual within the threshold)".into(),
+            (false, Some(v)) if !v.passed => "trust: NOT RELIABLE - do not act on this pose (it puts template points where the sensor saw past the object, or too few on the seen surface)".into(),
+            (false, _) => "trust: NOT RELIABLE - do not act on this pose (plane residual above the threshold, or a degenerate source)".into(),
         });
     }
     if let Some(out_path) = aligned {
@@ -337,6 +384,15 @@ fn report_json(method: &str, out: &methods::Outcome, pose: &FilePose) -> serde_j
         v["out_of_range"] = c.out_of_range.into();
         v["reliable"] = c.reliable.into();
         v["ambiguity"] = crate::ambiguity::json(&c.ambiguity, pose.origin);
+    }
+    if let Some(view) = &out.view {
+        v["view_check"] = serde_json::json!({
+            "supported": view.supported,
+            "violations": view.violations,
+            "occluded": view.occluded,
+            "unobserved": view.unobserved,
+            "passed": view.passed,
+        });
     }
     v
 }

@@ -106,13 +106,20 @@ pub fn resampled(ctx: &Context) -> anyhow::Result<Report> {
             };
             let pairs: Vec<Pair> = pair_set(ctx, &file_name("air0001", slug, resample), spec)?;
             rec.score(&set, Method::new(MethodKind::Icp), None, &pairs, true)?;
+            let viewed = cfg.single_view.then_some(Method {
+                view_check: true,
+                ..device(recommended)
+            });
             for model in &models {
                 for method in [
                     Method::new(MethodKind::Ipcrnet),
                     device(recommended),
                     every_point,
                     whole_template,
-                ] {
+                ]
+                .into_iter()
+                .chain(viewed)
+                {
                     rec.score(&set, method, model.int8(), &pairs, true)?;
                 }
             }
@@ -132,6 +139,7 @@ pub fn resampled(ctx: &Context) -> anyhow::Result<Report> {
             format!("ModelNet10: the test split at 512 points, the shipped model (`{SHIPPED_INT8}`, PCRNet, trained on all ten classes with the paper's protocol)."),
             format!("airplane_0001: one ModelNet40 airplane of the training split (2,048 points: {OBJECT_POINTS} for the template, the other {OBJECT_POINTS} for resampled sources, split by the same seed as in training), every pair a pose of it, with {object} (i-PCRNet, pose loss, single-view noisy training pairs; every one but the first from resampled sources, the third and fourth for 60 and 90 epochs instead of 30; trained on this airplane's points, as `train --object` is meant to be used: the file holds no others)."),
             "i-PCRNet: up to 20 passes, the paper's stop rule; device K=10: `pcrnet-core`'s register as in the `trust` experiment (the blob's passes, 10 starting poses, on-device point-to-plane ICP, residual), scoring and refining 256 source points (the default) or every one, against 512 stored template points (the default) or the whole template (`--template-points 1024`).".into(),
+            "View check (single-view sets): the same registration, reliable only if the pose also explains the view from the camera's position (`pcrnet_core::scene::view`: the source splatted into a depth image seen from there; at most 10% of the template points it can judge in free space, at least 20% supported); the poses are the same, only the verdict changes.".into(),
         ],
         vec![table],
         started,
