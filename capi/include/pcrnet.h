@@ -89,6 +89,13 @@
 #define PCRNET_DEGENERATE_LINE 2
 
 /*
+ Floats of the image buffer `pcrnet_check_view` is best given: 32 x 32
+ pixels (4 KB), enough for sources of up to about 500 points at full
+ resolution; at least 64 (8 x 8), a smaller buffer gives coarser pixels.
+ */
+#define PCRNET_VIEW_BUFFER_LEN 1024
+
+/*
  Status of a call: `PCRNET_OK` (0) or what went wrong (negative).
  */
 enum PcrnetStatus
@@ -595,6 +602,34 @@ typedef struct {
   uint64_t storage[PCRNET_PREPARED_WORDS];
 } PcrnetPrepared;
 
+/*
+ What `pcrnet_check_view` found: the stored template points, moved by the
+ pose into the view, counted by what the view says of each.
+ */
+typedef struct {
+  /*
+   On the seen surface.
+   */
+  uint32_t supported;
+  /*
+   Where the sensor saw past the object (free space).
+   */
+  uint32_t violations;
+  /*
+   Behind the seen surface (no evidence).
+   */
+  uint32_t occluded;
+  /*
+   Behind the viewpoint (none for a sound pose).
+   */
+  uint32_t unobserved;
+  /*
+   At most 10% violations among supported + violations, at least 20%
+   support among those with an observation: the pose explains the view.
+   */
+  bool passed;
+} PcrnetViewCheck;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -882,6 +917,36 @@ PcrnetStatus pcrnet_track(const PcrnetModel *model,
                           size_t scratch_len,
                           PcrnetRegistration *out,
                           uint32_t *outcome);
+
+/*
+ Checks `pose` `[qw, qx, qy, qz, tx, ty, tz]` (a registration of the
+ `n_points` source points, as `PcrnetRegistration` gives it) against the
+ source seen as a cut single view from `viewpoint` `[x, y, z]` (the
+ sensor's position in the source's frame, source units; 0, 0, 0 for
+ points in the camera's own frame): the source splatted into a small
+ depth image in `buffer` (`buffer_len` floats, see
+ `PCRNET_VIEW_BUFFER_LEN`), the template's points judged on it (see
+ `pcrnet_core::scene::view`). Act on a registration only when it is
+ reliable and the check passed. Writes `out` on success; a viewpoint
+ that is not finite, among or beside the points, or a buffer under 64
+ floats, is `PCRNET_ERROR_INVALID_OPTION`; no finite point,
+ `PCRNET_ERROR_EMPTY_CLOUD`; a pose that is not finite,
+ `PCRNET_ERROR_NON_FINITE_RESULT`.
+
+ # Safety
+ `model` as `pcrnet_register`; `points` must point to `3 * n_points`
+ readable floats, `viewpoint` to 3 and `pose` to 7, `buffer` to
+ `buffer_len` writable floats, `out` to a writable `PcrnetViewCheck`
+ (each may be null: an error).
+ */
+PcrnetStatus pcrnet_check_view(const PcrnetModel *model,
+                               const float *points,
+                               size_t n_points,
+                               const float *viewpoint,
+                               const float *pose,
+                               float *buffer,
+                               size_t buffer_len,
+                               PcrnetViewCheck *out);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -54,6 +54,7 @@ mod locate;
 mod prepared;
 mod track;
 mod types;
+mod view;
 pub use feature::pcrnet_feature_distance;
 pub use locate::{
     PcrnetDepthImage, PcrnetLocated, PcrnetSceneOptions, pcrnet_locate, pcrnet_scene_labels_len,
@@ -69,6 +70,7 @@ pub use types::{
     PCRNET_METRIC_POINT_TO_PLANE, PCRNET_METRIC_POINT_TO_POINT, PcrnetOptions, PcrnetRegistration,
     PcrnetStatus,
 };
+pub use view::{PCRNET_VIEW_BUFFER_LEN, PcrnetViewCheck, pcrnet_check_view};
 
 use PcrnetStatus::*;
 use pcrnet_core::{Int8Model, MAX_TILE, Options, Pose, Registration};

@@ -372,6 +372,34 @@ pub fn describe_ambiguity(
     }
 }
 
+/// Pixels a side of the harness's view check (`scene::view`): 32, as the
+/// host's `register --viewpoint`; 16 on boards short of RAM (the check's
+/// arithmetic is the same, on coarser pixels).
+pub const HARNESS_VIEW_SIDE: usize = 32;
+
+/// The viewpoint the QEMU harness checks a registration of `cloud` from
+/// (`Int8Model::check_view`): three times the cloud's radius (its farthest
+/// finite point from their mean, summed in f32 in point order) from that
+/// mean along +z, so every point lies in front of it. The mean of nothing
+/// is the origin.
+pub fn harness_viewpoint(cloud: &[[f32; 3]]) -> [f32; 3] {
+    let finite = || cloud.iter().filter(|p| p.iter().all(|v| v.is_finite()));
+    let (mut sum, mut n) = ([0f32; 3], 0u32);
+    for p in finite() {
+        for k in 0..3 {
+            sum[k] += p[k];
+        }
+        n += 1;
+    }
+    let c = sum.map(|s| s / n.max(1) as f32);
+    let mut radius = 0f32;
+    for p in finite() {
+        let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+        radius = radius.max(libm::sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]));
+    }
+    [c[0], c[1], c[2] + 3.0 * radius]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

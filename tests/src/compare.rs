@@ -48,6 +48,8 @@ pub struct DeviceRun {
     pub tracks: BTreeMap<(usize, usize, String), DeviceTrack>,
     /// Feature-space checks, per (case index, option set index).
     pub features: BTreeMap<(usize, usize), crate::feature::DeviceFeature>,
+    /// View checks, per (case index, option set index).
+    pub views: BTreeMap<(usize, usize), crate::view::DeviceView>,
     /// The scene path, per model index.
     pub scenes: crate::scene::Scenes,
     /// Load verdict per model (`ok int8`, `ok f32`, `error ...`; see
@@ -219,6 +221,11 @@ pub fn parse(stdout: &str) -> DeviceRun {
             ["case", c, "feature", rest @ ..] => {
                 crate::feature::parse_line(c, rest).map(|(key, check)| {
                     run.features.insert(key, check);
+                })
+            }
+            ["case", c, "view", rest @ ..] => {
+                crate::view::parse_line(c, rest).map(|(key, check)| {
+                    run.views.insert(key, check);
                 })
             }
             ["case", c, "reg", k, "ok", rest @ ..] => c

@@ -92,6 +92,13 @@ fn shipped(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
             "feature-space check (Int8Model::feature_distance), 512 points: {check} instructions"
         );
     }
+    let view = demo(512).and_then(|(i, c)| {
+        let k = c.registrations.iter().position(|r| *r == default)?;
+        Some(device.views.get(&(i, k))?.instructions)
+    });
+    if let Some(view) = view {
+        println!("view check (Int8Model::check_view), 512 points: {view} instructions");
+    }
     let shipped = models
         .iter()
         .position(|m| m.name == "embedded-default-int8.pcrn");

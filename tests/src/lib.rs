@@ -36,3 +36,4 @@ pub mod qemu;
 pub mod scene;
 pub mod tracking;
 pub mod vectors;
+pub mod view;

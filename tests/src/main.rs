@@ -30,7 +30,7 @@ use pcrnet_qemu_tests::plan::{Plan, build_cases, models};
 use pcrnet_qemu_tests::vectors::{
     Case, TestModel, container, describe, expected, expected_iterative, expected_registrations,
 };
-use pcrnet_qemu_tests::{c_example, elf, feature, figures, layers, qemu, scene, tracking};
+use pcrnet_qemu_tests::{c_example, elf, feature, figures, layers, qemu, scene, tracking, view};
 
 struct Args {
     mutate: bool,
@@ -89,11 +89,12 @@ fn run_plans(
             let registrations = expected_registrations(blob, c);
             let tracks = tracking::expected(blob, c, &registrations);
             let features = feature::expected(blob, c, &registrations);
+            let views = view::expected(blob, c, &registrations, view::side_for(board.machine));
             (
                 expected(blob, c),
                 expected_iterative(blob, c),
                 registrations,
-                (tracks, features),
+                (tracks, features, views),
             )
         })
         .collect();
@@ -146,9 +147,24 @@ fn run_plans(
     let (mut lk_registrations, mut lk_differ) = (0usize, 0usize);
     let (mut tracks, mut tracks_differ) = (0usize, 0usize);
     let (mut features, mut features_differ) = (0usize, 0usize);
-    for (i, (case, (host, host_iterative, host_registrations, (host_tracks, host_features)))) in
-        cases.iter().zip(&expect).enumerate()
+    let (mut views, mut views_differ) = (0usize, 0usize);
+    for (
+        i,
+        (
+            case,
+            (host, host_iterative, host_registrations, (host_tracks, host_features, host_views)),
+        ),
+    ) in cases.iter().zip(&expect).enumerate()
     {
+        let view_verdicts: Vec<String> = host_views
+            .iter()
+            .filter_map(|(k, h)| {
+                let d = device.views.get(&(i, *k)).map(|d| &d.result);
+                view::difference(h, d).map(|why| format!("view check #{k}: {why}"))
+            })
+            .collect();
+        views += host_views.len();
+        views_differ += view_verdicts.len();
         let feature_verdicts: Vec<String> = host_features
             .iter()
             .filter_map(|(k, h)| {
@@ -199,7 +215,8 @@ fn run_plans(
         })
         .or_else(|| register_verdicts.into_iter().flatten().next())
         .or_else(|| track_verdicts.into_iter().next())
-        .or_else(|| feature_verdicts.into_iter().next());
+        .or_else(|| feature_verdicts.into_iter().next())
+        .or_else(|| view_verdicts.into_iter().next());
         match verdict {
             None => passed += 1,
             Some(why) => {
@@ -273,10 +290,11 @@ fn run_plans(
         println!("device run incomplete (no `done`, or unparsed lines)");
     }
     println!(
-        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical; {features} feature checks, {} identical; {scenes} scenes, {} identical",
+        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical; {features} feature checks, {} identical; {views} view checks, {} identical; {scenes} scenes, {} identical",
         registrations - registrations_differ,
         tracks - tracks_differ,
         features - features_differ,
+        views - views_differ,
         scenes - scenes_differ
     );
     println!(

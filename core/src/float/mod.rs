@@ -191,7 +191,7 @@ impl<'a> F32Model<'a> {
     /// `viewpoint`, as [`crate::Int8Model::check_view`].
     ///
     /// # Errors
-    /// As [`crate::scene::View::render`].
+    /// As [`crate::Int8Model::check_view`].
     pub fn check_view(
         &self,
         source: &[[f32; 3]],

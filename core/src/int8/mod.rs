@@ -330,7 +330,8 @@ impl<'a> Int8Model<'a> {
     /// registration's own verdict.
     ///
     /// # Errors
-    /// As [`crate::scene::View::render`].
+    /// As [`crate::scene::View::render`]; a pose that is not finite is
+    /// [`Error::NonFiniteResult`].
     pub fn check_view(
         &self,
         source: &[[f32; 3]],

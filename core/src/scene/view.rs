@@ -84,18 +84,18 @@ impl<'b> View<'b> {
         let finite = || source.iter().filter(|p| p.iter().all(|v| v.is_finite()));
         let (mut sum, mut n) = ([0f32; 3], 0usize);
         for p in finite() {
-            for k in 0..3 {
-                sum[k] += p[k] - viewpoint[k];
+            for ((s, v), e) in sum.iter_mut().zip(p).zip(viewpoint) {
+                *s += v - e;
             }
             n += 1;
         }
         if n == 0 {
             return Err(Error::EmptyCloud);
         }
-        let axes =
-            camera_axes([0, 1, 2].map(|k| sum[k] / n as f32)).ok_or(Error::InvalidOption {
-                what: "the viewpoint must not lie at the source's centroid",
-            })?;
+        let count = n as f32;
+        let axes = camera_axes(sum.map(|s| s / count)).ok_or(Error::InvalidOption {
+            what: "the viewpoint must not lie at the source's centroid",
+        })?;
         // The source's extent in the image plane (tangents of its angles).
         let mut extent = 0f32;
         for p in finite() {
@@ -126,7 +126,12 @@ impl<'b> View<'b> {
             cx: centre,
             cy: centre,
         };
-        let depth = &mut buffer[..side * side];
+        // `side` is at most the buffer's square root: the slice is there.
+        let Some(depth) = buffer.get_mut(..side * side) else {
+            return Err(Error::InvalidOption {
+                what: "the view's buffer needs at least 8 x 8 elements",
+            });
+        };
         depth.fill(f32::INFINITY);
         for p in finite() {
             let c = to_camera(&axes, viewpoint, *p);
@@ -134,11 +139,13 @@ impl<'b> View<'b> {
                 continue;
             };
             let (u, v) = (libm::roundf(u), libm::roundf(v));
-            if (0.0..side as f32).contains(&u) && (0.0..side as f32).contains(&v) {
-                let d = &mut depth[v as usize * side + u as usize];
-                if z < *d {
-                    *d = z;
-                }
+            let inside = (0.0..side as f32).contains(&u) && (0.0..side as f32).contains(&v);
+            if let Some(d) = depth
+                .get_mut(v as usize * side + u as usize)
+                .filter(|_| inside)
+                && z < *d
+            {
+                *d = z;
             }
         }
         Ok(View {
@@ -183,7 +190,8 @@ impl<'b> View<'b> {
 
 /// [`View::render`], then [`View::check`] with
 /// [`VerifySettings::for_object`] of the template's radius (user units):
-/// what the models' `check_view` do.
+/// what the models' `check_view` do. A pose that is not finite is
+/// [`Error::NonFiniteResult`].
 pub(crate) fn check_model(
     template: &Template,
     model: &Frame,
@@ -192,6 +200,9 @@ pub(crate) fn check_model(
     pose: &Pose,
     buffer: &mut [f32],
 ) -> Result<Verification> {
+    if !pose.is_finite() {
+        return Err(Error::NonFiniteResult);
+    }
     let view = View::render(source, viewpoint, buffer)?;
     let settings = VerifySettings::for_object(template.radius() / model.scale);
     Ok(view.check(template, model, pose, &settings))

@@ -43,6 +43,10 @@
 //!   START, `held` (the registered pose) and, with `Options::default()`,
 //!   `predicted` (`pose::predict(IDENTITY, pose)`; the host's
 //!   `vectors::track_starts` is the same rule).
+//! - after each successful `register` with `Options::default()`, `case C
+//!   feature K ok INSTR BITS` (the feature-space check) and `case C view K
+//!   ok INSTR SUPPORTED VIOLATIONS OCCLUDED UNOBSERVED PASSED` (the view
+//!   check from `testing::harness_viewpoint`), or `... error INSTR E`.
 #![no_std]
 #![no_main]
 
@@ -340,6 +344,11 @@ fn run_case(
                 Err(e) => write!(line, "case {c} feature {k} error {} {e:?}", f1 - f0),
             };
             emit(line);
+            // The view check from the harness's viewpoint (the rule of
+            // the host's `view::expected`; not on the micro:bit, whose
+            // flash it does not fit).
+            #[cfg(not(feature = "microbit"))]
+            check_view(c, k, cloud, model, &r.pose, counter, line);
         }
         // Tracking from the registered pose (held), and with the
         // default options also from its constant-velocity
@@ -368,6 +377,52 @@ fn run_case(
             emit(line);
         }
     }
+}
+
+/// `case C view K ...`: the view check of a registration (see the module docs).
+#[cfg(not(feature = "microbit"))]
+fn check_view(
+    c: usize,
+    k: usize,
+    cloud: &[[f32; 3]],
+    model: &Int8Model,
+    pose: &Pose,
+    counter: &icount::Counter,
+    line: &mut String<LINE>,
+) {
+    let viewpoint = pcrnet_core::testing::harness_viewpoint(cloud);
+    let view = view_buffer();
+    let v0 = counter.instructions();
+    let seen = model.check_view(cloud, viewpoint, pose, view);
+    let v1 = counter.instructions();
+    line.clear();
+    let _ = match seen {
+        Ok(v) => write!(
+            line,
+            "case {c} view {k} ok {} {} {} {} {} {}",
+            v1 - v0,
+            v.supported,
+            v.violations,
+            v.occluded,
+            v.unobserved,
+            u32::from(v.passed)
+        ),
+        Err(e) => write!(line, "case {c} view {k} error {} {e:?}", v1 - v0),
+    };
+    emit(line);
+}
+
+/// Pixels a side of the view check's image (as the host's `view::side_for`).
+#[cfg(not(feature = "microbit"))]
+const VIEW_SIDE: usize = pcrnet_core::testing::HARNESS_VIEW_SIDE;
+
+/// The view check's image buffer.
+#[cfg(not(feature = "microbit"))]
+fn view_buffer() -> &'static mut [f32] {
+    static mut VIEW: [f32; VIEW_SIDE * VIEW_SIDE] = [0.0; VIEW_SIDE * VIEW_SIDE];
+    // SAFETY: the runner is single-threaded and each borrow ends before
+    // the next call (one check at a time).
+    unsafe { &mut *core::ptr::addr_of_mut!(VIEW) }
 }
 
 /// The scene path on the harness frame ([`pcrnet_core::testing::scene`]):

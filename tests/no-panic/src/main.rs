@@ -221,6 +221,27 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
             black_box(pose.as_mut_ptr()),
             black_box(&mut passes_run),
         ));
+        black_box(capi::pcrnet_feature_distance(
+            model,
+            points,
+            n_points,
+            black_box(pose.as_ptr()),
+            scratch,
+            scratch_len,
+            black_box(&mut 0f32),
+        ));
+        let mut view = [0f32; 64];
+        let mut seen = core::mem::MaybeUninit::<capi::PcrnetViewCheck>::uninit();
+        black_box(capi::pcrnet_check_view(
+            model,
+            points,
+            n_points,
+            black_box([0f32, 0.0, 3.0].as_ptr()),
+            black_box(pose.as_ptr()),
+            black_box(view.as_mut_ptr()),
+            black_box(view.len()),
+            black_box(seen.as_mut_ptr()),
+        ));
         black_box(capi::pcrnet_status_message(black_box(-3)));
         c_locate(model, scratch, scratch_len);
     }

@@ -1,0 +1,144 @@
+//! `pcrnet_check_view` as C calls it: the same counts as the Rust API's
+//! `Int8Model::check_view`, a fragment of the view failing where the whole
+//! passes, and a status with nothing written for bad input.
+#![allow(unsafe_code)]
+
+mod common;
+
+use common::{loaded, options_default, sentinel, shipped_blob};
+use pcrnet::*;
+use pcrnet_core::{Int8Model, Options};
+
+/// `pcrnet_check_view` of `points` seen from `viewpoint` at `pose`.
+fn check(
+    model: &PcrnetModel,
+    points: &[[f32; 3]],
+    viewpoint: &[f32; 3],
+    pose: *const f32,
+    buffer: &mut [f32],
+) -> (PcrnetStatus, PcrnetViewCheck) {
+    let mut out = PcrnetViewCheck {
+        supported: u32::MAX,
+        ..PcrnetViewCheck::default()
+    };
+    let status = unsafe {
+        pcrnet_check_view(
+            model,
+            points.as_ptr() as *const f32,
+            points.len(),
+            viewpoint.as_ptr(),
+            pose,
+            buffer.as_mut_ptr(),
+            buffer.len(),
+            &mut out,
+        )
+    };
+    (status, out)
+}
+
+/// The points of `cloud` a camera far along +z sees (an orthographic
+/// z-buffer on an 8 x 8 grid over the cloud: in each cell, the points
+/// within a cell's width of its nearest), and a viewpoint three radii from
+/// the centroid along +z.
+fn near_side(cloud: &[[f32; 3]]) -> (Vec<[f32; 3]>, [f32; 3]) {
+    let n = cloud.len() as f32;
+    let c: [f32; 3] = std::array::from_fn(|k| cloud.iter().map(|p| p[k]).sum::<f32>() / n);
+    let radius = cloud
+        .iter()
+        .map(|p| (0..3).map(|k| (p[k] - c[k]).powi(2)).sum::<f32>().sqrt())
+        .fold(0f32, f32::max);
+    let cell = 2.0 * radius / 8.0;
+    let at = |p: &[f32; 3]| {
+        let i = |k: usize| (((p[k] - c[k] + radius) / cell) as usize).min(7);
+        i(1) * 8 + i(0)
+    };
+    let mut top = [f32::MIN; 64];
+    for p in cloud {
+        top[at(p)] = top[at(p)].max(p[2]);
+    }
+    let seen = cloud
+        .iter()
+        .copied()
+        .filter(|p| p[2] >= top[at(p)] - cell)
+        .collect();
+    (seen, [c[0], c[1], c[2] + 3.0 * radius])
+}
+
+#[test]
+fn the_view_check_through_the_c_api_matches_the_rust_api() {
+    let blob = shipped_blob();
+    let handle = loaded(&blob);
+    let rust = Int8Model::from_bytes(&blob).unwrap();
+    // The template's near side from +z, as a sensor there would see it.
+    let template: Vec<[f32; 3]> = (0..rust.template().len())
+        .map(|i| rust.template().user_point(i, rust.frame()))
+        .collect();
+    let (view, eye) = near_side(&template);
+    let mut scratch = vec![0i8; rust.scratch_len(1)];
+    let r = rust
+        .register(&view, &Options::default(), &mut scratch)
+        .unwrap();
+    // The pose as C gets it from `pcrnet_register`.
+    let mut registered = sentinel();
+    let status = unsafe {
+        pcrnet_register(
+            &*handle,
+            view.as_ptr() as *const f32,
+            view.len(),
+            &options_default(),
+            scratch.as_mut_ptr(),
+            scratch.len(),
+            &mut registered,
+        )
+    };
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    let pose = {
+        let (q, t) = (registered.rotation, registered.translation);
+        [q[0], q[1], q[2], q[3], t[0], t[1], t[2]]
+    };
+    assert_eq!(pose[..4], r.pose.rotation);
+    let mut buffer = vec![0f32; PCRNET_VIEW_BUFFER_LEN];
+    let want = rust.check_view(&view, eye, &r.pose, &mut buffer).unwrap();
+    let (status, got) = check(&handle, &view, &eye, pose.as_ptr(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    assert_eq!(
+        [got.supported, got.violations, got.occluded, got.unobserved],
+        [
+            want.supported,
+            want.violations,
+            want.occluded,
+            want.unobserved
+        ]
+    );
+    assert!(got.passed && want.passed, "{got:?}");
+    // A third of the view, at the same pose: the rest of the near side
+    // would be where the sensor saw nothing.
+    let third: Vec<[f32; 3]> = view.iter().copied().filter(|p| p[0] > 0.1).collect();
+    assert!(
+        third.len() < view.len() / 2,
+        "{} of {}",
+        third.len(),
+        view.len()
+    );
+    let (status, got) = check(&handle, &third, &eye, pose.as_ptr(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    assert!(!got.passed && got.violations > 0, "{got:?}");
+
+    // Nothing written on a bad call.
+    let untouched = |c: &PcrnetViewCheck| c.supported == u32::MAX;
+    let (status, got) = check(&handle, &view, &eye, std::ptr::null(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NULL_POINTER);
+    assert!(untouched(&got));
+    let nan = [f32::NAN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let (status, got) = check(&handle, &view, &eye, nan.as_ptr(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NON_FINITE_RESULT);
+    assert!(untouched(&got));
+    let inside = view[0];
+    let (status, got) = check(&handle, &view, &inside, pose.as_ptr(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_INVALID_OPTION);
+    assert!(untouched(&got));
+    let (status, _) = check(&handle, &view, &eye, pose.as_ptr(), &mut buffer[..63]);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_INVALID_OPTION);
+    let (status, _) = check(&handle, &[], &eye, pose.as_ptr(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_EMPTY_CLOUD);
+}
