@@ -441,10 +441,11 @@ pub(crate) fn run(
     pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     let checked = check(frame, template, source, options)?;
-    run_checked(frame, centring, template, &checked, options, pass)
+    run_checked(frame, centring, template, &checked, options, pass, |_| true)
 }
 
-/// [`run`] on a source [`check`] has passed (its subset's cloud).
+/// [`run`] on a source [`check`] has passed (its subset's cloud), the
+/// starts resolved with `accept` ([`refine::resolve`]; user units).
 pub(crate) fn run_checked(
     frame: &Frame,
     centring: Centring,
@@ -452,6 +453,7 @@ pub(crate) fn run_checked(
     checked: &Checked<'_>,
     options: &Options,
     mut pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
+    mut accept: impl FnMut(&Pose) -> bool,
 ) -> Result<Registration> {
     let source = checked.subset.source;
     let sample = Sample::new(source, options.network_points);
@@ -477,6 +479,7 @@ pub(crate) fn run_checked(
         options.screen_iterations,
         &options.icp_settings(),
         options.inlier_distance,
+        |pose| accept(&frame.pose_to_user(pose)),
     )?;
     let stage = Stage {
         passes,

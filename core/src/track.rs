@@ -121,7 +121,7 @@ pub(crate) fn step(
         });
     }
     let registration =
-        registration::run_checked(frame, centring, template, &checked, options, pass)?;
+        registration::run_checked(frame, centring, template, &checked, options, pass, |_| true)?;
     let outcome = if registration.reliable {
         TrackOutcome::Recovered
     } else {

@@ -110,8 +110,12 @@ fn flip_resolution_picks_the_turn_that_fits() {
         tolerance: 1e-5,
         max_distance: 0.1,
     };
-    let one = refine::resolve(&t, &subset, Pose::IDENTITY, 1, 10, &settings, 0.05).unwrap();
-    let three = refine::resolve(&t, &subset, Pose::IDENTITY, 3, 4, &settings, 0.05).unwrap();
+    let one = refine::resolve(&t, &subset, Pose::IDENTITY, 1, 10, &settings, 0.05, |_| {
+        true
+    })
+    .unwrap();
+    let three =
+        refine::resolve(&t, &subset, Pose::IDENTITY, 3, 4, &settings, 0.05, |_| true).unwrap();
     assert_eq!(three.hypothesis, 2);
     assert!(three.fit.residual < 1e-3, "{three:?}");
     assert!(one.fit.residual > 10.0 * three.fit.residual, "{one:?}");

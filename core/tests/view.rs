@@ -163,3 +163,84 @@ fn bad_viewpoints_buffers_and_clouds_are_typed_errors() {
     let v = View::render(&source, EYE, &mut small).unwrap();
     assert_eq!(v.side(), view::MIN_SIDE);
 }
+
+const MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
+
+/// The shipped template's near side from +z (a z-buffer of its stored
+/// points on an 8 x 8 grid) moved by a small motion, with the viewpoint
+/// moved alike.
+fn shipped_view(model: &pcrnet_core::Int8Model<'_>) -> (Vec<[f32; 3]>, [f32; 3]) {
+    let t = model.template();
+    let cloud: Vec<[f32; 3]> = (0..t.len())
+        .map(|i| t.user_point(i, model.frame()))
+        .collect();
+    let n = cloud.len() as f32;
+    let c: [f32; 3] = std::array::from_fn(|k| cloud.iter().map(|p| p[k]).sum::<f32>() / n);
+    let radius = model.object_radius();
+    let cell = 2.0 * radius / 8.0;
+    let at = |p: &[f32; 3]| {
+        let i = |k: usize| (((p[k] - c[k] + radius) / cell).max(0.0) as usize).min(7);
+        i(1) * 8 + i(0)
+    };
+    let mut top = [f32::MIN; 64];
+    for p in &cloud {
+        top[at(p)] = top[at(p)].max(p[2]);
+    }
+    let motion = Pose {
+        translation: [0.1, -0.05, 0.2],
+        ..turn([0.6, 0.0, 0.8], 25.0)
+    };
+    let seen = cloud
+        .iter()
+        .filter(|p| p[2] >= top[at(p)] - cell)
+        .map(|&p| motion.transform_point(p))
+        .collect();
+    (
+        seen,
+        motion.transform_point([c[0], c[1], c[2] + 3.0 * radius]),
+    )
+}
+
+#[test]
+fn a_viewed_registration_is_the_registration_with_its_check() {
+    let model = pcrnet_core::Int8Model::from_bytes(MODEL).unwrap();
+    let (source, at) = shipped_view(&model);
+    let mut scratch = vec![0i8; model.host_scratch_len()];
+    let mut buffer = vec![0f32; view::buffer_len(32)];
+    let options = pcrnet_core::Options::default();
+    let viewed = model
+        .register_view(&source, at, &options, &mut scratch, &mut buffer)
+        .unwrap();
+    let plain = model.register(&source, &options, &mut scratch).unwrap();
+    // The lowest-residual start explains the view: the same registration.
+    assert_eq!(viewed.registration, plain);
+    assert!(viewed.reliable && viewed.view.passed, "{viewed:?}");
+    let again = model
+        .check_view(&source, at, &plain.pose, &mut buffer)
+        .unwrap();
+    assert_eq!(again, viewed.view);
+
+    // Bad input: the source's errors first, then the view's.
+    let mut broken = source.clone();
+    broken[3][1] = f32::NAN;
+    assert!(matches!(
+        model.register_view(&broken, at, &options, &mut scratch, &mut buffer),
+        Err(Error::NonFiniteCoordinate { index: 3 })
+    ));
+    assert!(matches!(
+        model.register_view(&source, source[0], &options, &mut scratch, &mut buffer),
+        Err(Error::InvalidOption { .. })
+    ));
+    assert!(matches!(
+        model.check_view(
+            &source,
+            at,
+            &Pose {
+                translation: [f32::NAN; 3],
+                ..plain.pose
+            },
+            &mut buffer
+        ),
+        Err(Error::NonFiniteResult)
+    ));
+}

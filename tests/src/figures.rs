@@ -97,7 +97,9 @@ fn shipped(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
         Some(device.views.get(&(i, k))?.instructions)
     });
     if let Some(view) = view {
-        println!("view check (Int8Model::check_view), 512 points: {view} instructions");
+        println!(
+            "registration seen from a viewpoint (Int8Model::register_view), 512 points: {view} instructions"
+        );
     }
     let shipped = models
         .iter()

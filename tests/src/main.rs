@@ -290,7 +290,7 @@ fn run_plans(
         println!("device run incomplete (no `done`, or unparsed lines)");
     }
     println!(
-        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical; {features} feature checks, {} identical; {views} view checks, {} identical; {scenes} scenes, {} identical",
+        "{registrations} registrations, {} identical; {tracks} tracking steps, {} identical; {features} feature checks, {} identical; {views} viewed registrations, {} identical; {scenes} scenes, {} identical",
         registrations - registrations_differ,
         tracks - tracks_differ,
         features - features_differ,

@@ -187,6 +187,32 @@ impl<'a> F32Model<'a> {
         self.residual_floor
     }
 
+    /// Registers a cut single view seen from `viewpoint`, as
+    /// [`crate::Int8Model::register_view`], with the f32 network.
+    ///
+    /// # Errors
+    /// As [`Self::register`] and [`crate::scene::View::render`].
+    pub fn register_view(
+        &self,
+        source: &[[f32; 3]],
+        viewpoint: [f32; 3],
+        options: &Options,
+        scratch: &mut [f32],
+        buffer: &mut [f32],
+    ) -> Result<crate::scene::view::Viewed> {
+        let net = &self.network;
+        crate::scene::view::register(
+            &self.frame,
+            net.centring(),
+            &self.template,
+            source,
+            viewpoint,
+            options,
+            buffer,
+            |sample, map, step| self.step(sample, map, step, scratch),
+        )
+    }
+
     /// Checks `pose` against the cut single view `source` seen from
     /// `viewpoint`, as [`crate::Int8Model::check_view`].
     ///

@@ -320,6 +320,42 @@ impl<'a> Int8Model<'a> {
         )
     }
 
+    /// Registers a cut single view `source` (one object as a depth sensor
+    /// saw it from `viewpoint`, the sensor's position in the source's
+    /// frame, user units; everything else cut away) as [`Self::register`]
+    /// does, with the view rendered into `buffer`
+    /// ([`crate::scene::view::buffer_len`]) as a test the turned starts
+    /// must pass besides their residual: screening finishes the
+    /// lowest-residual turned start whose pose explains the view
+    /// ([`crate::refine::resolve`]). The result carries the registration, its
+    /// check against the view ([`Self::check_view`]) and both verdicts.
+    /// With a view that every pose explains it registers as
+    /// [`Self::register`].
+    ///
+    /// # Errors
+    /// As [`Self::register`] and [`crate::scene::View::render`].
+    #[inline(never)]
+    pub fn register_view(
+        &self,
+        source: &[[f32; 3]],
+        viewpoint: [f32; 3],
+        options: &Options,
+        scratch: &mut [i8],
+        buffer: &mut [f32],
+    ) -> Result<crate::scene::view::Viewed> {
+        let tile = self.tile_for(scratch.len())?;
+        crate::scene::view::register(
+            &self.p.frame,
+            self.centring(),
+            &self.template,
+            source,
+            viewpoint,
+            options,
+            buffer,
+            |sample, map, step| self.pass(sample, map, step, tile, scratch, Ready::default()),
+        )
+    }
+
     /// Checks `pose` (a registration of `source`, user units) against the
     /// cut single view `source` seen from `viewpoint` (the sensor's
     /// position in the source's frame, user units): the view rendered into

@@ -44,9 +44,11 @@
 //!   `predicted` (`pose::predict(IDENTITY, pose)`; the host's
 //!   `vectors::track_starts` is the same rule).
 //! - after each successful `register` with `Options::default()`, `case C
-//!   feature K ok INSTR BITS` (the feature-space check) and `case C view K
-//!   ok INSTR SUPPORTED VIOLATIONS OCCLUDED UNOBSERVED PASSED` (the view
-//!   check from `testing::harness_viewpoint`), or `... error INSTR E`.
+//!   feature K ok INSTR BITS` (the feature-space check), or `... error
+//!   INSTR E`; and `case C view K ok INSTR STACK` with a registration's
+//!   fields then `SUPPORTED VIOLATIONS OCCLUDED UNOBSERVED PASSED
+//!   RELIABLE` (`register_view` from `testing::harness_viewpoint`), or
+//!   `case C view K error INSTR STACK E`.
 #![no_std]
 #![no_main]
 
@@ -344,11 +346,11 @@ fn run_case(
                 Err(e) => write!(line, "case {c} feature {k} error {} {e:?}", f1 - f0),
             };
             emit(line);
-            // The view check from the harness's viewpoint (the rule of
-            // the host's `view::expected`; not on the micro:bit, whose
-            // flash it does not fit).
+            // The registration seen from the harness's viewpoint (the
+            // rule of the host's `view::expected`; not on the micro:bit,
+            // whose flash it does not fit).
             #[cfg(not(feature = "microbit"))]
-            check_view(c, k, cloud, model, &r.pose, counter, line);
+            register_view(c, k, cloud, model, scratch, counter, line);
         }
         // Tracking from the registered pose (held), and with the
         // default options also from its constant-velocity
@@ -379,44 +381,54 @@ fn run_case(
     }
 }
 
-/// `case C view K ...`: the view check of a registration (see the module docs).
+/// `case C view K ...`: the viewed registration of the cloud (see the
+/// module docs), its instructions and peak stack.
 #[cfg(not(feature = "microbit"))]
-fn check_view(
+fn register_view(
     c: usize,
     k: usize,
     cloud: &[[f32; 3]],
     model: &Int8Model,
-    pose: &Pose,
+    scratch: &mut [i8],
     counter: &icount::Counter,
     line: &mut String<LINE>,
 ) {
     let viewpoint = pcrnet_core::testing::harness_viewpoint(cloud);
     let view = view_buffer();
+    let baseline = stack::paint();
     let v0 = counter.instructions();
-    let seen = model.check_view(cloud, viewpoint, pose, view);
+    let seen = model.register_view(cloud, viewpoint, &Options::default(), scratch, view);
     let v1 = counter.instructions();
+    let peak = stack::used_below(baseline);
     line.clear();
-    let _ = match seen {
-        Ok(v) => write!(
-            line,
-            "case {c} view {k} ok {} {} {} {} {} {}",
-            v1 - v0,
-            v.supported,
-            v.violations,
-            v.occluded,
-            v.unobserved,
-            u32::from(v.passed)
-        ),
-        Err(e) => write!(line, "case {c} view {k} error {} {e:?}", v1 - v0),
-    };
+    match seen {
+        Ok(v) => {
+            let _ = write!(line, "case {c} view {k} ok {} {peak}", v1 - v0);
+            write_registration(line, &v.registration);
+            let s = v.view;
+            let _ = write!(
+                line,
+                " {} {} {} {} {} {}",
+                s.supported,
+                s.violations,
+                s.occluded,
+                s.unobserved,
+                u32::from(s.passed),
+                u32::from(v.reliable)
+            );
+        }
+        Err(e) => {
+            let _ = write!(line, "case {c} view {k} error {} {peak} {e:?}", v1 - v0);
+        }
+    }
     emit(line);
 }
 
-/// Pixels a side of the view check's image (as the host's `view::side_for`).
+/// Pixels a side of the viewed registration's image (as the host's `view::side_for`).
 #[cfg(not(feature = "microbit"))]
 const VIEW_SIDE: usize = pcrnet_core::testing::HARNESS_VIEW_SIDE;
 
-/// The view check's image buffer.
+/// The viewed registration's image buffer.
 #[cfg(not(feature = "microbit"))]
 fn view_buffer() -> &'static mut [f32] {
     static mut VIEW: [f32; VIEW_SIDE * VIEW_SIDE] = [0.0; VIEW_SIDE * VIEW_SIDE];

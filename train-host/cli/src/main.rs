@@ -189,9 +189,11 @@ enum Command {
         /// SOURCE is one object as a depth sensor saw it from X,Y,Z (the
         /// sensor's position in the source file's frame; 0,0,0 for points
         /// in the camera's own frame), everything else cut away: the
-        /// device pipeline's pose is then reliable only if it also
-        /// explains that view (the template's points it puts in view lie
-        /// on the seen surface, none where the sensor saw past the object).
+        /// device pipeline registers with that view (of the turned starts,
+        /// the lowest-residual one that explains it finishes) and its pose
+        /// is reliable only if it also explains the view (the template's
+        /// points it puts in view lie on the seen surface, none where the
+        /// sensor saw past the object).
         #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = register::parse_point, conflicts_with = "scene")]
         viewpoint: Option<[f64; 3]>,
         /// How the clouds are read.

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use super::icp::{IcpConfig, IcpError, icp};
 use crate::register::{
-    ITERATIVE_TOLERANCE, Precision, check_view, network, pipeline, register_pointnetlk,
+    ITERATIVE_TOLERANCE, Precision, network, pipeline, pipeline_viewed, register_pointnetlk,
 };
 use pcrnet_train::degeneracy::source_degeneracy;
 use pcrnet_train::template::{DEFAULT_TEMPLATE_POINTS, Reference, TemplateError, bind_reference};
@@ -437,15 +437,20 @@ pub fn run(
         }
         MethodKind::Device => {
             let blob = bound(model()?)?;
-            let (mut r, precision) = pipeline(&blob, None, source, &method.device_options())?;
-            let view = match (method.view_check, viewpoint) {
-                (false, _) => None,
+            let options = method.device_options();
+            let (r, view, precision) = match (method.view_check, viewpoint) {
+                (false, _) => {
+                    let (r, precision) = pipeline(&blob, None, source, &options)?;
+                    (r, None, precision)
+                }
                 (true, None) => return Err(MethodError::NoViewpoint),
                 (true, Some(v)) => {
-                    let seen =
-                        check_view(&blob, source, v, &r.pose).map_err(TemplateError::from)?;
-                    r.reliable &= seen.passed;
-                    Some(seen)
+                    let (seen, precision) = pipeline_viewed(&blob, source, v, &options)?;
+                    let r = pcrnet_core::Registration {
+                        reliable: seen.reliable,
+                        ..seen.registration
+                    };
+                    (r, Some(seen.view), precision)
                 }
             };
             let checking = Instant::now();

@@ -13,7 +13,7 @@
 //! template's), `p_template = R p_source + t`.
 
 use pcrnet_core::pose;
-use pcrnet_core::scene::Verification;
+use pcrnet_core::scene::view::Viewed;
 use pcrnet_core::{F32Model, Int8Model, Options, Pose, Registration};
 
 use crate::pointnetlk::{LkResult, PointNetLk};
@@ -108,26 +108,35 @@ pub fn pipeline(
     }
 }
 
-/// Pixels a side of the view [`check_view`] renders: 32, enough for
+/// Pixels a side of the view [`pipeline_viewed`] renders: 32, enough for
 /// sources of up to about 500 points at full resolution.
 pub const VIEW_SIDE: usize = 32;
 
-/// Checks `pose` (a registration of `source`, user units) against the cut
-/// single view `source` seen from `viewpoint` (the source's frame), with
-/// either kind of blob (`Int8Model::check_view`).
-pub fn check_view(
+/// [`pipeline`] for a cut single view seen from `viewpoint` (the source's
+/// frame): `register_view` of either kind of blob, its starts chosen with
+/// the view and its pose checked against it.
+pub fn pipeline_viewed(
     blob: &[u8],
     source: &[[f32; 3]],
     viewpoint: [f32; 3],
-    pose: &Pose,
-) -> Result<Verification, pcrnet_core::Error> {
+    options: &Options,
+) -> Result<(Viewed, Precision), TemplateError> {
     let mut buffer = vec![0f32; pcrnet_core::scene::view::buffer_len(VIEW_SIDE)];
     match Int8Model::from_bytes(blob) {
-        Ok(m) => m.check_view(source, viewpoint, pose, &mut buffer),
-        Err(pcrnet_core::Error::WrongKind { .. }) => {
-            F32Model::from_bytes(blob)?.check_view(source, viewpoint, pose, &mut buffer)
+        Ok(model) => {
+            let mut scratch = vec![0i8; model.host_scratch_len()];
+            let options = or_trained(options, model.trained_options());
+            let r = model.register_view(source, viewpoint, &options, &mut scratch, &mut buffer)?;
+            Ok((r, Precision::Int8))
         }
-        Err(e) => Err(e),
+        Err(pcrnet_core::Error::WrongKind { .. }) => {
+            let model = F32Model::from_bytes(blob)?;
+            let mut scratch = vec![0f32; model.tiled_scratch_len()];
+            let options = or_trained(options, model.trained_options());
+            let r = model.register_view(source, viewpoint, &options, &mut scratch, &mut buffer)?;
+            Ok((r, Precision::F32))
+        }
+        Err(e) => Err(e.into()),
     }
 }
 
