@@ -919,6 +919,35 @@ PcrnetStatus pcrnet_track(const PcrnetModel *model,
                           uint32_t *outcome);
 
 /*
+ Registers `n_points` source points, a cut single view seen from
+ `viewpoint` `[x, y, z]` (the sensor's position in the source's frame,
+ source units), as `pcrnet_register` does, with the view rendered into
+ `buffer` (`buffer_len` floats, see `PCRNET_VIEW_BUFFER_LEN`) as a test
+ the turned starts must pass besides their residual (the lowest-residual
+ one that explains the view finishes; `Int8Model::register_view`).
+ Writes the registration to `out` (its `reliable` the residual's
+ verdict) and its check against the view to `out_view` on success: act
+ on the pose only when `out->reliable` and `out_view->passed`. Errors as
+ `pcrnet_register` and `pcrnet_check_view`; nothing is written on one.
+
+ # Safety
+ As `pcrnet_register`; `viewpoint` must point to 3 readable floats,
+ `buffer` to `buffer_len` writable floats overlapping nothing else,
+ `out_view` to a writable `PcrnetViewCheck` (each may be null: an error).
+ */
+PcrnetStatus pcrnet_register_view(const PcrnetModel *model,
+                                  const float *points,
+                                  size_t n_points,
+                                  const float *viewpoint,
+                                  const PcrnetOptions *options,
+                                  int8_t *scratch,
+                                  size_t scratch_len,
+                                  float *buffer,
+                                  size_t buffer_len,
+                                  PcrnetRegistration *out,
+                                  PcrnetViewCheck *out_view);
+
+/*
  Checks `pose` `[qw, qx, qy, qz, tx, ty, tz]` (a registration of the
  `n_points` source points, as `PcrnetRegistration` gives it) against the
  source seen as a cut single view from `viewpoint` `[x, y, z]` (the

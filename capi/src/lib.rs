@@ -70,7 +70,7 @@ pub use types::{
     PCRNET_METRIC_POINT_TO_PLANE, PCRNET_METRIC_POINT_TO_POINT, PcrnetOptions, PcrnetRegistration,
     PcrnetStatus,
 };
-pub use view::{PCRNET_VIEW_BUFFER_LEN, PcrnetViewCheck, pcrnet_check_view};
+pub use view::{PCRNET_VIEW_BUFFER_LEN, PcrnetViewCheck, pcrnet_check_view, pcrnet_register_view};
 
 use PcrnetStatus::*;
 use pcrnet_core::{Int8Model, MAX_TILE, Options, Pose, Registration};

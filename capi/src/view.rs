@@ -1,11 +1,12 @@
-//! A registration of a cut single view checked from the sensor's
-//! viewpoint: `pcrnet_check_view`.
+//! A cut single view registered and checked from the sensor's viewpoint:
+//! `pcrnet_register_view` and `pcrnet_check_view`.
 
 use PcrnetStatus::*;
 use pcrnet_core::Pose;
+use pcrnet_core::scene::Verification;
 
-use crate::types::PcrnetStatus;
-use crate::{PcrnetModel, cloud, slice, slice_mut};
+use crate::types::{PcrnetOptions, PcrnetRegistration, PcrnetStatus};
+use crate::{PcrnetModel, cloud, register_into, scratch_mut, slice, slice_mut};
 
 /// Floats of the image buffer `pcrnet_check_view` is best given: 32 x 32
 /// pixels (4 KB), enough for sources of up to about 500 points at full
@@ -28,6 +29,76 @@ pub struct PcrnetViewCheck {
     /// At most 10% violations among supported + violations, at least 20%
     /// support among those with an observation: the pose explains the view.
     pub passed: bool,
+}
+
+impl From<Verification> for PcrnetViewCheck {
+    fn from(c: Verification) -> Self {
+        PcrnetViewCheck {
+            supported: c.supported,
+            violations: c.violations,
+            occluded: c.occluded,
+            unobserved: c.unobserved,
+            passed: c.passed,
+        }
+    }
+}
+
+/// Registers `n_points` source points, a cut single view seen from
+/// `viewpoint` `[x, y, z]` (the sensor's position in the source's frame,
+/// source units), as `pcrnet_register` does, with the view rendered into
+/// `buffer` (`buffer_len` floats, see `PCRNET_VIEW_BUFFER_LEN`) as a test
+/// the turned starts must pass besides their residual (the lowest-residual
+/// one that explains the view finishes; `Int8Model::register_view`).
+/// Writes the registration to `out` (its `reliable` the residual's
+/// verdict) and its check against the view to `out_view` on success: act
+/// on the pose only when `out->reliable` and `out_view->passed`. Errors as
+/// `pcrnet_register` and `pcrnet_check_view`; nothing is written on one.
+///
+/// # Safety
+/// As `pcrnet_register`; `viewpoint` must point to 3 readable floats,
+/// `buffer` to `buffer_len` writable floats overlapping nothing else,
+/// `out_view` to a writable `PcrnetViewCheck` (each may be null: an error).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_register_view(
+    model: *const PcrnetModel,
+    points: *const f32,
+    n_points: usize,
+    viewpoint: *const f32,
+    options: *const PcrnetOptions,
+    scratch: *mut i8,
+    scratch_len: usize,
+    buffer: *mut f32,
+    buffer_len: usize,
+    out: *mut PcrnetRegistration,
+    out_view: *mut PcrnetViewCheck,
+) -> PcrnetStatus {
+    let m = match crate::model(model) {
+        Ok(m) => m,
+        Err(s) => return s,
+    };
+    if viewpoint.is_null() || out_view.is_null() {
+        return PCRNET_ERROR_NULL_POINTER;
+    }
+    let mut seen = None;
+    // SAFETY: the caller's contract for every pointer; `viewpoint` is
+    // non-null, its length 3 and alignment checked by `slice`.
+    let status = unsafe {
+        register_into(points, n_points, options, out, |source, options| {
+            let v = slice(viewpoint, 3)?;
+            let (scratch, buffer) = (
+                scratch_mut(scratch, scratch_len)?,
+                slice_mut(buffer, buffer_len)?,
+            );
+            let r = m.register_view(source, [v[0], v[1], v[2]], options, scratch, buffer)?;
+            seen = Some(r.view);
+            Ok(r.registration)
+        })
+    };
+    if let (PCRNET_OK, Some(v)) = (status, seen) {
+        // SAFETY: checked non-null above; the caller's contract.
+        unsafe { out_view.write(v.into()) };
+    }
+    status
 }
 
 /// Checks `pose` `[qw, qx, qy, qz, tx, ty, tz]` (a registration of the
@@ -74,14 +145,8 @@ pub unsafe extern "C" fn pcrnet_check_view(
         // SAFETY: the caller's contract for `points` and `buffer`.
         let (source, buffer) =
             unsafe { (cloud(points, n_points)?, slice_mut(buffer, buffer_len)?) };
-        let c = m.check_view(source, [v[0], v[1], v[2]], &pose, buffer)?;
-        Ok(PcrnetViewCheck {
-            supported: c.supported,
-            violations: c.violations,
-            occluded: c.occluded,
-            unobserved: c.unobserved,
-            passed: c.passed,
-        })
+        Ok(m.check_view(source, [v[0], v[1], v[2]], &pose, buffer)?
+            .into())
     };
     match run() {
         Ok(c) => {

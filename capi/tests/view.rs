@@ -142,3 +142,86 @@ fn the_view_check_through_the_c_api_matches_the_rust_api() {
     let (status, _) = check(&handle, &[], &eye, pose.as_ptr(), &mut buffer);
     assert_eq!(status, PcrnetStatus::PCRNET_ERROR_EMPTY_CLOUD);
 }
+
+#[test]
+fn the_viewed_registration_through_the_c_api_matches_the_rust_api() {
+    let blob = shipped_blob();
+    let handle = loaded(&blob);
+    let rust = Int8Model::from_bytes(&blob).unwrap();
+    let template: Vec<[f32; 3]> = (0..rust.template().len())
+        .map(|i| rust.template().user_point(i, rust.frame()))
+        .collect();
+    let (view, eye) = near_side(&template);
+    let mut scratch = vec![0i8; rust.scratch_len(1)];
+    let mut buffer = vec![0f32; PCRNET_VIEW_BUFFER_LEN];
+    let want = rust
+        .register_view(&view, eye, &Options::default(), &mut scratch, &mut buffer)
+        .unwrap();
+    let call = |viewpoint: *const f32,
+                out_view: *mut PcrnetViewCheck,
+                scratch: &mut [i8],
+                buffer: &mut [f32]| {
+        let mut out = sentinel();
+        let status = unsafe {
+            pcrnet_register_view(
+                &*handle,
+                view.as_ptr() as *const f32,
+                view.len(),
+                viewpoint,
+                &options_default(),
+                scratch.as_mut_ptr(),
+                scratch.len(),
+                buffer.as_mut_ptr(),
+                buffer.len(),
+                &mut out,
+                out_view,
+            )
+        };
+        (status, out)
+    };
+    let mut seen = PcrnetViewCheck {
+        supported: u32::MAX,
+        ..PcrnetViewCheck::default()
+    };
+    let (status, out) = call(eye.as_ptr(), &mut seen, &mut scratch, &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_OK);
+    assert_eq!(out.rotation, want.registration.pose.rotation);
+    assert_eq!(out.translation, want.registration.pose.translation);
+    assert_eq!(out.reliable, want.registration.reliable);
+    let w = want.view;
+    assert_eq!(
+        [
+            seen.supported,
+            seen.violations,
+            seen.occluded,
+            seen.unobserved
+        ],
+        [w.supported, w.violations, w.occluded, w.unobserved]
+    );
+    assert_eq!(seen.passed, w.passed);
+    // Nothing written without a viewpoint or with a bad one.
+    let mut untouched = PcrnetViewCheck {
+        supported: u32::MAX,
+        ..PcrnetViewCheck::default()
+    };
+    let (status, out) = call(std::ptr::null(), &mut untouched, &mut scratch, &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NULL_POINTER);
+    assert_eq!(
+        (untouched.supported, out.rotation),
+        (u32::MAX, sentinel().rotation)
+    );
+    let inside = view[0];
+    let (status, out) = call(inside.as_ptr(), &mut untouched, &mut scratch, &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_INVALID_OPTION);
+    assert_eq!(
+        (untouched.supported, out.rotation),
+        (u32::MAX, sentinel().rotation)
+    );
+    let (status, _) = call(
+        eye.as_ptr(),
+        std::ptr::null_mut(),
+        &mut scratch,
+        &mut buffer,
+    );
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NULL_POINTER);
+}
