@@ -150,7 +150,7 @@ pub fn tracking(ctx: &Context) -> anyhow::Result<Report> {
             format!("{FRAMES} frames per sequence at {} frames a second; the object turns up to 90 deg/s and shifts up to half its size a second along a smooth random trajectory (each Euler angle and coordinate a sine about a start in the network's range: Euler U[-45°, 45°], translation U[-0.5, 0.5]; periods 5 to 20 s), seen by a fixed depth camera.", RATES.map(|r| r.to_string()).join(" and ")),
             format!("Every frame a fresh single view (point z-buffer) of {POINTS} points drawn from the shape's points the template did not keep, Gaussian noise sigma {SIGMA} per coordinate. ModelNet10: {SHAPES} seeded test shapes (512-point templates); airplane_0001: one ModelNet40 airplane (1,024-point template, 512 stored), both with the shipped model (`{SHIPPED_INT8}`) and `Options::default()` (its `max_residual` replaced in the calibrated runs, below)."),
             "Frames until the first reliable pose: `register`. Every later frame: `track` from the constant-velocity prediction of the last two poses (`pose::predict`; the last pose after a registration; after a lost frame, the last reliable pose: coasting), kept when reliable and within one step, else the registration in the same call (recovered if reliable). Lost: no reliable pose for the frame. Wrong: reliable but more than 5° off.".into(),
-            "Acquired: a sequence with a reliable pose at some frame; lost after acquisition: the lost frames from each sequence's first reliable frame on (what tracking itself loses; a sequence's first frame is a single view of the full model in the network's range, where registration alone often fails: issue 37). Errors are of the frames with a reliable pose. Drift: the mean rotation error of a sequence's last 30 frames, the median over sequences. Host times are one thread, the int8 model with the host scratch (AVX2 kernels where the CPU has them); the device's counts are the QEMU harness's `tracking step` line.".into(),
+            "View check: after each step, its pose checked against the frame's view from the camera (`Int8Model::check_view`, scene.md); the step does not use it, so the columns say what a tracker acting on it would have refused, frame by frame. Acquired: a sequence with a reliable pose at some frame; lost after acquisition: the lost frames from each sequence's first reliable frame on (what tracking itself loses; a sequence's first frame is a single view of the full model in the network's range, where registration alone often fails: issue 37). Errors are of the frames with a reliable pose. Drift: the mean rotation error of a sequence's last 30 frames, the median over sequences. Host times are one thread, the int8 model with the host scratch (AVX2 kernels where the CPU has them); the device's counts are the QEMU harness's `tracking step` line.".into(),
             format!("Verdict: every sequence is followed twice, with `Options::max_residual` at its default 0.015 and calibrated for its template (`pcrnet_train::floor`): the template's residual floor (the relative plane residual of the shape's points the template did not store, at the template's own pose, no noise) plus {} for the noise, never below 0.015. The floor is measured once per template, from points a user training for their own object has at hand.", pcrnet_core::registration::NOISE_ALLOWANCE),
         ],
         vec![table(&all), floors(&all)],
@@ -314,6 +314,16 @@ fn table(all: &[Followed]) -> Table {
             .iter()
             .filter(|f| f.rotation_deg > FAR_DEG && f.ambiguous)
             .count();
+        // The view check after the step: of the wrong and of the good
+        // reliable frames, those whose pose does not explain the view.
+        let refused = |wrong: bool| {
+            let of: Vec<_> = reliable
+                .iter()
+                .filter(|f| (f.rotation_deg > WRONG_DEG) == wrong)
+                .collect();
+            let failed = of.iter().filter(|f| f.view_passed == Some(false)).count();
+            format!("{failed} of {}", of.len())
+        };
         let mut drift: Vec<f64> = seqs
             .iter()
             .map(|s| {
@@ -368,6 +378,8 @@ fn table(all: &[Followed]) -> Table {
             format!("{:.2}", quantile(&mut drift, 0.5)),
             wrong.to_string(),
             format!("{far} ({far_flagged})"),
+            refused(true),
+            refused(false),
             ms(Step::Kept),
             ms(Step::Recovered),
         ]);
@@ -393,6 +405,8 @@ fn table(all: &[Followed]) -> Table {
             "drift °",
             "wrong (reliable, > 5°)",
             "far off (reliable, > 30°; of them reported ambiguous)",
+            "wrong the view check refuses",
+            "good the view check refuses",
             "ms kept step",
             "ms fallback step",
         ]

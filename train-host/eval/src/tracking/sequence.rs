@@ -18,7 +18,7 @@ use pcrnet_core::{Int8Model, Options, TrackOutcome};
 use pcrnet_train::data::gaussian;
 use pcrnet_train::geometry::{Mat3, apply, euler_to_mat, invert, quat_to_mat};
 use pcrnet_train::metrics::{rotation_error_deg, translation_error};
-use pcrnet_train::view::visible_from;
+use pcrnet_train::view::{eye, visible_from};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -80,7 +80,8 @@ impl Trajectory {
 /// The frame at `t` of an object whose other points are `rest` (template
 /// frame): `points` of them (all, if fewer) drawn without replacement
 /// with `seed`, moved by `M(t)`, cut to the view from +z, with noise
-/// `sigma` per coordinate.
+/// `sigma` per coordinate; and where the view's camera stood
+/// (`pcrnet_train::view::eye`, `None` for fewer than two points).
 pub fn frame(
     rest: &[[f32; 3]],
     points: usize,
@@ -88,16 +89,20 @@ pub fn frame(
     t: f32,
     sigma: f32,
     seed: u64,
-) -> Vec<[f32; 3]> {
+) -> (Vec<[f32; 3]>, Option<[f32; 3]>) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (r, s) = trajectory.at(t);
     let drawn = rand::seq::index::sample(&mut rng, rest.len(), points.min(rest.len()));
     let moved: Vec<[f32; 3]> = drawn.iter().map(|i| apply(&r, &s, &rest[i])).collect();
-    visible_from(&moved, [0.0, 0.0, 1.0])
+    let seen = visible_from(&moved, UP)
         .into_iter()
         .map(|i| moved[i].map(|v| v + sigma * gaussian(&mut rng)))
-        .collect()
+        .collect();
+    (seen, eye(&moved, UP))
 }
+
+/// The direction the frames are seen from.
+const UP: [f32; 3] = [0.0, 0.0, 1.0];
 
 /// What happened to one frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -136,6 +141,11 @@ pub struct FrameResult {
     pub points: usize,
     /// Host time of the call, microseconds (one thread).
     pub micros: f64,
+    /// Whether the pose explains the frame's view from its camera
+    /// (`Int8Model::check_view`, checked after the step: the step itself
+    /// does not use it); `None` when it could not be checked.
+    #[serde(default)]
+    pub view_passed: Option<bool>,
 }
 
 /// Follows a sequence of `frames` frames at `rate` frames a second with
@@ -158,11 +168,12 @@ pub fn follow(
     seed: u64,
 ) -> Result<Vec<FrameResult>, pcrnet_core::Error> {
     let mut scratch = vec![0i8; model.host_scratch_len()];
+    let mut view = vec![0f32; pcrnet_core::scene::view::buffer_len(crate::register::VIEW_SIDE)];
     let (mut last, mut before): (Option<Pose>, Option<Pose>) = (None, None);
     let mut out = Vec::with_capacity(frames);
     for k in 0..frames {
         let t = k as f32 / rate;
-        let source = frame(
+        let (source, camera) = frame(
             rest,
             points,
             trajectory,
@@ -201,6 +212,10 @@ pub fn follow(
             (Step::Registered | Step::Recovered, _) | (Step::Kept, None) => (None, Some(r.pose)),
             (Step::Kept, Some(previous)) => (Some(previous), Some(r.pose)),
         };
+        let view_passed = camera.and_then(|at| {
+            let checked = model.check_view(&source, at, &r.pose, &mut view);
+            checked.ok().map(|v| v.passed)
+        });
         let (r_gt, t_gt) = trajectory.truth(t);
         out.push(FrameResult {
             t,
@@ -212,6 +227,7 @@ pub fn follow(
             ambiguous: r.ambiguity.is_ambiguous(),
             points: source.len(),
             micros,
+            view_passed,
         });
     }
     Ok(out)
@@ -245,7 +261,7 @@ mod tests {
     fn a_frame_is_a_view_of_the_moved_shape() {
         let shapes = pcrnet_train::dataset::Dataset::generated(1, 512, 3);
         let tr = Trajectory::new(4);
-        let f = frame(&shapes.rest[0], 512, &tr, 1.5, 0.0, 9);
+        let (f, camera) = frame(&shapes.rest[0], 512, &tr, 1.5, 0.0, 9);
         // One side: fewer points than drawn, but a good share of them.
         assert!(f.len() < 480 && f.len() > 80, "{}", f.len());
         // Moved back by the truth, every point lies on the shape.
@@ -258,6 +274,9 @@ mod tests {
                 .fold(f32::MAX, f32::min);
             assert!(near < 1e-8, "{near}");
         }
-        assert_eq!(f, frame(&shapes.rest[0], 512, &tr, 1.5, 0.0, 9));
+        assert_eq!((f.clone(), camera), frame(&shapes.rest[0], 512, &tr, 1.5, 0.0, 9));
+        // The camera looks down at the frame from above (+z).
+        let camera = camera.unwrap();
+        assert!(f.iter().all(|p| p[2] < camera[2]));
     }
 }
