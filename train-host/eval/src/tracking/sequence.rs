@@ -274,7 +274,10 @@ mod tests {
                 .fold(f32::MAX, f32::min);
             assert!(near < 1e-8, "{near}");
         }
-        assert_eq!((f.clone(), camera), frame(&shapes.rest[0], 512, &tr, 1.5, 0.0, 9));
+        assert_eq!(
+            (f.clone(), camera),
+            frame(&shapes.rest[0], 512, &tr, 1.5, 0.0, 9)
+        );
         // The camera looks down at the frame from above (+z).
         let camera = camera.unwrap();
         assert!(f.iter().all(|p| p[2] < camera[2]));
