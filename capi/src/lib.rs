@@ -542,7 +542,7 @@ pub extern "C" fn pcrnet_status_message(status: i32) -> *const c_char {
         -33 => c"the network's output has a zero quaternion",
         -34 => c"the pose or residual is not finite: the coordinates are too large once moved into the model's frame",
         -40 => c"a registration option is out of range (zero passes with zero lk_iterations, zero hypotheses, max_points or network_points, a negative or non-finite tolerance or distance, an unknown metric, or more points or buffer elements than memory can hold)",
-        -41 => c"the previous pose is not finite or its quaternion is not of unit length: pass the pose a registration or tracking step wrote, or call pcrnet_register",
+        -41 => c"a pose given as input (to track from, or to check) is not finite or its quaternion is not of unit length: pass the pose a registration or tracking step wrote, or call pcrnet_register",
         -42 => c"the depth frame or a scene setting cannot be used (a zero size or stride, a frame buffer shorter than height x stride, intrinsics or a depth scale not finite and positive, a step of 0 or a sampling grid of more cells than its labels can number): check the camera's intrinsics and the frame's dimensions, or raise the grid step",
         -43 => c"this blob has no head (a model trained as PointNetLK): set passes to 0 and lk_iterations to its trained count (pcrnet_model_trained_passes)",
         -44 => c"lk_iterations needs PointNetLK's solver in the blob: export the model with `pcrnet export --lk`, or set lk_iterations to 0",

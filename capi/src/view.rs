@@ -8,7 +8,8 @@ use pcrnet_core::scene::Verification;
 use crate::types::{PcrnetOptions, PcrnetRegistration, PcrnetStatus};
 use crate::{PcrnetModel, cloud, register_into, scratch_mut, slice, slice_mut};
 
-/// Floats of the image buffer `pcrnet_check_view` is best given: 32 x 32
+/// Floats of the image buffer `pcrnet_register_view` and
+/// `pcrnet_check_view` are best given: 32 x 32
 /// pixels (4 KB), enough for sources of up to about 500 points at full
 /// resolution; at least 64 (8 x 8), a smaller buffer gives coarser pixels.
 pub const PCRNET_VIEW_BUFFER_LEN: usize = 1024;
@@ -49,9 +50,9 @@ impl From<Verification> for PcrnetViewCheck {
 /// `buffer` (`buffer_len` floats, see `PCRNET_VIEW_BUFFER_LEN`) as a test
 /// the turned starts must pass besides their residual (the lowest-residual
 /// one that explains the view finishes; `Int8Model::register_view`).
-/// Writes the registration to `out` (its `reliable` the residual's
-/// verdict) and its check against the view to `out_view` on success: act
-/// on the pose only when `out->reliable` and `out_view->passed`. Errors as
+/// Writes the registration to `out` and its check against the view to
+/// `out_view` on success; `out->reliable` is both verdicts (the residual's
+/// and `out_view->passed`): act on the pose only when it is set. Errors as
 /// `pcrnet_register` and `pcrnet_check_view`; nothing is written on one.
 ///
 /// # Safety
@@ -91,7 +92,10 @@ pub unsafe extern "C" fn pcrnet_register_view(
             );
             let r = m.register_view(source, [v[0], v[1], v[2]], options, scratch, buffer)?;
             seen = Some(r.view);
-            Ok(r.registration)
+            Ok(pcrnet_core::Registration {
+                reliable: r.reliable,
+                ..r.registration
+            })
         })
     };
     if let (PCRNET_OK, Some(v)) = (status, seen) {
@@ -110,10 +114,11 @@ pub unsafe extern "C" fn pcrnet_register_view(
 /// `PCRNET_VIEW_BUFFER_LEN`), the template's points judged on it (see
 /// `pcrnet_core::scene::view`). Act on a registration only when it is
 /// reliable and the check passed. Writes `out` on success; a viewpoint
-/// that is not finite, among or beside the points, or a buffer under 64
-/// floats, is `PCRNET_ERROR_INVALID_OPTION`; no finite point,
-/// `PCRNET_ERROR_EMPTY_CLOUD`; a pose that is not finite,
-/// `PCRNET_ERROR_NON_FINITE_RESULT`.
+/// that is not finite, among or beside the points or more than 10,000
+/// source radii away, or a buffer under 64 floats, is
+/// `PCRNET_ERROR_INVALID_OPTION`; no finite point,
+/// `PCRNET_ERROR_EMPTY_CLOUD`; a pose that is not finite or whose
+/// quaternion is not of unit length, `PCRNET_ERROR_INVALID_POSE`.
 ///
 /// # Safety
 /// `model` as `pcrnet_register`; `points` must point to `3 * n_points`

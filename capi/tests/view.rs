@@ -131,7 +131,17 @@ fn the_view_check_through_the_c_api_matches_the_rust_api() {
     assert!(untouched(&got));
     let nan = [f32::NAN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     let (status, got) = check(&handle, &view, &eye, nan.as_ptr(), &mut buffer);
-    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NON_FINITE_RESULT);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_INVALID_POSE);
+    assert!(untouched(&got));
+    // Not a unit quaternion.
+    let stretched = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let (status, got) = check(&handle, &view, &eye, stretched.as_ptr(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_INVALID_POSE);
+    assert!(untouched(&got));
+    // Far away: another frame's coordinates.
+    let far = [eye[0] + 1e6, eye[1], eye[2]];
+    let (status, got) = check(&handle, &view, &far, pose.as_ptr(), &mut buffer);
+    assert_eq!(status, PcrnetStatus::PCRNET_ERROR_INVALID_OPTION);
     assert!(untouched(&got));
     let inside = view[0];
     let (status, got) = check(&handle, &view, &inside, pose.as_ptr(), &mut buffer);
@@ -187,7 +197,11 @@ fn the_viewed_registration_through_the_c_api_matches_the_rust_api() {
     assert_eq!(status, PcrnetStatus::PCRNET_OK);
     assert_eq!(out.rotation, want.registration.pose.rotation);
     assert_eq!(out.translation, want.registration.pose.translation);
-    assert_eq!(out.reliable, want.registration.reliable);
+    assert_eq!(out.reliable, want.reliable);
+    assert_eq!(
+        want.reliable,
+        want.registration.reliable && want.view.passed
+    );
     let w = want.view;
     assert_eq!(
         [

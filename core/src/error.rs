@@ -196,7 +196,7 @@ impl fmt::Display for Error {
             Error::InvalidOption { what } => write!(f, "invalid registration option: {what}"),
             Error::InvalidPose => write!(
                 f,
-                "the previous pose is not finite or its rotation is not a unit quaternion: pass the pose a registration or tracking step returned, or register afresh"
+                "a pose given as input (a previous pose to track from, a pose to check) is not finite or its rotation is not a unit quaternion: pass the pose a registration or tracking step returned, or register afresh"
             ),
             Error::InvalidFrame { what } => write!(f, "invalid sensor frame: {what}"),
             Error::NoHead => write!(

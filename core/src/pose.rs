@@ -13,6 +13,10 @@ use crate::arch::POSE_DIM;
 use crate::error::{Error, Result};
 use crate::format::Frame;
 
+/// Rotation quaternions whose squared norm is further than this from 1
+/// are refused as an input pose ([`Pose::checked_unit`]).
+pub const UNIT_TOLERANCE: f32 = 1e-3;
+
 /// A rigid transform: unit quaternion (scalar first) and translation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -139,6 +143,19 @@ impl Pose {
             rotation: [w * s, x * s, y * s, z * s],
             translation: self.translation,
         }
+    }
+
+    /// This pose as an input may be given (a previous pose to track from,
+    /// a pose to check): finite, its rotation within [`UNIT_TOLERANCE`]
+    /// of unit length, then [`Self::normalised`]; else
+    /// [`Error::InvalidPose`].
+    pub fn checked_unit(&self) -> Result<Pose> {
+        let [w, x, y, z] = self.rotation;
+        let norm = w * w + x * x + y * y + z * z;
+        if !(self.is_finite() && libm::fabsf(norm - 1.0) <= UNIT_TOLERANCE) {
+            return Err(Error::InvalidPose);
+        }
+        Ok(self.normalised())
     }
 
     /// Whether every component is finite.

@@ -372,13 +372,12 @@ pub fn describe_ambiguity(
     }
 }
 
-/// Pixels a side of the harness's view check (`scene::view`): 32, as the
-/// host's `register --viewpoint`; 16 on boards short of RAM (the check's
-/// arithmetic is the same, on coarser pixels).
+/// Pixels a side of the image of the harness's viewed registration
+/// (`Int8Model::register_view`): 32, as the host's `register --viewpoint`.
 pub const HARNESS_VIEW_SIDE: usize = 32;
 
-/// The viewpoint the QEMU harness checks a registration of `cloud` from
-/// (`Int8Model::check_view`): three times the cloud's radius (its farthest
+/// The viewpoint the QEMU harness registers `cloud` from
+/// (`Int8Model::register_view`): three times the cloud's radius (its farthest
 /// finite point from their mean, summed in f32 in point order) from that
 /// mean along +z, so every point lies in front of it. The mean of nothing
 /// is the origin.

@@ -19,7 +19,7 @@
 //! The same code runs on the device and the host; with the int8 network,
 //! every value is bit-identical between them.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::format::Frame;
 use crate::pose::{Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration};
@@ -55,10 +55,6 @@ pub struct Tracking {
     /// Kept, recovered or lost.
     pub outcome: TrackOutcome,
 }
-
-/// Rotation quaternions whose squared norm is further than this from 1
-/// are refused as a previous pose.
-const UNIT_TOLERANCE: f32 = 1e-3;
 
 /// The most a kept step may turn the pose: 30 degrees, as
 /// `cos(30 deg / 2)`, the least `|q_previous . q_refined|`. Fast motion is
@@ -101,13 +97,8 @@ pub(crate) fn step(
     ) -> Result<(Pose, PassCounts)>,
 ) -> Result<Tracking> {
     let checked = registration::check(frame, template, source, options)?;
-    let [w, x, y, z] = previous.rotation;
-    let norm = w * w + x * x + y * y + z * z;
-    if !(previous.is_finite() && libm::fabsf(norm - 1.0) <= UNIT_TOLERANCE) {
-        return Err(Error::InvalidPose);
-    }
     // Unit length again: a pose carried through a stream composes without end.
-    let start = frame.pose_to_model(&previous.normalised());
+    let start = frame.pose_to_model(&previous.checked_unit()?);
     // A previous pose far out of the frame's reach can refine to a
     // non-finite one: that is a lost track, not an error.
     let (pose, held) = registration::refine_from(frame, template, &checked, start, options);

@@ -120,6 +120,22 @@ fn flip_resolution_picks_the_turn_that_fits() {
     assert!(three.fit.residual < 1e-3, "{three:?}");
     assert!(one.fit.residual > 10.0 * three.fit.residual, "{one:?}");
     assert!(angle_deg(&three.pose, &flip) < 0.1);
+
+    // A test besides the residual (the view's, in `register_view`): one
+    // that refuses the right fit leaves the lowest turned start it takes
+    // to finish, so the right pose is not chosen; one that refuses every
+    // fit changes nothing (the lowest finishes, as without a test).
+    let refusing = refine::resolve(&t, &subset, Pose::IDENTITY, 3, 4, &settings, 0.05, |p| {
+        angle_deg(p, &flip) > 10.0
+    })
+    .unwrap();
+    assert_ne!(refusing.hypothesis, 2, "{refusing:?}");
+    assert!(angle_deg(&refusing.pose, &flip) > 10.0, "{refusing:?}");
+    let none = refine::resolve(&t, &subset, Pose::IDENTITY, 3, 4, &settings, 0.05, |_| {
+        false
+    })
+    .unwrap();
+    assert_eq!(none, three);
 }
 
 #[test]

@@ -231,16 +231,24 @@ fn a_viewed_registration_is_the_registration_with_its_check() {
         model.register_view(&source, source[0], &options, &mut scratch, &mut buffer),
         Err(Error::InvalidOption { .. })
     ));
+    let nan = Pose {
+        translation: [f32::NAN; 3],
+        ..plain.pose
+    };
+    let stretched = Pose {
+        rotation: [2.0, 0.0, 0.0, 0.0],
+        ..plain.pose
+    };
+    for bad in [nan, stretched] {
+        assert!(matches!(
+            model.check_view(&source, at, &bad, &mut buffer),
+            Err(Error::InvalidPose)
+        ));
+    }
+    // Another frame's coordinates: 100,000 radii away.
+    let far = [at[0] + 1e5 * model.object_radius(), at[1], at[2]];
     assert!(matches!(
-        model.check_view(
-            &source,
-            at,
-            &Pose {
-                translation: [f32::NAN; 3],
-                ..plain.pose
-            },
-            &mut buffer
-        ),
-        Err(Error::NonFiniteResult)
+        model.check_view(&source, far, &plain.pose, &mut buffer),
+        Err(Error::InvalidOption { .. })
     ));
 }

@@ -37,6 +37,12 @@ use crate::pose::{Centring, PointMap, Pose};
 use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
 use crate::template::Template;
 
+/// How far the viewpoint may lie from the source's centroid, in source
+/// radii (its farthest finite point from the centroid): a sensor framing
+/// an object stands a few radii away; 10,000 leaves f32 depths a
+/// resolution finer than a thousandth of the radius.
+pub const MAX_DISTANCE: f32 = 10_000.0;
+
 /// The smallest image side [`View::render`] accepts (pixels).
 pub const MIN_SIDE: usize = 8;
 
@@ -67,9 +73,11 @@ impl<'b> View<'b> {
     ///
     /// # Errors
     /// [`Error::InvalidOption`] for a non-finite viewpoint, a buffer under
-    /// `MIN_SIDE` squared, or a viewpoint not in front of every point (at
-    /// the source's centroid, or with points beside or behind it);
-    /// [`Error::EmptyCloud`] without a finite point.
+    /// `MIN_SIDE` squared, a viewpoint not in front of every point (at
+    /// the source's centroid, or with points beside or behind it) or more
+    /// than [`MAX_DISTANCE`] source radii away (a source of one distinct
+    /// point has no radius: always); [`Error::EmptyCloud`] without a
+    /// finite point.
     pub fn render(source: &[[f32; 3]], viewpoint: [f32; 3], buffer: &'b mut [f32]) -> Result<Self> {
         if !viewpoint.iter().all(|v| v.is_finite()) {
             return Err(Error::InvalidOption {
@@ -94,9 +102,29 @@ impl<'b> View<'b> {
             return Err(Error::EmptyCloud);
         }
         let count = n as f32;
-        let axes = camera_axes(sum.map(|s| s / count)).ok_or(Error::InvalidOption {
+        let offset = sum.map(|s| s / count);
+        let axes = camera_axes(offset).ok_or(Error::InvalidOption {
             what: "the viewpoint must not lie at the source's centroid",
         })?;
+        // A viewpoint very far from the source (in another frame, such as
+        // map coordinates against local ones) would flatten it to one
+        // depth in f32 and every pose would pass.
+        let centroid = [
+            viewpoint[0] + offset[0],
+            viewpoint[1] + offset[1],
+            viewpoint[2] + offset[2],
+        ];
+        let mut radius2 = 0f32;
+        for p in finite() {
+            let d = [p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]];
+            radius2 = radius2.max(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        }
+        let distance2 = offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2];
+        if distance2.is_nan() || distance2 > MAX_DISTANCE * MAX_DISTANCE * radius2 {
+            return Err(Error::InvalidOption {
+                what: "the viewpoint lies more than 10,000 source radii away (is it in the source's frame?)",
+            });
+        }
         // The source's extent in the image plane (tangents of its angles).
         let mut extent = 0f32;
         for p in finite() {
@@ -115,11 +143,10 @@ impl<'b> View<'b> {
         let across = (n / 2).isqrt().max(2);
         let side = (2 * across).min(most).max(MIN_SIDE);
         let across = (side / 2).max(1);
-        let f = if extent > 0.0 {
-            across as f32 / (2.0 * extent)
-        } else {
-            1.0
-        };
+        // Points all on the optical axis (no extent, or a subnormal one):
+        // any finite scale.
+        let f = across as f32 / (2.0 * extent);
+        let f = if f.is_finite() { f } else { 1.0 };
         let centre = (side - 1) as f32 * 0.5;
         let intrinsics = Intrinsics {
             fx: f,
@@ -140,10 +167,10 @@ impl<'b> View<'b> {
                 continue;
             };
             let (u, v) = (libm::roundf(u), libm::roundf(v));
-            let inside = (0.0..side as f32).contains(&u) && (0.0..side as f32).contains(&v);
-            if let Some(d) = depth
-                .get_mut(v as usize * side + u as usize)
-                .filter(|_| inside)
+            if !((0.0..side as f32).contains(&u) && (0.0..side as f32).contains(&v)) {
+                continue;
+            }
+            if let Some(d) = depth.get_mut(v as usize * side + u as usize)
                 && z < *d
             {
                 *d = z;
@@ -196,8 +223,8 @@ fn settings_for(template: &Template, model: &Frame) -> VerifySettings {
 }
 
 /// [`View::render`], then [`View::check`] with the models' settings: what
-/// the models' `check_view` do. A pose that is not finite is
-/// [`Error::NonFiniteResult`].
+/// the models' `check_view` do. A pose that is not finite or whose
+/// rotation is not a unit quaternion is [`Error::InvalidPose`].
 pub(crate) fn check_model(
     template: &Template,
     model: &Frame,
@@ -206,11 +233,9 @@ pub(crate) fn check_model(
     pose: &Pose,
     buffer: &mut [f32],
 ) -> Result<Verification> {
-    if !pose.is_finite() {
-        return Err(Error::NonFiniteResult);
-    }
+    let pose = pose.checked_unit()?;
     let view = View::render(source, viewpoint, buffer)?;
-    Ok(view.check(template, model, pose, &settings_for(template, model)))
+    Ok(view.check(template, model, &pose, &settings_for(template, model)))
 }
 
 /// A registration of a cut single view made and checked from its

@@ -184,10 +184,18 @@ pub(crate) fn register(
         seen.viewpoint.is_none() || kind == MethodKind::Device,
         "--viewpoint checks the device pipeline's pose against the view: leave out --method or give --method device"
     );
+    anyhow::ensure!(
+        seen.viewpoint.is_none() || !options.refine_icp,
+        "--viewpoint checks the device pipeline's own pose, which --refine-icp would move: leave out one of them"
+    );
     // In the clouds' local frame, as the points were moved.
     let viewpoint = seen
         .viewpoint
         .map(|v| [0, 1, 2].map(|k| (v[k] - origin[k]) as f32));
+    anyhow::ensure!(
+        viewpoint.is_none_or(|v| v.iter().all(|c| c.is_finite())),
+        "--viewpoint lies too far from the clouds for f32 (is it in the files' frame?)"
+    );
     let mut method = options.method(kind);
     method.view_check = viewpoint.is_some();
     let (blob, model_note) = match options.read_model()? {
@@ -319,12 +327,7 @@ pub(crate) fn register(
                 if v.passed { "passed" } else { "FAILED" }
             ));
         }
-        say(match (c.reliable, &out.view) {
-            (true, Some(_)) => "trust: RELIABLE (relative plane residual within the threshold, and the pose explains the view)".into(),
-            (true, None) => "trust: RELIABLE (relative plane residual within the threshold)".into(),
-            (false, Some(v)) if !v.passed => "trust: NOT RELIABLE - do not act on this pose (it puts template points where the sensor saw past the object, or too few on the seen surface)".into(),
-            (false, _) => "trust: NOT RELIABLE - do not act on this pose (plane residual above the threshold, or a degenerate source)".into(),
-        });
+        say(trust_line(c.reliable, out.view.map(|v| v.passed)));
     }
     if let Some(out_path) = aligned {
         if origin == [0.0; 3] {
@@ -352,6 +355,21 @@ pub(crate) fn register(
         write_json(&path, &v)?;
     }
     Ok(())
+}
+
+/// The verdict line: the registration's own (`registered`: the residual
+/// and the source's shape) and, with `--viewpoint`, the view's, each
+/// reason named.
+fn trust_line(registered: bool, view: Option<bool>) -> String {
+    let residual = "plane residual above the threshold, or a degenerate source";
+    let seen = "it puts template points where the sensor saw past the object, or too few on the seen surface";
+    match (registered, view) {
+        (true, Some(true)) => "trust: RELIABLE (relative plane residual within the threshold, and the pose explains the view)".into(),
+        (true, None) => "trust: RELIABLE (relative plane residual within the threshold)".into(),
+        (true, Some(false)) => format!("trust: NOT RELIABLE - do not act on this pose ({seen})"),
+        (false, Some(false)) => format!("trust: NOT RELIABLE - do not act on this pose ({residual}; and {seen})"),
+        (false, _) => format!("trust: NOT RELIABLE - do not act on this pose ({residual})"),
+    }
 }
 
 /// The whole result of `register` as JSON: pose in the files' frame
@@ -382,7 +400,7 @@ fn report_json(method: &str, out: &methods::Outcome, pose: &FilePose) -> serde_j
         v["icp_iterations"] = c.icp_iterations.into();
         v["saturated"] = c.saturated.into();
         v["out_of_range"] = c.out_of_range.into();
-        v["reliable"] = c.reliable.into();
+        v["reliable"] = out.reliable().unwrap_or(c.reliable).into();
         v["ambiguity"] = crate::ambiguity::json(&c.ambiguity, pose.origin);
     }
     if let Some(view) = &out.view {

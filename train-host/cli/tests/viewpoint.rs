@@ -109,6 +109,16 @@ fn a_single_view_is_checked_from_its_viewpoint() {
     let (code, _, stderr) = register(&whole, &["--viewpoint", &point(at), "--method", "icp"]);
     assert_ne!(code, Some(0));
     assert!(stderr.contains("--method device"), "{stderr}");
+    let (code, _, stderr) = register(&whole, &["--viewpoint", &point(at), "--refine-icp"]);
+    assert_ne!(code, Some(0));
+    assert!(stderr.contains("--refine-icp"), "{stderr}");
+    // Too far for f32, and far enough to be another frame's coordinates.
+    let (code, _, stderr) = register(&whole, &["--viewpoint", "1e39,0,0"]);
+    assert_ne!(code, Some(0));
+    assert!(stderr.contains("too far from the clouds"), "{stderr}");
+    let (code, _, stderr) = register(&whole, &["--viewpoint", "5e5,5.4e6,0"]);
+    assert_ne!(code, Some(0));
+    assert!(stderr.contains("10,000 source radii"), "{stderr}");
     // Among the points: not a sensor's position.
     let inside = view[0];
     let (code, _, stderr) = register(&whole, &["--viewpoint", &point(inside)]);

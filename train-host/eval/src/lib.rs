@@ -198,7 +198,11 @@ pub fn score(
                     o.iterations,
                     o.seconds,
                     o.precision,
-                    o.check,
+                    // The verdict in force: the view's too, when checked.
+                    o.check.map(|c| pcrnet_core::Registration {
+                        reliable: o.reliable().unwrap_or(c.reliable),
+                        ..c
+                    }),
                     o.feature_distance,
                     o.view,
                     None,

@@ -347,9 +347,18 @@ pub struct Outcome {
     /// the pose is then not to be acted on, whatever the method returned.
     pub degenerate: Option<Degeneracy>,
     /// The check against the single view from its viewpoint
-    /// ([`Method::view_check`]), which the device pipeline's verdict then
-    /// includes.
+    /// ([`Method::view_check`]): the pose is to be acted on only when
+    /// `check`'s `reliable` is set and this passed ([`Outcome::reliable`]).
     pub view: Option<pcrnet_core::scene::Verification>,
+}
+
+impl Outcome {
+    /// The device pipeline's verdict: its registration's, and with a view
+    /// check that too; `None` for methods without one.
+    pub fn reliable(&self) -> Option<bool> {
+        let c = self.check.as_ref()?;
+        Some(c.reliable && self.view.is_none_or(|v| v.passed))
+    }
 }
 
 /// Why a registration failed.
@@ -446,11 +455,7 @@ pub fn run(
                 (true, None) => return Err(MethodError::NoViewpoint),
                 (true, Some(v)) => {
                     let (seen, precision) = pipeline_viewed(&blob, source, v, &options)?;
-                    let r = pcrnet_core::Registration {
-                        reliable: seen.reliable,
-                        ..seen.registration
-                    };
-                    (r, Some(seen.view), precision)
+                    (seen.registration, Some(seen.view), precision)
                 }
             };
             let checking = Instant::now();
