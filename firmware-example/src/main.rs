@@ -112,6 +112,7 @@ fn main() -> ! {
                 stack::in_use(baseline)
             );
             locate(&model, &counter, SCRATCH_BUF);
+            seen_from_above(&model, &counter, CLOUD, SCRATCH_BUF);
             match result {
                 Ok(r) if r.reliable => {
                     log!("pose reliable: acting on it");
@@ -214,6 +215,38 @@ fn locate(model: &Int8Model, counter: &Counter, scratch: &mut [i8]) {
             None => log!("no cluster of the object's size in the frame"),
         },
         Err(e) => log!("locate failed: {:?}", e),
+    }
+}
+
+/// Registers the cloud as a view from a sensor above it, checked against
+/// that view (`Int8Model::register_view`): a cut single view whose sensor
+/// position is known (the origin, for points in a camera's frame) gets a
+/// verdict that a fragment or a pose slid onto the wrong side cannot pass.
+fn seen_from_above(model: &Int8Model, counter: &Counter, cloud: &[[f32; 3]], scratch: &mut [i8]) {
+    use pcrnet_core::scene::view;
+    static mut VIEW: [f32; view::buffer_len(32)] = [0.0; view::buffer_len(32)];
+    // SAFETY: called once, on one thread; the only code naming VIEW.
+    let buffer = unsafe { &mut *core::ptr::addr_of_mut!(VIEW) };
+    // Three radii above the cloud's centre (a driver knows its sensor's place).
+    let viewpoint = pcrnet_core::testing::harness_viewpoint(cloud);
+    let start = counter.instructions();
+    let seen = model.register_view(cloud, viewpoint, &Options::default(), scratch, buffer);
+    log!(
+        "registration seen from {:?}: {} instructions",
+        viewpoint,
+        counter.instructions() - start
+    );
+    match seen {
+        Ok(v) => {
+            log!(
+                "view: {} template points on the seen surface, {} where the sensor saw past the object, {} behind it",
+                v.view.supported,
+                v.view.violations,
+                v.view.occluded
+            );
+            log!("reliable with the view: {}", v.reliable);
+        }
+        Err(e) => log!("register_view failed: {:?}", e),
     }
 }
 
