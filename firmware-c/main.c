@@ -115,6 +115,35 @@ static int32_t run(const char *label, const float *points, size_t n, const Pcrne
     return status;
 }
 
+/* The source as a cut single view from a sensor at (0, 0, 3), above the
+ * object: registered with the view (of the turned starts, the lowest
+ * whose pose explains the view finishes) and checked against it; then its
+ * "@ view" line (the registration, then the check's counts). */
+static void viewed(const float *points, size_t n, const PcrnetOptions *options) {
+    static float view[PCRNET_VIEW_BUFFER_LEN];
+    const float viewpoint[3] = {0.0f, 0.0f, 3.0f};
+    PcrnetRegistration r;
+    PcrnetViewCheck v;
+    uint64_t start = instructions_now();
+    int32_t status = pcrnet_register_view(&model, points, n, viewpoint, options, scratch, sizeof scratch, view,
+                                          PCRNET_VIEW_BUFFER_LEN, &r, &v);
+    uint64_t used = instructions_now() - start;
+    printf("register seen from (0, 0, 3): %s, ", pcrnet_status_message(status));
+    print_count(used);
+    printf(" instructions\n");
+    if (status != PCRNET_OK) {
+        printf("@ view above %ld\n", (long)status);
+        return;
+    }
+    printf("  view: %lu template points on the seen surface, %lu where the sensor saw past the object, %lu behind it; reliable with the view: %s\n",
+           (unsigned long)v.supported, (unsigned long)v.violations, (unsigned long)v.occluded,
+           r.reliable ? "yes" : "no");
+    printf("@ view above 0");
+    print_registration_bits(&r);
+    printf(" %lu %lu %lu %lu %d\n", (unsigned long)v.supported, (unsigned long)v.violations,
+           (unsigned long)v.occluded, (unsigned long)v.unobserved, v.passed ? 1 : 0);
+}
+
 /* The object found in the depth frame and registered (the plane taken
  * out, clusters of the object's size registered by a yaw sweep about the
  * plane's normal, each checked against the frame), then its "@ locate"
@@ -246,7 +275,8 @@ int main(void) {
     }
     printf("\n");
 
-    /* From a raw depth frame to the object's pose. */
+    /* A cut single view from a known place, then a raw depth frame. */
+    viewed(source_points, n, &options);
     locate();
 
     /* Bad input is a status with a message, never a crash. */

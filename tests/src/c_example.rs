@@ -4,7 +4,8 @@
 //!
 //! The example prints each result twice: readable, and as an `@` line
 //! with the bits of every value (`@ reg LABEL STATUS ...`,
-//! `@ pose LABEL STATUS ...`, `@ done`). The host recomputes each labelled
+//! `@ pose LABEL STATUS ...`, `@ view LABEL STATUS ...`, `@ locate ...`,
+//! `@ done`). The host recomputes each labelled
 //! call and formats it the same way through the C API's own conversions,
 //! so a difference names the call and the field.
 
@@ -20,10 +21,11 @@ use crate::qemu;
 
 /// Calls the example always makes; `every-start` follows only an
 /// unreliable `default`.
-const REQUIRED: [&str; 5] = [
+const REQUIRED: [&str; 6] = [
     "reg default",
     "reg network",
     "pose iterated",
+    "view above",
     "locate sweep",
     "reg nan",
 ];
@@ -251,9 +253,35 @@ fn expected_line(
             Err(e) => format!("@ pose {label} {}", PcrnetStatus::from(e) as i32),
         },
         ("locate", "sweep") => locate_line(model, depth, scratch),
+        ("view", "above") => {
+            let mut view = vec![0f32; pcrnet_core::scene::view::buffer_len(32)];
+            match model.register_view(source, VIEWPOINT, &Options::default(), scratch, &mut view) {
+                Ok(v) => {
+                    // The C API's `reliable` is both verdicts.
+                    let r = PcrnetRegistration::from(&pcrnet_core::Registration {
+                        reliable: v.reliable,
+                        ..v.registration
+                    });
+                    let c = v.view;
+                    format!(
+                        "@ view {label} 0{} {} {} {} {} {}",
+                        registration_words(&r),
+                        c.supported,
+                        c.violations,
+                        c.occluded,
+                        c.unobserved,
+                        u8::from(c.passed)
+                    )
+                }
+                Err(e) => format!("@ view {label} {}", PcrnetStatus::from(e) as i32),
+            }
+        }
         _ => bail!("the C example printed an unknown call `@ {kind} {label}`"),
     })
 }
+
+/// Where the C example's sensor stands for its `@ view above` line.
+const VIEWPOINT: [f32; 3] = [0.0, 0.0, 3.0];
 
 /// The first field where two `@` lines differ, named.
 fn difference(kind: &str, device: &str, host: &str) -> String {
@@ -271,6 +299,18 @@ fn difference(kind: &str, device: &str, host: &str) -> String {
         if a != b {
             let name = match kind {
                 "reg" => REG_FIELDS.get(i).copied().unwrap_or("extra value"),
+                "view" => REG_FIELDS
+                    .iter()
+                    .chain(&[
+                        "supported",
+                        "violations",
+                        "occluded",
+                        "unobserved",
+                        "passed",
+                    ])
+                    .nth(i)
+                    .copied()
+                    .unwrap_or("extra value"),
                 "locate" => LOCATE_FIELDS
                     .iter()
                     .chain(&REG_FIELDS)
