@@ -108,6 +108,7 @@ pub mod template;
 #[doc(hidden)]
 pub mod testing;
 pub mod track;
+pub mod viewed;
 
 pub use ambiguity::{Ambiguity, FreeAxis, Turn};
 pub use arch::{Arch, F32_TILE, MAX_TILE, POSE_DIM, f32_scratch_len, int8_scratch_len};

@@ -199,9 +199,9 @@ impl<'a> F32Model<'a> {
         options: &Options,
         scratch: &mut [f32],
         buffer: &mut [f32],
-    ) -> Result<crate::scene::view::Viewed> {
+    ) -> Result<crate::viewed::Viewed> {
         let net = &self.network;
-        crate::scene::view::register(
+        crate::viewed::register(
             &self.frame,
             net.centring(),
             &self.template,

@@ -342,9 +342,9 @@ impl<'a> Int8Model<'a> {
         options: &Options,
         scratch: &mut [i8],
         buffer: &mut [f32],
-    ) -> Result<crate::scene::view::Viewed> {
+    ) -> Result<crate::viewed::Viewed> {
         let tile = self.tile_for(scratch.len())?;
-        crate::scene::view::register(
+        crate::viewed::register(
             &self.p.frame,
             self.centring(),
             &self.template,

@@ -33,8 +33,7 @@ use super::depth::{Intrinsics, Organised, project};
 use super::verify::{Empty, Verification, VerifySettings, tally};
 use crate::error::{Error, Result};
 use crate::format::Frame;
-use crate::pose::{Centring, PointMap, Pose};
-use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
+use crate::pose::Pose;
 use crate::template::Template;
 
 /// How far the viewpoint may lie from the source's centroid, in source
@@ -218,7 +217,7 @@ impl<'b> View<'b> {
 
 /// How the models judge a view: [`VerifySettings::for_object`] of the
 /// template's radius (user units).
-fn settings_for(template: &Template, model: &Frame) -> VerifySettings {
+pub(crate) fn settings_for(template: &Template, model: &Frame) -> VerifySettings {
     VerifySettings::for_object(template.radius() / model.scale)
 }
 
@@ -236,51 +235,6 @@ pub(crate) fn check_model(
     let pose = pose.checked_unit()?;
     let view = View::render(source, viewpoint, buffer)?;
     Ok(view.check(template, model, &pose, &settings_for(template, model)))
-}
-
-/// A registration of a cut single view made and checked from its
-/// viewpoint (`Int8Model::register_view`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Viewed {
-    /// The registration: its starts chosen with the view (see
-    /// `Int8Model::register_view`), its `reliable` the residual's verdict.
-    pub registration: Registration,
-    /// Its pose checked against the view.
-    pub view: Verification,
-    /// Both verdicts: the registration is reliable and the view's check passed.
-    pub reliable: bool,
-}
-
-/// Registers `source` as [`crate::registration`] does (`pass` the model's
-/// network step), its starts resolved with the view from `viewpoint` as
-/// the test a pose must pass besides its residual
-/// ([`crate::refine::resolve`]), and checks the result against it.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn register(
-    model: &Frame,
-    centring: Centring,
-    template: &Template<'_>,
-    source: &[[f32; 3]],
-    viewpoint: [f32; 3],
-    options: &Options,
-    buffer: &mut [f32],
-    pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
-) -> Result<Viewed> {
-    let checked = registration::check(model, template, source, options)?;
-    let view = View::render(source, viewpoint, buffer)?;
-    let settings = settings_for(template, model);
-    let judge = |pose: &Pose| view.check(template, model, pose, &settings);
-    let registration =
-        registration::run_checked(model, centring, template, &checked, options, pass, |pose| {
-            judge(pose).passed
-        })?;
-    let view = judge(&registration.pose);
-    Ok(Viewed {
-        registration,
-        view,
-        reliable: registration.reliable && view.passed,
-    })
 }
 
 impl Organised for View<'_> {

@@ -13,7 +13,7 @@
 //! template's), `p_template = R p_source + t`.
 
 use pcrnet_core::pose;
-use pcrnet_core::scene::view::Viewed;
+use pcrnet_core::viewed::Viewed;
 use pcrnet_core::{F32Model, Int8Model, Options, Pose, Registration};
 
 use crate::pointnetlk::{LkResult, PointNetLk};
