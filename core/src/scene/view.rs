@@ -20,14 +20,17 @@
 //!
 //! The image: a virtual pinhole camera at the viewpoint, its optical axis
 //! through the source's centroid, square pixels sized so that the source's
-//! extent spans about `sqrt(n / 2)` of them (`n` its finite points: about
-//! two points a pixel on the object, so its surface has no holes), with
+//! extent spans about `sqrt(n / 2)` of them (`n` its finite points,
+//! repeated ones too: about two points a pixel on the object, so its
+//! surface has no holes), with
 //! half that again of margin on every side, so that a template point off
 //! the silhouette lands on an empty pixel rather than outside the image;
 //! at most `sqrt(buffer.len())` pixels a side. Each template point is
 //! judged on the 3 x 3 pixels about its projection, which bridges a
 //! missing pixel. f32 arithmetic through `libm`, in a fixed order:
-//! bit-identical on every target.
+//! bit-identical on every target. What it catches and misses, measured on
+//! ModelNet10 single views: `docs/scene.md`, "A single view checked from
+//! its viewpoint".
 
 use super::depth::{Intrinsics, Organised, project};
 use super::verify::{Empty, Verification, VerifySettings, tally};
@@ -49,7 +52,7 @@ pub const MIN_SIDE: usize = 8;
 /// (4 KB) serves sources up to about 500 points at full resolution;
 /// smaller buffers give coarser pixels.
 pub const fn buffer_len(side: usize) -> usize {
-    side * side
+    side.saturating_mul(side)
 }
 
 /// A cut single view rendered from its viewpoint (see the module docs).
