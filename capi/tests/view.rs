@@ -64,16 +64,21 @@ fn near_side(cloud: &[[f32; 3]]) -> (Vec<[f32; 3]>, [f32; 3]) {
     (seen, [c[0], c[1], c[2] + 3.0 * radius])
 }
 
+/// The model's template's near side from +z, as a sensor there would see
+/// it, and where that sensor stands ([`near_side`]).
+fn shipped_view(model: &Int8Model<'_>) -> (Vec<[f32; 3]>, [f32; 3]) {
+    let template: Vec<[f32; 3]> = (0..model.template().len())
+        .map(|i| model.template().user_point(i, model.frame()))
+        .collect();
+    near_side(&template)
+}
+
 #[test]
 fn the_view_check_through_the_c_api_matches_the_rust_api() {
     let blob = shipped_blob();
     let handle = loaded(&blob);
     let rust = Int8Model::from_bytes(&blob).unwrap();
-    // The template's near side from +z, as a sensor there would see it.
-    let template: Vec<[f32; 3]> = (0..rust.template().len())
-        .map(|i| rust.template().user_point(i, rust.frame()))
-        .collect();
-    let (view, eye) = near_side(&template);
+    let (view, eye) = shipped_view(&rust);
     let mut scratch = vec![0i8; rust.scratch_len(1)];
     let r = rust
         .register(&view, &Options::default(), &mut scratch)
@@ -158,10 +163,7 @@ fn the_viewed_registration_through_the_c_api_matches_the_rust_api() {
     let blob = shipped_blob();
     let handle = loaded(&blob);
     let rust = Int8Model::from_bytes(&blob).unwrap();
-    let template: Vec<[f32; 3]> = (0..rust.template().len())
-        .map(|i| rust.template().user_point(i, rust.frame()))
-        .collect();
-    let (view, eye) = near_side(&template);
+    let (view, eye) = shipped_view(&rust);
     let mut scratch = vec![0i8; rust.scratch_len(1)];
     let mut buffer = vec![0f32; PCRNET_VIEW_BUFFER_LEN];
     let want = rust

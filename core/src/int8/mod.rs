@@ -366,8 +366,8 @@ impl<'a> Int8Model<'a> {
     /// registration's own verdict.
     ///
     /// # Errors
-    /// As [`crate::scene::View::render`]; a pose that is not finite is
-    /// [`Error::NonFiniteResult`].
+    /// As [`crate::scene::View::render`]; a pose that is not finite or
+    /// whose rotation is not a unit quaternion is [`Error::InvalidPose`].
     pub fn check_view(
         &self,
         source: &[[f32; 3]],

@@ -116,10 +116,17 @@ impl<'b> View<'b> {
             viewpoint[1] + offset[1],
             viewpoint[2] + offset[2],
         ];
-        let mut radius2 = 0f32;
+        // One pass: the source's radius, whether every point is in front,
+        // and its extent in the image plane (tangents of its angles).
+        let (mut radius2, mut behind, mut extent) = (0f32, false, 0f32);
         for p in finite() {
             let d = [p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]];
             radius2 = radius2.max(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            let c = to_camera(&axes, viewpoint, *p);
+            behind |= c[2].is_nan() || c[2] <= 0.0;
+            extent = extent
+                .max(libm::fabsf(c[0] / c[2]))
+                .max(libm::fabsf(c[1] / c[2]));
         }
         let distance2 = offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2];
         if distance2.is_nan() || distance2 > MAX_DISTANCE * MAX_DISTANCE * radius2 {
@@ -127,18 +134,10 @@ impl<'b> View<'b> {
                 what: "the viewpoint lies more than 10,000 source radii away (is it in the source's frame?)",
             });
         }
-        // The source's extent in the image plane (tangents of its angles).
-        let mut extent = 0f32;
-        for p in finite() {
-            let c = to_camera(&axes, viewpoint, *p);
-            if c[2].is_nan() || c[2] <= 0.0 {
-                return Err(Error::InvalidOption {
-                    what: "the viewpoint must see every point in front of it (is it the sensor's position in the source's frame?)",
-                });
-            }
-            extent = extent
-                .max(libm::fabsf(c[0] / c[2]))
-                .max(libm::fabsf(c[1] / c[2]));
+        if behind {
+            return Err(Error::InvalidOption {
+                what: "the viewpoint must see every point in front of it (is it the sensor's position in the source's frame?)",
+            });
         }
         // About sqrt(n / 2) pixels across the source, half as many again
         // of margin each side, within the buffer.

@@ -89,23 +89,12 @@ pub fn pipeline(
     options: &Options,
 ) -> Result<(Registration, Precision), TemplateError> {
     let blob = model_for(blob, template)?;
-    let with = |trained: Options| or_trained(options, trained);
-    match Int8Model::from_bytes(&blob) {
-        Ok(model) => {
-            let mut scratch = vec![0i8; model.host_scratch_len()];
-            let options = with(model.trained_options());
-            let r = model.register(source, &options, &mut scratch)?;
-            Ok((r, Precision::Int8))
-        }
-        Err(pcrnet_core::Error::WrongKind { .. }) => {
-            let model = F32Model::from_bytes(&blob)?;
-            let mut scratch = vec![0f32; model.tiled_scratch_len()];
-            let options = with(model.trained_options());
-            let r = model.register(source, &options, &mut scratch)?;
-            Ok((r, Precision::F32))
-        }
-        Err(e) => Err(e.into()),
-    }
+    on_either(
+        &blob,
+        options,
+        |m, o, scratch| m.register(source, o, scratch),
+        |m, o, scratch| m.register(source, o, scratch),
+    )
 }
 
 /// Pixels a side of the view [`pipeline_viewed`] renders: 32, enough for
@@ -121,20 +110,36 @@ pub fn pipeline_viewed(
     viewpoint: [f32; 3],
     options: &Options,
 ) -> Result<(Viewed, Precision), TemplateError> {
-    let mut buffer = vec![0f32; pcrnet_core::scene::view::buffer_len(VIEW_SIDE)];
+    // One of the two runs: each takes its own buffer.
+    let buffer = || vec![0f32; pcrnet_core::scene::view::buffer_len(VIEW_SIDE)];
+    on_either(
+        blob,
+        options,
+        |m, o, scratch| m.register_view(source, viewpoint, o, scratch, &mut buffer()),
+        |m, o, scratch| m.register_view(source, viewpoint, o, scratch, &mut buffer()),
+    )
+}
+
+/// Runs `int8` on the blob's model if it is an int8 one, else `f32` on it
+/// as an f32 one, each with `options` completed by the blob's trained
+/// ones ([`or_trained`]) and the host scratch its kernels want.
+fn on_either<T>(
+    blob: &[u8],
+    options: &Options,
+    int8: impl FnOnce(&Int8Model<'_>, &Options, &mut [i8]) -> Result<T, pcrnet_core::Error>,
+    f32: impl FnOnce(&F32Model<'_>, &Options, &mut [f32]) -> Result<T, pcrnet_core::Error>,
+) -> Result<(T, Precision), TemplateError> {
     match Int8Model::from_bytes(blob) {
         Ok(model) => {
             let mut scratch = vec![0i8; model.host_scratch_len()];
             let options = or_trained(options, model.trained_options());
-            let r = model.register_view(source, viewpoint, &options, &mut scratch, &mut buffer)?;
-            Ok((r, Precision::Int8))
+            Ok((int8(&model, &options, &mut scratch)?, Precision::Int8))
         }
         Err(pcrnet_core::Error::WrongKind { .. }) => {
             let model = F32Model::from_bytes(blob)?;
             let mut scratch = vec![0f32; model.tiled_scratch_len()];
             let options = or_trained(options, model.trained_options());
-            let r = model.register_view(source, viewpoint, &options, &mut scratch, &mut buffer)?;
-            Ok((r, Precision::F32))
+            Ok((f32(&model, &options, &mut scratch)?, Precision::F32))
         }
         Err(e) => Err(e.into()),
     }

@@ -332,11 +332,9 @@ pub fn make_pair_seen(template: &[[f32; 3]], cfg: &PairConfig, seed: u64) -> Mad
     let mut eye = None;
     if cfg.single_view {
         let dir = random_direction(&mut rng);
-        eye = super::view::eye(&pts, dir);
-        pts = super::view::visible_from(&pts, dir)
-            .into_iter()
-            .map(|i| pts[i])
-            .collect();
+        let (seen, at) = super::view::seen_from(&pts, dir);
+        eye = at;
+        pts = seen.into_iter().map(|i| pts[i]).collect();
     }
     if let Some([lo, hi]) = cfg.partial {
         let frac = if hi > lo {

@@ -27,14 +27,20 @@ pub const EYE_DISTANCE: f32 = 3.0;
 /// points are never visible; an empty or single-point cloud keeps what it
 /// has.
 pub fn visible_from(cloud: &[[f32; 3]], dir: [f32; 3]) -> Vec<usize> {
+    seen_from(cloud, dir).0
+}
+
+/// [`visible_from`] and [`eye`] at once: the visible points' indices and
+/// where the camera stood, with one pass for the camera.
+pub fn seen_from(cloud: &[[f32; 3]], dir: [f32; 3]) -> (Vec<usize>, Option<[f32; 3]>) {
     let finite: Vec<usize> = (0..cloud.len())
         .filter(|&i| cloud[i].iter().all(|v| v.is_finite()))
         .collect();
     if finite.len() < 2 {
-        return finite;
+        return (finite, None);
     }
     let Some((eye, f)) = camera(cloud, dir) else {
-        return finite;
+        return (finite, None);
     };
     // An image basis perpendicular to the viewing direction.
     let helper = if f[0].abs() < 0.9 {
@@ -43,7 +49,7 @@ pub fn visible_from(cloud: &[[f32; 3]], dir: [f32; 3]) -> Vec<usize> {
         [0.0, 1.0, 0.0]
     };
     let Some(u) = normalised(cross(f, helper)) else {
-        return finite;
+        return (finite, Some(eye));
     };
     let w = cross(f, u);
     // Project: image coordinates (x, y) = lateral / depth, and the depth.
@@ -73,14 +79,15 @@ pub fn visible_from(cloud: &[[f32; 3]], dir: [f32; 3]) -> Vec<usize> {
     }
     // One pixel's width at the pixel's nearest depth.
     let width = side / grid as f32;
-    projected
+    let seen = projected
         .iter()
         .filter(|&&(_, x, y, z)| {
             let near = nearest[pixel(x, y)];
             z <= near + width * near
         })
         .map(|&(i, ..)| i)
-        .collect()
+        .collect();
+    (seen, Some(eye))
 }
 
 /// Where the camera of [`visible_from`] stands for `cloud` and `dir`

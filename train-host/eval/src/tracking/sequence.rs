@@ -18,7 +18,7 @@ use pcrnet_core::{Int8Model, Options, TrackOutcome};
 use pcrnet_train::data::gaussian;
 use pcrnet_train::geometry::{Mat3, apply, euler_to_mat, invert, quat_to_mat};
 use pcrnet_train::metrics::{rotation_error_deg, translation_error};
-use pcrnet_train::view::{eye, visible_from};
+use pcrnet_train::view::seen_from;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -94,11 +94,12 @@ pub fn frame(
     let (r, s) = trajectory.at(t);
     let drawn = rand::seq::index::sample(&mut rng, rest.len(), points.min(rest.len()));
     let moved: Vec<[f32; 3]> = drawn.iter().map(|i| apply(&r, &s, &rest[i])).collect();
-    let seen = visible_from(&moved, UP)
+    let (visible, eye) = seen_from(&moved, UP);
+    let seen = visible
         .into_iter()
         .map(|i| moved[i].map(|v| v + sigma * gaussian(&mut rng)))
         .collect();
-    (seen, eye(&moved, UP))
+    (seen, eye)
 }
 
 /// The direction the frames are seen from.
