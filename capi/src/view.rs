@@ -49,7 +49,9 @@ impl From<Verification> for PcrnetViewCheck {
 /// source units), as `pcrnet_register` does, with the view rendered into
 /// `buffer` (`buffer_len` floats, see `PCRNET_VIEW_BUFFER_LEN`) as a test
 /// the turned starts must pass besides their residual (the lowest-residual
-/// one that explains the view finishes; `Int8Model::register_view`).
+/// one that explains the view finishes), every start first placed so that
+/// the view's centroid meets the centroid of what the sensor would see of
+/// the template there (`Int8Model::register_view`).
 /// Writes the registration to `out` and its check against the view to
 /// `out_view` on success; `out->reliable` is both verdicts (the residual's
 /// and `out_view->passed`): act on the pose only when it is set. Errors as

@@ -22,7 +22,7 @@ use crate::ambiguity::{self, Ambiguity};
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::refine::{self, Degeneracy, IcpSettings, Metric, Resolved, Subset};
+use crate::refine::{self, Degeneracy, Guide, IcpSettings, Metric, Resolved, Subset, Unguided};
 use crate::template::Template;
 
 /// The default [`Options::network_points`], and [`network_points`] for a
@@ -441,11 +441,19 @@ pub(crate) fn run(
     pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     let checked = check(frame, template, source, options)?;
-    run_checked(frame, centring, template, &checked, options, pass, |_| true)
+    run_checked(
+        frame,
+        centring,
+        template,
+        &checked,
+        options,
+        pass,
+        &mut Unguided,
+    )
 }
 
 /// [`run`] on a source [`check`] has passed (its subset's cloud), the
-/// starts resolved with `accept` ([`refine::resolve`]; user units).
+/// starts resolved with `guide` ([`refine::resolve`]; model frame).
 pub(crate) fn run_checked(
     frame: &Frame,
     centring: Centring,
@@ -453,7 +461,7 @@ pub(crate) fn run_checked(
     checked: &Checked<'_>,
     options: &Options,
     mut pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
-    mut accept: impl FnMut(&Pose) -> bool,
+    guide: &mut impl Guide,
 ) -> Result<Registration> {
     let source = checked.subset.source;
     let sample = Sample::new(source, options.network_points);
@@ -479,7 +487,7 @@ pub(crate) fn run_checked(
         options.screen_iterations,
         &options.icp_settings(),
         options.inlier_distance,
-        |pose| accept(&frame.pose_to_user(pose)),
+        guide,
     )?;
     let stage = Stage {
         passes,

@@ -111,8 +111,15 @@ pub(crate) fn step(
             outcome: TrackOutcome::Kept,
         });
     }
-    let registration =
-        registration::run_checked(frame, centring, template, &checked, options, pass, |_| true)?;
+    let registration = registration::run_checked(
+        frame,
+        centring,
+        template,
+        &checked,
+        options,
+        pass,
+        &mut crate::refine::Unguided,
+    )?;
     let outcome = if registration.reliable {
         TrackOutcome::Recovered
     } else {

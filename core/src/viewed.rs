@@ -1,15 +1,18 @@
-//! A cut single view registered with its view: the registration's turned
-//! starts judged by the check against the view from the sensor's
-//! viewpoint ([`crate::scene::view`]), and the result checked against it.
+//! A cut single view registered with its view: every start placed by what
+//! the sensor would see of the template there ([`crate::scene::visible`]),
+//! the turned starts judged by the check against the view from the
+//! sensor's viewpoint ([`crate::scene::view`]), and the result checked
+//! against it.
 //! Above both [`crate::registration`] and [`crate::scene`], as
 //! [`crate::locate`] is.
 
 use crate::error::Result;
 use crate::format::Frame;
 use crate::pose::{Centring, PointMap, Pose};
+use crate::refine::Guide;
 use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
-use crate::scene::Verification;
 use crate::scene::view::{View, settings_for};
+use crate::scene::{Verification, VerifySettings, visible};
 use crate::template::Template;
 
 /// A registration of a cut single view made and checked from its
@@ -27,9 +30,8 @@ pub struct Viewed {
 }
 
 /// Registers `source` as [`crate::registration`] does (`pass` the model's
-/// network step), its starts resolved with the view from `viewpoint` as
-/// the test a pose must pass besides its residual
-/// ([`crate::refine::resolve`]), and checks the result against it.
+/// network step), guided by the view from `viewpoint` ([`ViewGuide`]),
+/// and checks the result against it.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn register(
     model: &Frame,
@@ -43,16 +45,55 @@ pub(crate) fn register(
 ) -> Result<Viewed> {
     let checked = registration::check(model, template, source, options)?;
     let view = View::render(source, viewpoint, buffer)?;
-    let settings = settings_for(template, model);
-    let judge = |pose: &Pose| view.check(template, model, pose, &settings);
-    let registration =
-        registration::run_checked(model, centring, template, &checked, options, pass, |pose| {
-            judge(pose).passed
-        })?;
-    let view = judge(&registration.pose);
+    let mut guide = ViewGuide {
+        template,
+        model,
+        view: &view,
+        settings: settings_for(template, model),
+        centroid: checked.subset.centroid(),
+        eye: model.to_model(viewpoint),
+    };
+    let registration = registration::run_checked(
+        model, centring, template, &checked, options, pass, &mut guide,
+    )?;
+    let view = guide.judge(&registration.pose);
     Ok(Viewed {
         registration,
         view,
         reliable: registration.reliable && view.passed,
     })
+}
+
+/// What a view from a known viewpoint adds to flip resolution
+/// ([`crate::refine::resolve`]): each start placed so that the source's
+/// centroid meets the centroid of the template points the sensor sees at
+/// that start ([`crate::scene::visible::place`]), and the screened turned
+/// starts judged by the check against the view ([`View::check`]).
+struct ViewGuide<'a, 't, 'b> {
+    template: &'a Template<'t>,
+    model: &'a Frame,
+    view: &'a View<'b>,
+    settings: VerifySettings,
+    /// The used source points' centroid (model frame).
+    centroid: [f32; 3],
+    /// The viewpoint (the source's model frame).
+    eye: [f32; 3],
+}
+
+impl ViewGuide<'_, '_, '_> {
+    /// `pose` (user units) checked against the view.
+    fn judge(&self, pose: &Pose) -> Verification {
+        self.view
+            .check(self.template, self.model, pose, &self.settings)
+    }
+}
+
+impl Guide for ViewGuide<'_, '_, '_> {
+    fn place(&mut self, start: Pose) -> Pose {
+        visible::place(self.template, start, self.centroid, self.eye)
+    }
+
+    fn accept(&mut self, pose: &Pose) -> bool {
+        self.judge(&self.model.pose_to_user(pose)).passed
+    }
 }

@@ -96,7 +96,17 @@ fn resolve_from_truth(
         .map(|p| back.transform_point(p))
         .collect();
     let subset = Subset::new(&source, Frame::IDENTITY, 256);
-    let r = refine::resolve(&template, &subset, *truth, 4, 10, &SETTINGS, 0.05, |_| true).unwrap();
+    let r = refine::resolve(
+        &template,
+        &subset,
+        *truth,
+        4,
+        10,
+        &SETTINGS,
+        0.05,
+        &mut refine::Unguided,
+    )
+    .unwrap();
     (template, source, r)
 }
 

@@ -110,12 +110,28 @@ fn flip_resolution_picks_the_turn_that_fits() {
         tolerance: 1e-5,
         max_distance: 0.1,
     };
-    let one = refine::resolve(&t, &subset, Pose::IDENTITY, 1, 10, &settings, 0.05, |_| {
-        true
-    })
+    let one = refine::resolve(
+        &t,
+        &subset,
+        Pose::IDENTITY,
+        1,
+        10,
+        &settings,
+        0.05,
+        &mut refine::Unguided,
+    )
     .unwrap();
-    let three =
-        refine::resolve(&t, &subset, Pose::IDENTITY, 3, 4, &settings, 0.05, |_| true).unwrap();
+    let three = refine::resolve(
+        &t,
+        &subset,
+        Pose::IDENTITY,
+        3,
+        4,
+        &settings,
+        0.05,
+        &mut refine::Unguided,
+    )
+    .unwrap();
     assert_eq!(three.hypothesis, 2);
     assert!(three.fit.residual < 1e-3, "{three:?}");
     assert!(one.fit.residual > 10.0 * three.fit.residual, "{one:?}");
@@ -125,17 +141,68 @@ fn flip_resolution_picks_the_turn_that_fits() {
     // that refuses the right fit leaves the lowest turned start it takes
     // to finish, so the right pose is not chosen; one that refuses every
     // fit changes nothing (the lowest finishes, as without a test).
-    let refusing = refine::resolve(&t, &subset, Pose::IDENTITY, 3, 4, &settings, 0.05, |p| {
-        angle_deg(p, &flip) > 10.0
-    })
+    let mut refuse_flip = Accepting(|p: &Pose| angle_deg(p, &flip) > 10.0);
+    let refusing = refine::resolve(
+        &t,
+        &subset,
+        Pose::IDENTITY,
+        3,
+        4,
+        &settings,
+        0.05,
+        &mut refuse_flip,
+    )
     .unwrap();
     assert_ne!(refusing.hypothesis, 2, "{refusing:?}");
     assert!(angle_deg(&refusing.pose, &flip) > 10.0, "{refusing:?}");
-    let none = refine::resolve(&t, &subset, Pose::IDENTITY, 3, 4, &settings, 0.05, |_| {
-        false
-    })
+    let mut refuse_all = Accepting(|_: &Pose| false);
+    let none = refine::resolve(
+        &t,
+        &subset,
+        Pose::IDENTITY,
+        3,
+        4,
+        &settings,
+        0.05,
+        &mut refuse_all,
+    )
     .unwrap();
     assert_eq!(none, three);
+
+    // A guide that places every start: the network's own start put on the
+    // right pose wins with one hypothesis, where unplaced it did not.
+    let mut onto_flip = Placing(flip);
+    let placed = refine::resolve(
+        &t,
+        &subset,
+        Pose::IDENTITY,
+        1,
+        10,
+        &settings,
+        0.05,
+        &mut onto_flip,
+    )
+    .unwrap();
+    assert_eq!(placed.hypothesis, 0);
+    assert!(angle_deg(&placed.pose, &flip) < 0.1, "{placed:?}");
+}
+
+/// A guide with a test besides the residual, starts as given.
+struct Accepting<F>(F);
+
+impl<F: FnMut(&Pose) -> bool> refine::Guide for Accepting<F> {
+    fn accept(&mut self, pose: &Pose) -> bool {
+        (self.0)(pose)
+    }
+}
+
+/// A guide that starts every screening from one pose.
+struct Placing(Pose);
+
+impl refine::Guide for Placing {
+    fn place(&mut self, _start: Pose) -> Pose {
+        self.0
+    }
 }
 
 #[test]

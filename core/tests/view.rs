@@ -7,6 +7,7 @@ mod shapes;
 
 use pcrnet_core::format::Frame;
 use pcrnet_core::scene::view::{self, View};
+use pcrnet_core::scene::visible;
 use pcrnet_core::scene::{Verification, VerifySettings};
 use pcrnet_core::{Error, Pose};
 
@@ -168,8 +169,8 @@ const MODEL: &[u8] = include_bytes!("../../models/embedded-default-int8.pcrn");
 
 /// The shipped template's near side from +z (a z-buffer of its stored
 /// points on an 8 x 8 grid) moved by a small motion, with the viewpoint
-/// moved alike.
-fn shipped_view(model: &pcrnet_core::Int8Model<'_>) -> (Vec<[f32; 3]>, [f32; 3]) {
+/// moved alike, and the true pose (the motion undone).
+fn shipped_view(model: &pcrnet_core::Int8Model<'_>) -> (Vec<[f32; 3]>, [f32; 3], Pose) {
     let t = model.template();
     let cloud: Vec<[f32; 3]> = (0..t.len())
         .map(|i| t.user_point(i, model.frame()))
@@ -198,13 +199,24 @@ fn shipped_view(model: &pcrnet_core::Int8Model<'_>) -> (Vec<[f32; 3]>, [f32; 3])
     (
         seen,
         motion.transform_point([c[0], c[1], c[2] + 3.0 * radius]),
+        motion.inverse(),
     )
+}
+
+/// How far apart two poses are: the angle between their rotations
+/// (degrees) and the distance between their translations.
+fn apart(a: &Pose, b: &Pose) -> (f32, f32) {
+    let d: f32 = a.rotation.iter().zip(b.rotation).map(|(x, y)| x * y).sum();
+    let t: f32 = (0..3)
+        .map(|k| (a.translation[k] - b.translation[k]).powi(2))
+        .sum();
+    (2.0 * d.abs().min(1.0).acos().to_degrees(), t.sqrt())
 }
 
 #[test]
 fn a_viewed_registration_is_the_registration_with_its_check() {
     let model = pcrnet_core::Int8Model::from_bytes(MODEL).unwrap();
-    let (source, at) = shipped_view(&model);
+    let (source, at, truth) = shipped_view(&model);
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let mut buffer = vec![0f32; view::buffer_len(32)];
     let options = pcrnet_core::Options::default();
@@ -212,11 +224,19 @@ fn a_viewed_registration_is_the_registration_with_its_check() {
         .register_view(&source, at, &options, &mut scratch, &mut buffer)
         .unwrap();
     let plain = model.register(&source, &options, &mut scratch).unwrap();
-    // The lowest-residual start explains the view: the same registration.
-    assert_eq!(viewed.registration, plain);
+    // Both find the pose; the view's starts are placed by what the sensor
+    // sees, so the registration is not the same bit for bit.
+    let radius = model.object_radius();
+    for (r, what) in [(&viewed.registration, "viewed"), (&plain, "plain")] {
+        let (angle, shift) = apart(&r.pose, &truth);
+        assert!(
+            angle < 1.0 && shift < 0.02 * radius,
+            "{what}: {angle} deg, {shift}"
+        );
+    }
     assert!(viewed.reliable && viewed.view.passed, "{viewed:?}");
     let again = model
-        .check_view(&source, at, &plain.pose, &mut buffer)
+        .check_view(&source, at, &viewed.registration.pose, &mut buffer)
         .unwrap();
     assert_eq!(again, viewed.view);
 
@@ -233,11 +253,11 @@ fn a_viewed_registration_is_the_registration_with_its_check() {
     ));
     let nan = Pose {
         translation: [f32::NAN; 3],
-        ..plain.pose
+        ..truth
     };
     let stretched = Pose {
         rotation: [2.0, 0.0, 0.0, 0.0],
-        ..plain.pose
+        ..truth
     };
     for bad in [nan, stretched] {
         assert!(matches!(
@@ -248,7 +268,51 @@ fn a_viewed_registration_is_the_registration_with_its_check() {
     // Another frame's coordinates: 100,000 radii away.
     let far = [at[0] + 1e5 * model.object_radius(), at[1], at[2]];
     assert!(matches!(
-        model.check_view(&source, far, &plain.pose, &mut buffer),
+        model.check_view(&source, far, &viewed.registration.pose, &mut buffer),
         Err(Error::InvalidOption { .. })
     ));
+}
+
+#[test]
+fn a_start_is_placed_by_what_the_sensor_sees() {
+    let model = pcrnet_core::Int8Model::from_bytes(MODEL).unwrap();
+    let (source, at, truth) = shipped_view(&model);
+    let (frame, template) = (model.frame(), model.template());
+    let to_model = |p: [f32; 3]| frame.to_model(p);
+    let n = source.len() as f32;
+    let centroid: [f32; 3] =
+        std::array::from_fn(|k| source.iter().map(|p| to_model(*p)[k]).sum::<f32>() / n);
+    let truth = frame.pose_to_model(&truth);
+    // The sensor above the template sees its top: the visible points'
+    // centroid lies above the template's centre, where the view's
+    // centroid lands at the true pose.
+    let eye = truth.transform_point(to_model(at));
+    let seen = visible::visible_centroid(template, eye, [0.0; 3]).unwrap();
+    let landed = truth.transform_point(centroid);
+    let gap = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>().sqrt();
+    assert!(seen[2] > 0.02, "{seen:?} {landed:?}");
+    assert!(gap(seen, landed) < 0.05, "{seen:?} {landed:?}");
+    // A start with the true rotation that puts the view's centroid on the
+    // template's centre (as the network's centring does) is placed near
+    // the truth.
+    let centred = Pose {
+        translation: std::array::from_fn(|k| truth.translation[k] - landed[k]),
+        ..truth
+    };
+    let placed = visible::place(template, centred, centroid, to_model(at));
+    let off = |p: &Pose| gap(p.translation, truth.translation);
+    assert!(
+        off(&placed) < 0.5 * off(&centred),
+        "{} -> {}",
+        off(&centred),
+        off(&placed)
+    );
+    assert_eq!(placed.rotation, centred.rotation);
+    // Nothing in front of the sensor: left as it was.
+    let behind = visible::visible_centroid(template, [0.0, 0.0, 5.0], [0.0, 0.0, 10.0]);
+    assert_eq!(behind, None);
+    assert_eq!(
+        visible::visible_centroid(template, [1.0; 3], [1.0; 3]),
+        None
+    );
 }

@@ -94,11 +94,12 @@ fn shipped(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
     }
     let view = demo(512).and_then(|(i, c)| {
         let k = c.registrations.iter().position(|r| *r == default)?;
-        Some(device.views.get(&(i, k))?.instructions)
+        let d = device.views.get(&(i, k))?;
+        Some((d.instructions, d.stack))
     });
-    if let Some(view) = view {
+    if let Some((view, stack)) = view {
         println!(
-            "registration seen from a viewpoint (Int8Model::register_view), 512 points: {view} instructions"
+            "registration seen from a viewpoint (Int8Model::register_view), 512 points: {view} instructions, peak stack {stack} B"
         );
     }
     let shipped = models

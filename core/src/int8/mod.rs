@@ -323,14 +323,15 @@ impl<'a> Int8Model<'a> {
     /// Registers a cut single view `source` (one object as a depth sensor
     /// saw it from `viewpoint`, the sensor's position in the source's
     /// frame, user units; everything else cut away) as [`Self::register`]
-    /// does, with the view rendered into `buffer`
-    /// ([`crate::scene::view::buffer_len`]) as a test the turned starts
-    /// must pass besides their residual: screening finishes the
+    /// does, guided by the view: every start (the network's pose and each
+    /// turned one) is first placed so that the source's centroid meets the
+    /// centroid of the template points the sensor would see at that start
+    /// ([`crate::scene::visible::place`]), and the view, rendered into
+    /// `buffer` ([`crate::scene::view::buffer_len`]), is a test the turned
+    /// starts must pass besides their residual: screening finishes the
     /// lowest-residual turned start whose pose explains the view
     /// ([`crate::refine::resolve`]). The result carries the registration, its
     /// check against the view ([`Self::check_view`]) and both verdicts.
-    /// With a view that every pose explains it registers as
-    /// [`Self::register`].
     ///
     /// # Errors
     /// As [`Self::register`] and [`crate::scene::View::render`].

@@ -15,7 +15,8 @@ use core::num::NonZeroUsize;
 mod resolve;
 pub(crate) use resolve::apart;
 pub use resolve::{
-    FLIP_MARGIN, RIVAL_MIN_TURN_COS, RIVAL_SCREEN_RATIO, Resolved, Rival, resolve, resolve_starts,
+    FLIP_MARGIN, Guide, RIVAL_MIN_TURN_COS, RIVAL_SCREEN_RATIO, Resolved, Rival, Unguided, resolve,
+    resolve_starts,
 };
 
 use crate::eigen;

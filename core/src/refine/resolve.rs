@@ -76,6 +76,28 @@ pub(crate) fn apart(a: &Pose, b: &Pose) -> bool {
 /// keeps it.
 pub const FLIP_MARGIN: f32 = 0.7;
 
+/// What a caller who knows more about the source than its points adds to
+/// flip resolution ([`resolve`]; poses in the model frame, source onto
+/// template). A cut single view seen from a known viewpoint knows both
+/// ([`crate::viewed`]).
+pub trait Guide {
+    /// Where a start begins its screening: by default where it is.
+    fn place(&mut self, start: Pose) -> Pose {
+        start
+    }
+
+    /// Whether a screened turned start may finish: by default every one.
+    fn accept(&mut self, _pose: &Pose) -> bool {
+        true
+    }
+}
+
+/// No guide: the starts as given, every screened start may finish.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Unguided;
+
+impl Guide for Unguided {}
+
 /// One search: the template, the used points, the screening and the
 /// finishing ICP settings, the scoring distance.
 struct Search<'a, 't, 's> {
@@ -147,20 +169,20 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
         })
     }
 
-    /// Screens every `(hypothesis, start)`; the one with the lowest
-    /// residual (the first on a tie) that `accept` takes finishes (the
-    /// lowest when it takes none; see [`resolve`]).
+    /// Screens every `(hypothesis, start)` from where `guide` places it;
+    /// the one with the lowest residual (the first on a tie) that `guide`
+    /// accepts finishes (the lowest when it accepts none; see [`resolve`]).
     fn best_of(
         &self,
         starts: impl IntoIterator<Item = (usize, Pose)>,
-        accept: &mut impl FnMut(&Pose) -> bool,
+        guide: &mut impl Guide,
     ) -> Result<Option<Screened>> {
         // The lowest residuals so far, ascending (ties keep the earlier
         // start), at most one per fit: a start that ends near a kept one
         // (not [`apart`]) replaces it only if lower.
         let mut kept: [Option<Resolved>; KEPT] = [None; KEPT];
         for (hypothesis, from) in starts {
-            let r = self.refine(from, hypothesis, &self.first, self.subset)?;
+            let r = self.refine(guide.place(from), hypothesis, &self.first, self.subset)?;
             let same = kept
                 .iter()
                 .position(|k| k.is_some_and(|k| !apart(&k.pose, &r.pose)));
@@ -189,7 +211,7 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
         let best = kept
             .iter()
             .flatten()
-            .find(|k| accept(&k.pose))
+            .find(|k| guide.accept(&k.pose))
             .copied()
             .unwrap_or(lowest);
         let rival = kept
@@ -226,12 +248,12 @@ struct Screened {
 /// the result's [`Resolved::rival`]. With
 /// `screen >= icp.iterations` every start gets the full ICP.
 ///
-/// `accept` is a test a screened turned start (model frame) must pass
-/// besides its residual, such as the check against a single view
-/// ([`crate::scene::view`]): screening finishes the lowest-residual turned
-/// start it accepts (the lowest when it accepts none); the margin against
-/// the network's pose stays the residual's. A test that accepts everything
-/// (`|_| true`) leaves the search as it was, bit for bit. (Measured on the
+/// `guide` adds what the caller knows besides the points ([`Guide`]):
+/// every start (the network's and each turned one) begins where
+/// [`Guide::place`] puts it, and screening finishes the lowest-residual
+/// turned start [`Guide::accept`] takes (the lowest when it takes none);
+/// the margin against the network's pose stays the residual's.
+/// [`Unguided`] leaves the search as it was, bit for bit. (Measured on the
 /// `resampled` experiment's single-view sets, 200 pairs each, session 50:
 /// letting the test also overrule the margin (a turned finalist the view
 /// accepts beating a network pose it does not) raised success 0.760 ->
@@ -260,12 +282,13 @@ pub fn resolve(
     screen: usize,
     icp_settings: &IcpSettings,
     max_distance: f32,
-    mut accept: impl FnMut(&Pose) -> bool,
+    guide: &mut impl Guide,
 ) -> Result<Resolved> {
     let search = Search::new(template, subset, screen, icp_settings, max_distance);
     let turns = template.turns();
     let count = hypotheses.min(turns.len().saturating_add(1)).max(1);
-    let network = search.finish(search.refine(start, 0, &search.first, subset)?)?;
+    let first = guide.place(start);
+    let network = search.finish(search.refine(first, 0, &search.first, subset)?)?;
     let turned = turns
         .iter()
         .enumerate()
@@ -277,7 +300,7 @@ pub fn resolve(
             };
             (k + 1, start.then(&turn))
         });
-    let Some(Screened { best: t, .. }) = search.best_of(turned, &mut accept)? else {
+    let Some(Screened { best: t, .. }) = search.best_of(turned, guide)? else {
         return Ok(network);
     };
     Ok(if t.fit.residual < FLIP_MARGIN * network.fit.residual {
@@ -315,7 +338,7 @@ pub fn resolve_starts(
 ) -> Result<Resolved> {
     let search = Search::new(template, subset, screen, icp_settings, max_distance);
     let found = search
-        .best_of(starts, &mut |_| true)?
+        .best_of(starts, &mut Unguided)?
         .ok_or(Error::InvalidOption {
             what: "a sweep needs at least one start",
         })?;

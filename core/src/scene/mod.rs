@@ -12,6 +12,7 @@
 //! | points | [`cluster::gather`] | one cluster's points at full resolution, for registration |
 //! | verify | [`verify`] | a pose against the frame: the template's points seen where they should be, none in free space |
 //! | view | [`view`] | a cut single view rendered from its sensor's viewpoint, for the same check when there is no frame |
+//! | visible | [`visible`] | the template's points a sensor sees at a pose, and a start placed so a one-sided source's centroid meets theirs |
 //!
 //! Working memory is one caller-owned `u16` slice of [`labels_len`]
 //! elements (4 bytes a grid cell: 9.6 KB for a 224 x 172 frame at step 4).
@@ -22,6 +23,7 @@ pub mod grid;
 pub mod plane;
 pub mod verify;
 pub mod view;
+pub mod visible;
 
 pub use cluster::{Cluster, ClusterSearch, Clusters};
 pub use depth::{DepthImage, Intrinsics, Organised, OrganisedPoints};

@@ -270,7 +270,7 @@ impl Organised for View<'_> {
 /// right-handed frame with z along `forward`, x perpendicular to it and to
 /// the source frame's x axis (or y, when `forward` is near x), y = z x x.
 /// `None` for a zero or non-finite `forward`.
-fn camera_axes(forward: [f32; 3]) -> Option<[[f32; 3]; 3]> {
+pub(super) fn camera_axes(forward: [f32; 3]) -> Option<[[f32; 3]; 3]> {
     let z = normalised(forward)?;
     let helper = if libm::fabsf(z[0]) < 0.9 {
         [1.0, 0.0, 0.0]
@@ -283,7 +283,7 @@ fn camera_axes(forward: [f32; 3]) -> Option<[[f32; 3]; 3]> {
 }
 
 /// `p` in the camera's frame.
-fn to_camera(axes: &[[f32; 3]; 3], viewpoint: [f32; 3], p: [f32; 3]) -> [f32; 3] {
+pub(super) fn to_camera(axes: &[[f32; 3]; 3], viewpoint: [f32; 3], p: [f32; 3]) -> [f32; 3] {
     let d = [
         p[0] - viewpoint[0],
         p[1] - viewpoint[1],
