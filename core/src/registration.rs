@@ -22,7 +22,8 @@ use crate::ambiguity::{self, Ambiguity};
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::refine::{self, Degeneracy, Guide, IcpSettings, Metric, Resolved, Subset, Unguided};
+use crate::refine::{self, Degeneracy, Guide, IcpSettings, Metric, Resolved, Subset};
+use crate::scene::visible::Placing;
 use crate::template::Template;
 
 /// The default [`Options::network_points`], and [`network_points`] for a
@@ -432,23 +433,22 @@ pub(crate) fn check<'s>(
 
 /// Runs the pipeline with `pass`, one [`Step`] on the source moved by a
 /// [`PointMap`], returning the step's pose (model frame) and its counts.
+/// With `seen_from` (the sensor's position in the source's frame, user
+/// units: the source is one side of the object as seen from there) every
+/// start is placed by what the sensor sees ([`Placing`]).
 pub(crate) fn run(
     frame: &Frame,
     centring: Centring,
     template: &Template<'_>,
     source: &[[f32; 3]],
     options: &Options,
+    seen_from: Option<[f32; 3]>,
     pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     let checked = check(frame, template, source, options)?;
+    let mut guide = seen_from.map(|eye| Placing::new(template, &checked.subset, eye, None));
     run_checked(
-        frame,
-        centring,
-        template,
-        &checked,
-        options,
-        pass,
-        &mut Unguided,
+        frame, centring, template, &checked, options, pass, &mut guide,
     )
 }
 
@@ -507,17 +507,22 @@ pub(crate) fn all_finite(source: &[[f32; 3]]) -> Result<()> {
 }
 
 /// Registers `source` standing on `sweep`'s plane: the sweep's starts
-/// ([`crate::sweep`]) screened and the best refined, no network pass.
+/// ([`crate::sweep`]) screened and the best refined, no network pass. With
+/// `seen_from` (as for [`run`]) each start is placed by what the sensor
+/// sees, along the plane only (its base stays on the plane).
 pub(crate) fn run_swept(
     frame: &Frame,
     template: &Template<'_>,
     source: &[[f32; 3]],
     options: &Options,
     sweep: &crate::sweep::Sweep,
+    seen_from: Option<[f32; 3]>,
 ) -> Result<Registration> {
     sweep.validate()?;
     let checked = check(frame, template, source, options)?;
     let starts = crate::sweep::starts(frame, template, &checked.subset, sweep);
+    let up = crate::sweep::unit_up(sweep);
+    let mut guide = seen_from.map(|eye| Placing::new(template, &checked.subset, eye, Some(up)));
     let r = refine::resolve_starts(
         template,
         &checked.subset,
@@ -525,6 +530,7 @@ pub(crate) fn run_swept(
         options.screen_iterations,
         &options.icp_settings(),
         options.inlier_distance,
+        &mut guide,
     )?;
     conclude(frame, template, &checked, &r, Stage::default(), options)
 }

@@ -13,7 +13,10 @@
 //! - translation: the source's points on the plane land on the template's
 //!   lowest level along the up axis (its base), and the source's centroid
 //!   over the template's centre along the plane (a view from one side sees
-//!   the near half: ICP slides the rest).
+//!   the near half: ICP slides the rest). [`crate::locate`], which knows
+//!   where the sensor stands, then moves each start along the plane so the
+//!   source's centroid is over the centroid of what the sensor would see of
+//!   the template there ([`crate::scene::visible`]).
 //!
 //! Each start gets the screening ICP, the best the full ICP
 //! ([`crate::refine::resolve_starts`]); the network is not run (this is
@@ -77,6 +80,12 @@ impl Sweep {
     }
 }
 
+/// The sweep's up axis at unit length (template frame).
+pub(crate) fn unit_up(sweep: &Sweep) -> [f32; 3] {
+    let length = libm::sqrtf(dot(sweep.up, sweep.up));
+    sweep.up.map(|v| v / length)
+}
+
 /// The sweep's starts in the model frame, numbered from 0.
 pub(crate) fn starts(
     frame: &Frame,
@@ -85,8 +94,7 @@ pub(crate) fn starts(
     sweep: &Sweep,
 ) -> impl Iterator<Item = (usize, Pose)> {
     let n = sweep.plane.normal;
-    let length = libm::sqrtf(dot(sweep.up, sweep.up));
-    let up = sweep.up.map(|v| v / length);
+    let up = unit_up(sweep);
     let align = shortest_arc(n, up);
     // The plane in the model frame: n . p_m + offset_m = 0.
     let offset = frame.scale * (sweep.plane.offset + dot(n, frame.centre));

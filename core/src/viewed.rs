@@ -12,7 +12,8 @@ use crate::pose::{Centring, PointMap, Pose};
 use crate::refine::Guide;
 use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
 use crate::scene::view::{View, settings_for};
-use crate::scene::{Verification, VerifySettings, visible};
+use crate::scene::visible::Placing;
+use crate::scene::{Verification, VerifySettings};
 use crate::template::Template;
 
 /// A registration of a cut single view made and checked from its
@@ -46,12 +47,11 @@ pub(crate) fn register(
     let checked = registration::check(model, template, source, options)?;
     let view = View::render(source, viewpoint, buffer)?;
     let mut guide = ViewGuide {
+        placing: Placing::new(template, &checked.subset, viewpoint, None),
         template,
         model,
         view: &view,
         settings: settings_for(template, model),
-        centroid: checked.subset.centroid(),
-        eye: model.to_model(viewpoint),
     };
     let registration = registration::run_checked(
         model, centring, template, &checked, options, pass, &mut guide,
@@ -70,14 +70,11 @@ pub(crate) fn register(
 /// that start ([`crate::scene::visible::place`]), and the screened turned
 /// starts judged by the check against the view ([`View::check`]).
 struct ViewGuide<'a, 't, 'b> {
+    placing: Placing<'a, 't>,
     template: &'a Template<'t>,
     model: &'a Frame,
     view: &'a View<'b>,
     settings: VerifySettings,
-    /// The used source points' centroid (model frame).
-    centroid: [f32; 3],
-    /// The viewpoint (the source's model frame).
-    eye: [f32; 3],
 }
 
 impl ViewGuide<'_, '_, '_> {
@@ -90,7 +87,7 @@ impl ViewGuide<'_, '_, '_> {
 
 impl Guide for ViewGuide<'_, '_, '_> {
     fn place(&mut self, start: Pose) -> Pose {
-        visible::place(self.template, start, self.centroid, self.eye)
+        self.placing.place(start)
     }
 
     fn accept(&mut self, pose: &Pose) -> bool {

@@ -176,7 +176,16 @@ fn the_sweep_finds_the_rival_of_a_box_turned_about_its_up_axis() {
         .collect();
     let subset = Subset::new(&source, Frame::IDENTITY, 256);
     let starts = (0..12).map(|k| (k, rotation([0.0, 0.0, 1.0], 30.0 * k as f32)));
-    let r = refine::resolve_starts(&template, &subset, starts, 10, &SETTINGS, 0.05).unwrap();
+    let r = refine::resolve_starts(
+        &template,
+        &subset,
+        starts,
+        10,
+        &SETTINGS,
+        0.05,
+        &mut refine::Unguided,
+    )
+    .unwrap();
     let found = assess(&template, &source, &r);
     let turn = found
         .turn

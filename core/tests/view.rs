@@ -299,7 +299,7 @@ fn a_start_is_placed_by_what_the_sensor_sees() {
         translation: std::array::from_fn(|k| truth.translation[k] - landed[k]),
         ..truth
     };
-    let placed = visible::place(template, centred, centroid, to_model(at));
+    let placed = visible::place(template, centred, centroid, to_model(at), None);
     let off = |p: &Pose| gap(p.translation, truth.translation);
     assert!(
         off(&placed) < 0.5 * off(&centred),
@@ -308,6 +308,11 @@ fn a_start_is_placed_by_what_the_sensor_sees() {
         off(&placed)
     );
     assert_eq!(placed.rotation, centred.rotation);
+    // Kept along an axis (a start standing on its plane): moved across it only.
+    let x = [1.0, 0.0, 0.0];
+    let across = visible::place(template, centred, centroid, to_model(at), Some(x));
+    assert_eq!(across.translation[0], centred.translation[0]);
+    assert_eq!(&across.translation[1..], &placed.translation[1..]);
     // Nothing in front of the sensor: left as it was.
     let behind = visible::visible_centroid(template, [0.0, 0.0, 5.0], [0.0, 0.0, 10.0]);
     assert_eq!(behind, None);

@@ -295,6 +295,7 @@ impl<'a> F32Model<'a> {
             &self.template,
             source,
             options,
+            None,
             |sample, map, step| self.step(sample, map, step, scratch),
         )
     }

@@ -207,16 +207,18 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
     ) -> Result<Registration> {
         let tile = self.tile_for(scratch.len())?;
-        self.register_ready(source, options, tile, scratch, Ready::default())
+        self.register_ready(source, options, None, tile, scratch, Ready::default())
     }
 
     /// [`Self::register`] with `tile` points per pass on a scratch where
-    /// [`Self::prepare`] left what `ready` says.
+    /// [`Self::prepare`] left what `ready` says, its starts placed by what
+    /// a sensor at `seen_from` sees (`registration::run`).
     #[inline(always)]
     fn register_ready(
         &self,
         source: &[[f32; 3]],
         options: &Options,
+        seen_from: Option<[f32; 3]>,
         tile: usize,
         scratch: &mut [i8],
         ready: Ready,
@@ -227,6 +229,7 @@ impl<'a> Int8Model<'a> {
             &self.template,
             source,
             options,
+            seen_from,
             |sample, map, step| self.pass(sample, map, step, tile, scratch, ready),
         )
     }
@@ -271,7 +274,7 @@ impl<'a> Int8Model<'a> {
         sweep: &crate::sweep::Sweep,
         options: &Options,
     ) -> Result<Registration> {
-        registration::run_swept(&self.p.frame, &self.template, source, options, sweep)
+        registration::run_swept(&self.p.frame, &self.template, source, options, sweep, None)
     }
 
     /// Finds the template's object in a sensor frame and registers it
@@ -308,9 +311,16 @@ impl<'a> Int8Model<'a> {
             labels,
             points,
             |source, start| match start {
-                Start::Sweep(sweep) => self.register_on_plane(source, sweep, options),
+                Start::Sweep(sweep) => registration::run_swept(
+                    &self.p.frame,
+                    &self.template,
+                    source,
+                    options,
+                    sweep,
+                    Some(crate::locate::SENSOR),
+                ),
                 Start::Network => {
-                    self.register_ready(source, options, tile, scratch, Ready::default())
+                    self.register_ready(source, options, None, tile, scratch, Ready::default())
                 }
                 Start::Pose(pose) => {
                     registration::run_from(&self.p.frame, &self.template, source, pose, options)

@@ -98,6 +98,20 @@ pub struct Unguided;
 
 impl Guide for Unguided {}
 
+/// A guide when there is one, else none ([`Unguided`]).
+impl<G: Guide> Guide for Option<G> {
+    fn place(&mut self, start: Pose) -> Pose {
+        match self {
+            Some(g) => g.place(start),
+            None => start,
+        }
+    }
+
+    fn accept(&mut self, pose: &Pose) -> bool {
+        self.as_mut().is_none_or(|g| g.accept(pose))
+    }
+}
+
 /// One search: the template, the used points, the screening and the
 /// finishing ICP settings, the scoring distance.
 struct Search<'a, 't, 's> {
@@ -327,7 +341,9 @@ pub fn resolve(
 /// to the full budget (5 / 7 of the 9 / 12 reliable poses more than 5
 /// degrees off) for 10% more host time instead of 25%; scoring the screened
 /// rival again without more ICP found 4 / 5. An empty list is
-/// [`Error::InvalidOption`].
+/// [`Error::InvalidOption`]. Each start begins where `guide` places it,
+/// and the best is the lowest-residual one it accepts (the lowest when it
+/// accepts none).
 pub fn resolve_starts(
     template: &Template<'_>,
     subset: &Subset<'_>,
@@ -335,13 +351,12 @@ pub fn resolve_starts(
     screen: usize,
     icp_settings: &IcpSettings,
     max_distance: f32,
+    guide: &mut impl Guide,
 ) -> Result<Resolved> {
     let search = Search::new(template, subset, screen, icp_settings, max_distance);
-    let found = search
-        .best_of(starts, &mut Unguided)?
-        .ok_or(Error::InvalidOption {
-            what: "a sweep needs at least one start",
-        })?;
+    let found = search.best_of(starts, guide)?.ok_or(Error::InvalidOption {
+        what: "a sweep needs at least one start",
+    })?;
     let rival = match found.rival {
         Some(r) if r.fit.residual <= RIVAL_SCREEN_RATIO * found.screened_residual => {
             let more = search.refine(r.pose, r.hypothesis, &search.first, search.subset)?;

@@ -25,6 +25,7 @@
 
 use super::view::{camera_axes, to_camera};
 use crate::pose::Pose;
+use crate::refine::{Guide, Subset};
 use crate::template::Template;
 
 /// Most grid cells a side of [`visible_centroid`]'s z-buffer.
@@ -106,7 +107,9 @@ pub fn visible_centroid(template: &Template<'_>, eye: [f32; 3], aim: [f32; 3]) -
 /// `start` (model frame: source onto template) with its translation
 /// moved so that `centroid` (the source's centroid, its model frame) lands
 /// on the centroid of the template points seen from `eye` (the sensor's
-/// position, the source's model frame) at that pose; the rotation is kept.
+/// position, the source's model frame) at that pose; the rotation is kept,
+/// and so is the translation along `keep` (a unit axis of the template's
+/// frame, such as the up axis of a start already standing on its plane).
 /// Without a visible point, or where the move would give a non-finite
 /// translation, the start as it was.
 ///
@@ -116,17 +119,28 @@ pub fn visible_centroid(template: &Template<'_>, eye: [f32; 3], aim: [f32; 3]) -
 /// single-view sets, 200 pairs each, session 51: success 185 / 158 of 200
 /// once, 182 / 156 twice and three times; reliable poses more than 5
 /// degrees off 4 / 8 once, 3 / 7 twice).
-pub fn place(template: &Template<'_>, start: Pose, centroid: [f32; 3], eye: [f32; 3]) -> Pose {
+pub fn place(
+    template: &Template<'_>,
+    start: Pose,
+    centroid: [f32; 3],
+    eye: [f32; 3],
+    keep: Option<[f32; 3]>,
+) -> Pose {
     let aim = start.transform_point(centroid);
     let Some(seen) = visible_centroid(template, start.transform_point(eye), aim) else {
         return start;
     };
+    let mut d = [seen[0] - aim[0], seen[1] - aim[1], seen[2] - aim[2]];
+    if let Some(k) = keep {
+        let along = d[0] * k[0] + d[1] * k[1] + d[2] * k[2];
+        d = [
+            d[0] - along * k[0],
+            d[1] - along * k[1],
+            d[2] - along * k[2],
+        ];
+    }
     let t = &start.translation;
-    let moved = [
-        t[0] + (seen[0] - aim[0]),
-        t[1] + (seen[1] - aim[1]),
-        t[2] + (seen[2] - aim[2]),
-    ];
+    let moved = [t[0] + d[0], t[1] + d[1], t[2] + d[2]];
     if moved.iter().all(|v| v.is_finite()) {
         Pose {
             translation: moved,
@@ -134,5 +148,40 @@ pub fn place(template: &Template<'_>, start: Pose, centroid: [f32; 3], eye: [f32
         }
     } else {
         start
+    }
+}
+
+/// A [`Guide`] that places every start by what a sensor at a known
+/// viewpoint sees ([`place`]), and lets every screened start finish.
+#[derive(Debug, Clone, Copy)]
+pub struct Placing<'a, 't> {
+    template: &'a Template<'t>,
+    centroid: [f32; 3],
+    eye: [f32; 3],
+    keep: Option<[f32; 3]>,
+}
+
+impl<'a, 't> Placing<'a, 't> {
+    /// For the used points of `subset` seen from `viewpoint` (the source's
+    /// frame, user units), keeping the translation along `keep` (see
+    /// [`place`]).
+    pub fn new(
+        template: &'a Template<'t>,
+        subset: &Subset<'_>,
+        viewpoint: [f32; 3],
+        keep: Option<[f32; 3]>,
+    ) -> Self {
+        Placing {
+            template,
+            centroid: subset.centroid(),
+            eye: subset.frame.to_model(viewpoint),
+            keep,
+        }
+    }
+}
+
+impl Guide for Placing<'_, '_> {
+    fn place(&mut self, start: Pose) -> Pose {
+        place(self.template, start, self.centroid, self.eye, self.keep)
     }
 }
