@@ -920,6 +920,37 @@ PcrnetStatus pcrnet_track(const PcrnetModel *model,
                           uint32_t *outcome);
 
 /*
+ One tracking step of a cut single view seen from `viewpoint` `[x, y,
+ z]` (the sensor's position in the source's frame, source units: 0, 0, 0
+ for points in the camera's own frame), as `pcrnet_track` does, its
+ fallback registration guided by the view as `pcrnet_register_view`'s
+ is (starts placed by what the sensor sees, the turned ones judged by
+ the view rendered into `buffer`, `buffer_len` floats, see
+ `PCRNET_VIEW_BUFFER_LEN`). `out->reliable` is the residual's verdict,
+ as `pcrnet_track`'s; `pcrnet_check_view` checks the pose against the
+ view. Errors as `pcrnet_track` and `pcrnet_check_view` (the view is
+ rendered first: a viewpoint it refuses is an error even when the track
+ holds); nothing is written on one.
+
+ # Safety
+ As `pcrnet_track`; `viewpoint` must point to 3 readable floats and
+ `buffer` to `buffer_len` writable floats overlapping nothing else
+ (each may be null: an error).
+ */
+PcrnetStatus pcrnet_track_view(const PcrnetModel *model,
+                               const float *points,
+                               size_t n_points,
+                               const float *previous,
+                               const float *viewpoint,
+                               const PcrnetOptions *options,
+                               int8_t *scratch,
+                               size_t scratch_len,
+                               float *buffer,
+                               size_t buffer_len,
+                               PcrnetRegistration *out,
+                               uint32_t *outcome);
+
+/*
  Registers `n_points` source points, a cut single view seen from
  `viewpoint` `[x, y, z]` (the sensor's position in the source's frame,
  source units), as `pcrnet_register` does, with the view rendered into

@@ -64,7 +64,9 @@ pub use prepared::{
     PCRNET_PREPARED_SIZE, PCRNET_PREPARED_WORDS, PcrnetPrepared, pcrnet_prepare,
     pcrnet_prepared_network_pose, pcrnet_prepared_register,
 };
-pub use track::{PCRNET_TRACK_KEPT, PCRNET_TRACK_LOST, PCRNET_TRACK_RECOVERED, pcrnet_track};
+pub use track::{
+    PCRNET_TRACK_KEPT, PCRNET_TRACK_LOST, PCRNET_TRACK_RECOVERED, pcrnet_track, pcrnet_track_view,
+};
 pub use types::{
     PCRNET_DEGENERATE_LINE, PCRNET_DEGENERATE_NONE, PCRNET_DEGENERATE_POINT,
     PCRNET_METRIC_POINT_TO_PLANE, PCRNET_METRIC_POINT_TO_POINT, PcrnetOptions, PcrnetRegistration,

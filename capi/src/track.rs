@@ -1,12 +1,14 @@
 //! `pcrnet_track`: one tracking step of a sensor stream (the Rust API's
 //! `Int8Model::track`): the previous frame's pose refined and kept when it
-//! holds, else a full registration in the same call.
+//! holds, else a full registration in the same call; `pcrnet_track_view`
+//! the same for a cut single view from a known viewpoint
+//! (`Int8Model::track_view`).
 
 use PcrnetStatus::*;
-use pcrnet_core::{Pose, TrackOutcome};
+use pcrnet_core::{Pose, TrackOutcome, Tracking};
 
 use crate::types::{PcrnetRegistration, PcrnetStatus};
-use crate::{PcrnetModel, PcrnetOptions, register_into, scratch_mut, slice};
+use crate::{PcrnetModel, PcrnetOptions, register_into, scratch_mut, slice, slice_mut};
 
 /// `pcrnet_track`'s outcome: refined from the previous pose, reliable: the
 /// track is kept (the network did not run).
@@ -50,12 +52,9 @@ pub unsafe extern "C" fn pcrnet_track(
     if previous.is_null() || outcome.is_null() {
         return PCRNET_ERROR_NULL_POINTER;
     }
-    // SAFETY: non-null; the caller's contract (7 floats); alignment checked.
-    let previous = match unsafe { slice(previous, 7) } {
-        Ok(p) => Pose {
-            rotation: [p[0], p[1], p[2], p[3]],
-            translation: [p[4], p[5], p[6]],
-        },
+    // SAFETY: non-null; the caller's contract (7 floats).
+    let previous = match unsafe { previous_pose(previous) } {
+        Ok(p) => p,
         Err(s) => return s,
     };
     let mut what = PCRNET_TRACK_LOST;
@@ -63,13 +62,10 @@ pub unsafe extern "C" fn pcrnet_track(
     let status = unsafe {
         register_into(points, n_points, options, out, |source, options| {
             let scratch = scratch_mut(scratch, scratch_len)?;
-            let t = m.track(source, &previous, options, scratch)?;
-            what = match t.outcome {
-                TrackOutcome::Kept => PCRNET_TRACK_KEPT,
-                TrackOutcome::Recovered => PCRNET_TRACK_RECOVERED,
-                TrackOutcome::Lost => PCRNET_TRACK_LOST,
-            };
-            Ok(t.registration)
+            Ok(noted(
+                m.track(source, &previous, options, scratch)?,
+                &mut what,
+            ))
         })
     };
     if status == PCRNET_OK {
@@ -77,4 +73,94 @@ pub unsafe extern "C" fn pcrnet_track(
         unsafe { outcome.write(what) };
     }
     status
+}
+
+/// One tracking step of a cut single view seen from `viewpoint` `[x, y,
+/// z]` (the sensor's position in the source's frame, source units: 0, 0, 0
+/// for points in the camera's own frame), as `pcrnet_track` does, its
+/// fallback registration guided by the view as `pcrnet_register_view`'s
+/// is (starts placed by what the sensor sees, the turned ones judged by
+/// the view rendered into `buffer`, `buffer_len` floats, see
+/// `PCRNET_VIEW_BUFFER_LEN`). `out->reliable` is the residual's verdict,
+/// as `pcrnet_track`'s; `pcrnet_check_view` checks the pose against the
+/// view. Errors as `pcrnet_track` and `pcrnet_check_view` (the view is
+/// rendered first: a viewpoint it refuses is an error even when the track
+/// holds); nothing is written on one.
+///
+/// # Safety
+/// As `pcrnet_track`; `viewpoint` must point to 3 readable floats and
+/// `buffer` to `buffer_len` writable floats overlapping nothing else
+/// (each may be null: an error).
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments, reason = "a flat C signature")]
+pub unsafe extern "C" fn pcrnet_track_view(
+    model: *const PcrnetModel,
+    points: *const f32,
+    n_points: usize,
+    previous: *const f32,
+    viewpoint: *const f32,
+    options: *const PcrnetOptions,
+    scratch: *mut i8,
+    scratch_len: usize,
+    buffer: *mut f32,
+    buffer_len: usize,
+    out: *mut PcrnetRegistration,
+    outcome: *mut u32,
+) -> PcrnetStatus {
+    let m = match crate::model(model) {
+        Ok(m) => m,
+        Err(s) => return s,
+    };
+    if previous.is_null() || viewpoint.is_null() || outcome.is_null() {
+        return PCRNET_ERROR_NULL_POINTER;
+    }
+    // SAFETY: non-null; the caller's contract (7 floats).
+    let previous = match unsafe { previous_pose(previous) } {
+        Ok(p) => p,
+        Err(s) => return s,
+    };
+    let mut what = PCRNET_TRACK_LOST;
+    // SAFETY: the caller's contract for every pointer; `viewpoint` is
+    // non-null, its length 3 and alignment checked by `slice`.
+    let status = unsafe {
+        register_into(points, n_points, options, out, |source, options| {
+            let v = slice(viewpoint, 3)?;
+            let (scratch, buffer) = (
+                scratch_mut(scratch, scratch_len)?,
+                slice_mut(buffer, buffer_len)?,
+            );
+            let viewpoint = [v[0], v[1], v[2]];
+            let t = m.track_view(source, &previous, viewpoint, options, scratch, buffer)?;
+            Ok(noted(t, &mut what))
+        })
+    };
+    if status == PCRNET_OK {
+        // SAFETY: checked non-null above; the caller's contract.
+        unsafe { outcome.write(what) };
+    }
+    status
+}
+
+/// The pose `[qw, qx, qy, qz, tx, ty, tz]` at `previous`.
+///
+/// # Safety
+/// `previous` is non-null and points to 7 readable floats (alignment is
+/// checked).
+unsafe fn previous_pose(previous: *const f32) -> Result<Pose, PcrnetStatus> {
+    // SAFETY: the caller's contract.
+    let p = unsafe { slice(previous, 7) }?;
+    Ok(Pose {
+        rotation: [p[0], p[1], p[2], p[3]],
+        translation: [p[4], p[5], p[6]],
+    })
+}
+
+/// A step's registration, its outcome written to `what` as a C code.
+fn noted(t: Tracking, what: &mut u32) -> pcrnet_core::Registration {
+    *what = match t.outcome {
+        TrackOutcome::Kept => PCRNET_TRACK_KEPT,
+        TrackOutcome::Recovered => PCRNET_TRACK_RECOVERED,
+        TrackOutcome::Lost => PCRNET_TRACK_LOST,
+    };
+    t.registration
 }

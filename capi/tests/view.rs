@@ -241,3 +241,82 @@ fn the_viewed_registration_through_the_c_api_matches_the_rust_api() {
     );
     assert_eq!(status, PcrnetStatus::PCRNET_ERROR_NULL_POINTER);
 }
+
+#[test]
+fn the_viewed_tracking_step_through_the_c_api_matches_the_rust_api() {
+    let blob = shipped_blob();
+    let handle = loaded(&blob);
+    let rust = Int8Model::from_bytes(&blob).unwrap();
+    let (view, eye) = shipped_view(&rust);
+    let mut scratch = vec![0i8; rust.scratch_len(1)];
+    let mut buffer = vec![0f32; PCRNET_VIEW_BUFFER_LEN];
+    let options = Options::default();
+    let found = rust
+        .register_view(&view, eye, &options, &mut scratch, &mut buffer)
+        .unwrap()
+        .registration
+        .pose;
+    // From the found pose (kept) and from a half turn away (falls back).
+    let away = pcrnet_core::Pose {
+        rotation: [0.0, 0.0, 1.0, 0.0],
+        translation: [0.0; 3],
+    };
+    for (previous, code) in [
+        (found, PCRNET_TRACK_KEPT),
+        (found.then(&away), PCRNET_TRACK_RECOVERED),
+    ] {
+        let want = rust
+            .track_view(&view, &previous, eye, &options, &mut scratch, &mut buffer)
+            .unwrap();
+        let pose: Vec<f32> = previous
+            .rotation
+            .iter()
+            .chain(&previous.translation)
+            .copied()
+            .collect();
+        let (mut out, mut outcome) = (sentinel(), u32::MAX);
+        let status = unsafe {
+            pcrnet_track_view(
+                &*handle,
+                view.as_ptr() as *const f32,
+                view.len(),
+                pose.as_ptr(),
+                eye.as_ptr(),
+                &options_default(),
+                scratch.as_mut_ptr(),
+                scratch.len(),
+                buffer.as_mut_ptr(),
+                buffer.len(),
+                &mut out,
+                &mut outcome,
+            )
+        };
+        assert_eq!(status, PcrnetStatus::PCRNET_OK);
+        assert_eq!(outcome, code);
+        assert_eq!(out.rotation, want.registration.pose.rotation);
+        assert_eq!(out.translation, want.registration.pose.translation);
+        assert_eq!(out.reliable, want.registration.reliable);
+        // A missing or refused viewpoint: a status, nothing written.
+        for viewpoint in [std::ptr::null(), view[0].as_ptr()] {
+            let (mut out, mut outcome) = (sentinel(), u32::MAX);
+            let status = unsafe {
+                pcrnet_track_view(
+                    &*handle,
+                    view.as_ptr() as *const f32,
+                    view.len(),
+                    pose.as_ptr(),
+                    viewpoint,
+                    &options_default(),
+                    scratch.as_mut_ptr(),
+                    scratch.len(),
+                    buffer.as_mut_ptr(),
+                    buffer.len(),
+                    &mut out,
+                    &mut outcome,
+                )
+            };
+            assert_ne!(status, PcrnetStatus::PCRNET_OK);
+            assert_eq!((out.rotation, outcome), (sentinel().rotation, u32::MAX));
+        }
+    }
+}

@@ -22,7 +22,7 @@ use crate::ambiguity::{self, Ambiguity};
 use crate::error::{Error, Result};
 use crate::format::Frame;
 use crate::pose::{self, Centring, PointMap, Pose};
-use crate::refine::{self, Degeneracy, Guide, IcpSettings, Metric, Resolved, Subset};
+use crate::refine::{self, Degeneracy, Guide, IcpSettings, Metric, Resolved, Subset, Unguided};
 use crate::scene::visible::Placing;
 use crate::template::Template;
 
@@ -433,22 +433,23 @@ pub(crate) fn check<'s>(
 
 /// Runs the pipeline with `pass`, one [`Step`] on the source moved by a
 /// [`PointMap`], returning the step's pose (model frame) and its counts.
-/// With `seen_from` (the sensor's position in the source's frame, user
-/// units: the source is one side of the object as seen from there) every
-/// start is placed by what the sensor sees ([`Placing`]).
 pub(crate) fn run(
     frame: &Frame,
     centring: Centring,
     template: &Template<'_>,
     source: &[[f32; 3]],
     options: &Options,
-    seen_from: Option<[f32; 3]>,
     pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Registration> {
     let checked = check(frame, template, source, options)?;
-    let mut guide = seen_from.map(|eye| Placing::new(template, &checked.subset, eye, None));
     run_checked(
-        frame, centring, template, &checked, options, pass, &mut guide,
+        frame,
+        centring,
+        template,
+        &checked,
+        options,
+        pass,
+        &mut Unguided,
     )
 }
 
@@ -508,8 +509,10 @@ pub(crate) fn all_finite(source: &[[f32; 3]]) -> Result<()> {
 
 /// Registers `source` standing on `sweep`'s plane: the sweep's starts
 /// ([`crate::sweep`]) screened and the best refined, no network pass. With
-/// `seen_from` (as for [`run`]) each start is placed by what the sensor
-/// sees, along the plane only (its base stays on the plane).
+/// `seen_from` (the sensor's position in the source's frame, user units:
+/// the source is one side of the object as seen from there) each start is
+/// placed by what the sensor sees ([`Placing`]), along the plane only (its
+/// base stays on the plane).
 pub(crate) fn run_swept(
     frame: &Frame,
     template: &Template<'_>,

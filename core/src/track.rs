@@ -22,6 +22,7 @@
 use crate::error::Result;
 use crate::format::Frame;
 use crate::pose::{Centring, PointMap, Pose};
+use crate::refine::{Guide, Subset};
 use crate::registration::{self, Options, PassCounts, Registration};
 use crate::template::Template;
 
@@ -82,14 +83,18 @@ fn within_step(start: &Pose, refined: &Pose) -> bool {
 }
 
 /// One tracking step with `pass` the network pass a fallback registration
-/// runs (see [`registration::run`]).
-pub(crate) fn step(
+/// runs (see [`registration::run`]), its starts guided by what `guide`
+/// makes of the used points ([`crate::refine::Guide`]; made only when the
+/// step falls back).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn step<G: Guide>(
     frame: &Frame,
     centring: Centring,
     template: &Template<'_>,
     source: &[[f32; 3]],
     previous: &Pose,
     options: &Options,
+    guide: impl FnOnce(&Subset<'_>) -> G,
     pass: impl FnMut(
         registration::Sample<'_>,
         &PointMap,
@@ -118,7 +123,7 @@ pub(crate) fn step(
         &checked,
         options,
         pass,
-        &mut crate::refine::Unguided,
+        &mut guide(&checked.subset),
     )?;
     let outcome = if registration.reliable {
         TrackOutcome::Recovered

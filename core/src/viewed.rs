@@ -15,6 +15,7 @@ use crate::scene::view::{View, settings_for};
 use crate::scene::visible::Placing;
 use crate::scene::{Verification, VerifySettings};
 use crate::template::Template;
+use crate::track::Tracking;
 
 /// A registration of a cut single view made and checked from its
 /// viewpoint (`Int8Model::register_view`).
@@ -62,6 +63,43 @@ pub(crate) fn register(
         view,
         reliable: registration.reliable && view.passed,
     })
+}
+
+/// One tracking step ([`crate::track`]) of a cut single view seen from
+/// `viewpoint`: `previous` refined by ICP and kept when reliable, else the
+/// registration in the same call guided by the view as in [`register`].
+/// The view is rendered into `buffer` first, so a viewpoint it refuses is
+/// an error whether or not the step falls back.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn track(
+    model: &Frame,
+    centring: Centring,
+    template: &Template<'_>,
+    source: &[[f32; 3]],
+    previous: &Pose,
+    viewpoint: [f32; 3],
+    options: &Options,
+    buffer: &mut [f32],
+    pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
+) -> Result<Tracking> {
+    let view = View::render(source, viewpoint, buffer)?;
+    let settings = settings_for(template, model);
+    crate::track::step(
+        model,
+        centring,
+        template,
+        source,
+        previous,
+        options,
+        |subset| ViewGuide {
+            placing: Placing::new(template, subset, viewpoint, None),
+            template,
+            model,
+            view: &view,
+            settings,
+        },
+        pass,
+    )
 }
 
 /// What a view from a known viewpoint adds to flip resolution

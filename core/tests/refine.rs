@@ -171,7 +171,7 @@ fn flip_resolution_picks_the_turn_that_fits() {
 
     // A guide that places every start: the network's own start put on the
     // right pose wins with one hypothesis, where unplaced it did not.
-    let mut onto_flip = Placing(flip);
+    let mut onto_flip = StartFrom(flip);
     let placed = refine::resolve(
         &t,
         &subset,
@@ -185,6 +185,12 @@ fn flip_resolution_picks_the_turn_that_fits() {
     .unwrap();
     assert_eq!(placed.hypothesis, 0);
     assert!(angle_deg(&placed.pose, &flip) < 0.1, "{placed:?}");
+    // An optional guide: none is no guide, some is the guide.
+    let resolve = |guide: &mut Option<StartFrom>| {
+        refine::resolve(&t, &subset, Pose::IDENTITY, 1, 10, &settings, 0.05, guide).unwrap()
+    };
+    assert_eq!(resolve(&mut None), one);
+    assert_eq!(resolve(&mut Some(StartFrom(flip))), placed);
 }
 
 /// A guide with a test besides the residual, starts as given.
@@ -197,9 +203,9 @@ impl<F: FnMut(&Pose) -> bool> refine::Guide for Accepting<F> {
 }
 
 /// A guide that starts every screening from one pose.
-struct Placing(Pose);
+struct StartFrom(Pose);
 
-impl refine::Guide for Placing {
+impl refine::Guide for StartFrom {
     fn place(&mut self, _start: Pose) -> Pose {
         self.0
     }

@@ -214,7 +214,7 @@ fn apart(a: &Pose, b: &Pose) -> (f32, f32) {
 }
 
 #[test]
-fn a_viewed_registration_is_the_registration_with_its_check() {
+fn a_viewed_registration_finds_the_pose_and_carries_its_check() {
     let model = pcrnet_core::Int8Model::from_bytes(MODEL).unwrap();
     let (source, at, truth) = shipped_view(&model);
     let mut scratch = vec![0i8; model.host_scratch_len()];
@@ -313,6 +313,11 @@ fn a_start_is_placed_by_what_the_sensor_sees() {
     let across = visible::place(template, centred, centroid, to_model(at), Some(x));
     assert_eq!(across.translation[0], centred.translation[0]);
     assert_eq!(&across.translation[1..], &placed.translation[1..]);
+    // The grid: about 16 stored points a cell, 4 to 8 cells a side.
+    assert_eq!(
+        [0, 255, 256, 512, 1024, 4096].map(visible::grid_side),
+        [4, 4, 4, 5, 8, 8]
+    );
     // Nothing in front of the sensor: left as it was.
     let behind = visible::visible_centroid(template, [0.0, 0.0, 5.0], [0.0, 0.0, 10.0]);
     assert_eq!(behind, None);
@@ -320,4 +325,49 @@ fn a_start_is_placed_by_what_the_sensor_sees() {
         visible::visible_centroid(template, [1.0; 3], [1.0; 3]),
         None
     );
+}
+
+#[test]
+fn a_view_is_tracked_and_recovered_as_registered_with_it() {
+    let model = pcrnet_core::Int8Model::from_bytes(MODEL).unwrap();
+    let (source, at, truth) = shipped_view(&model);
+    let mut scratch = vec![0i8; model.host_scratch_len()];
+    let mut buffer = vec![0f32; view::buffer_len(32)];
+    let options = pcrnet_core::Options::default();
+    // From the right pose: kept, as `track` keeps it (the view is not needed).
+    let kept = model
+        .track_view(&source, &truth, at, &options, &mut scratch, &mut buffer)
+        .unwrap();
+    let plain = model
+        .track(&source, &truth, &options, &mut scratch)
+        .unwrap();
+    assert_eq!(kept.outcome, pcrnet_core::TrackOutcome::Kept);
+    assert_eq!(kept, plain);
+    // From a pose a half turn away: the step falls back to the
+    // registration guided by the view, the same as `register_view`'s.
+    let away = Pose {
+        rotation: [0.0, 0.0, 1.0, 0.0],
+        translation: [0.0; 3],
+    };
+    let lost = truth.then(&away);
+    let fell = model
+        .track_view(&source, &lost, at, &options, &mut scratch, &mut buffer)
+        .unwrap();
+    let viewed = model
+        .register_view(&source, at, &options, &mut scratch, &mut buffer)
+        .unwrap();
+    assert_eq!(fell.outcome, pcrnet_core::TrackOutcome::Recovered);
+    assert_eq!(fell.registration, viewed.registration);
+    // A viewpoint the view refuses is an error even when the track holds.
+    assert!(matches!(
+        model.track_view(
+            &source,
+            &truth,
+            source[0],
+            &options,
+            &mut scratch,
+            &mut buffer
+        ),
+        Err(Error::InvalidOption { .. })
+    ));
 }

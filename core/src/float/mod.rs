@@ -213,6 +213,34 @@ impl<'a> F32Model<'a> {
         )
     }
 
+    /// One tracking step of a cut single view seen from `viewpoint`, as
+    /// [`crate::Int8Model::track_view`], with the f32 network.
+    ///
+    /// # Errors
+    /// As [`crate::Int8Model::track_view`].
+    pub fn track_view(
+        &self,
+        source: &[[f32; 3]],
+        previous: &Pose,
+        viewpoint: [f32; 3],
+        options: &Options,
+        scratch: &mut [f32],
+        buffer: &mut [f32],
+    ) -> Result<Tracking> {
+        let net = &self.network;
+        crate::viewed::track(
+            &self.frame,
+            net.centring(),
+            &self.template,
+            source,
+            previous,
+            viewpoint,
+            options,
+            buffer,
+            |sample, map, step| self.step(sample, map, step, scratch),
+        )
+    }
+
     /// Checks `pose` against the cut single view `source` seen from
     /// `viewpoint`, as [`crate::Int8Model::check_view`].
     ///
@@ -295,7 +323,6 @@ impl<'a> F32Model<'a> {
             &self.template,
             source,
             options,
-            None,
             |sample, map, step| self.step(sample, map, step, scratch),
         )
     }
@@ -317,6 +344,7 @@ impl<'a> F32Model<'a> {
             source,
             previous,
             options,
+            |_| crate::refine::Unguided,
             |sample, map, step| self.step(sample, map, step, scratch),
         )
     }

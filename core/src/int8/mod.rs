@@ -207,18 +207,16 @@ impl<'a> Int8Model<'a> {
         scratch: &mut [i8],
     ) -> Result<Registration> {
         let tile = self.tile_for(scratch.len())?;
-        self.register_ready(source, options, None, tile, scratch, Ready::default())
+        self.register_ready(source, options, tile, scratch, Ready::default())
     }
 
     /// [`Self::register`] with `tile` points per pass on a scratch where
-    /// [`Self::prepare`] left what `ready` says, its starts placed by what
-    /// a sensor at `seen_from` sees (`registration::run`).
+    /// [`Self::prepare`] left what `ready` says.
     #[inline(always)]
     fn register_ready(
         &self,
         source: &[[f32; 3]],
         options: &Options,
-        seen_from: Option<[f32; 3]>,
         tile: usize,
         scratch: &mut [i8],
         ready: Ready,
@@ -229,7 +227,6 @@ impl<'a> Int8Model<'a> {
             &self.template,
             source,
             options,
-            seen_from,
             |sample, map, step| self.pass(sample, map, step, tile, scratch, ready),
         )
     }
@@ -258,6 +255,7 @@ impl<'a> Int8Model<'a> {
             source,
             previous,
             options,
+            |_| crate::refine::Unguided,
             |sample, map, step| self.pass(sample, map, step, tile, scratch, Ready::default()),
         )
     }
@@ -266,7 +264,10 @@ impl<'a> Int8Model<'a> {
     /// with the template's up axis along the plane's normal, by the yaw
     /// sweep of [`crate::sweep`] (no network pass, no scratch): the
     /// registration for one-sided views in any yaw, which the network's
-    /// hypotheses do not cover.
+    /// hypotheses do not cover. The starts stand where [`crate::sweep`]
+    /// puts them: without the sensor's position they are not placed by
+    /// what it sees, as [`Self::locate`]'s are (the sensor at the frame's
+    /// origin, [`crate::locate::SENSOR`]).
     #[inline(never)]
     pub fn register_on_plane(
         &self,
@@ -281,8 +282,9 @@ impl<'a> Int8Model<'a> {
     /// (see [`crate::locate`]): the scene stages over `frame` with `scene`
     /// (start from [`crate::scene::SceneOptions::for_object`] with
     /// [`Self::object_radius`]), then up to `candidates` of the largest kept
-    /// clusters registered as [`Self::register`] does, each from at most
-    /// `points.len()` of its points. `labels` needs
+    /// clusters registered, each from at most `points.len()` of its points:
+    /// by the yaw sweep with its starts placed by what the sensor sees when
+    /// the scene has an up axis and a plane, else as [`Self::register`] does. `labels` needs
     /// [`crate::scene::labels_len`] elements; the scratch is the registration's.
     #[inline(never)]
     #[allow(clippy::too_many_arguments)]
@@ -320,7 +322,7 @@ impl<'a> Int8Model<'a> {
                     Some(crate::locate::SENSOR),
                 ),
                 Start::Network => {
-                    self.register_ready(source, options, None, tile, scratch, Ready::default())
+                    self.register_ready(source, options, tile, scratch, Ready::default())
                 }
                 Start::Pose(pose) => {
                     registration::run_from(&self.p.frame, &self.template, source, pose, options)
@@ -360,6 +362,43 @@ impl<'a> Int8Model<'a> {
             self.centring(),
             &self.template,
             source,
+            viewpoint,
+            options,
+            buffer,
+            |sample, map, step| self.pass(sample, map, step, tile, scratch, Ready::default()),
+        )
+    }
+
+    /// One tracking step ([`Self::track`]) of a cut single view seen from
+    /// `viewpoint` (the sensor's position in the source's frame, user
+    /// units: the origin for points in the sensor's own frame): `previous`
+    /// refined by ICP and kept when reliable, else registered afresh in the
+    /// same call as [`Self::register_view`] registers (its starts placed by
+    /// what the sensor sees and judged by the view rendered into `buffer`).
+    /// The result's verdict is the residual's, as [`Self::track`]'s; check
+    /// the pose against the view with [`Self::check_view`] when acting on
+    /// it must also explain the view.
+    ///
+    /// # Errors
+    /// As [`Self::track`] and [`crate::scene::View::render`] (the view is
+    /// rendered first, whether or not the step falls back).
+    #[inline(never)]
+    pub fn track_view(
+        &self,
+        source: &[[f32; 3]],
+        previous: &Pose,
+        viewpoint: [f32; 3],
+        options: &Options,
+        scratch: &mut [i8],
+        buffer: &mut [f32],
+    ) -> Result<Tracking> {
+        let tile = self.tile_for(scratch.len())?;
+        crate::viewed::track(
+            &self.p.frame,
+            self.centring(),
+            &self.template,
+            source,
+            previous,
             viewpoint,
             options,
             buffer,

@@ -86,7 +86,7 @@ impl<'a> Prepared<'_, 'a, '_> {
     /// [`Int8Model::register`] on the prepared scratch.
     pub fn register(&mut self, source: &[[f32; 3]], options: &Options) -> Result<Registration> {
         self.model
-            .register_ready(source, options, None, self.tile, self.scratch, self.ready)
+            .register_ready(source, options, self.tile, self.scratch, self.ready)
     }
 
     /// [`Int8Model::network_pose`] on the prepared scratch.

@@ -10,11 +10,12 @@
 //! lands on the centroid of the template points the sensor would see at
 //! that start ([`visible_centroid`]); the rotation is kept.
 //!
-//! Visibility is a coarse z-buffer of the template's stored points, as the
-//! experiments' simulated views are made (`pcrnet_train::view`): the points
-//! projected from the sensor's position onto a square grid of at most
-//! [`MAX_GRID`] cells a side (about 16 stored points a cell), a point seen
-//! when its depth is within one cell's width of its cell's nearest. The
+//! Visibility is a coarse z-buffer of the template's stored points, like
+//! the experiments' simulated views (`pcrnet_train::view`, whose grid
+//! rounds `sqrt(n / 16)` and has no upper bound): the points projected
+//! from the sensor's position onto a square grid of [`grid_side`] cells a
+//! side (at most [`MAX_GRID`]; 5 for 512 points, about 20 a cell), a point
+//! seen when its depth is within one cell's width of its cell's nearest. The
 //! stored normals are not used: their sign is arbitrary (estimated by
 //! principal components at export). f32 arithmetic in a fixed order, no
 //! allocation (a grid of 64 depths on the stack): bit-identical on every

@@ -150,8 +150,10 @@ pub struct FrameResult {
 }
 
 /// Follows a sequence of `frames` frames at `rate` frames a second with
-/// `model` (the template bound in) and `options`: frames registered afresh until one is
-/// reliable; then every frame a tracking step from the constant-velocity
+/// `model` (the template bound in) and `options`: frames registered afresh
+/// until one is reliable (`register_view` from the frame's camera: the
+/// sensor's position is known; `register` for a frame without one); then
+/// every frame a tracking step (`track_view`, else `track`) from the constant-velocity
 /// prediction of the last two poses (the last pose alone after a
 /// registration or a lost frame). After a lost frame the next is tracked
 /// from the last reliable pose: the step's ICP from there, then its
@@ -185,7 +187,14 @@ pub fn follow(
         let started = Instant::now();
         let (r, step) = match last {
             None => {
-                let r = model.register(&source, options, &mut scratch)?;
+                let r = match camera {
+                    Some(at) => {
+                        model
+                            .register_view(&source, at, options, &mut scratch, &mut view)?
+                            .registration
+                    }
+                    None => model.register(&source, options, &mut scratch)?,
+                };
                 let step = if r.reliable {
                     Step::Registered
                 } else {
@@ -195,7 +204,12 @@ pub fn follow(
             }
             Some(last) => {
                 let start = before.map_or(last, |b| pose::predict(&b, &last));
-                let tracked = model.track(&source, &start, options, &mut scratch)?;
+                let tracked = match camera {
+                    Some(at) => {
+                        model.track_view(&source, &start, at, options, &mut scratch, &mut view)?
+                    }
+                    None => model.track(&source, &start, options, &mut scratch)?,
+                };
                 let step = match tracked.outcome {
                     TrackOutcome::Kept => Step::Kept,
                     TrackOutcome::Recovered => Step::Recovered,
