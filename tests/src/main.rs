@@ -87,7 +87,7 @@ fn run_plans(
         .map(|c| {
             let blob = &models[c.model].blob;
             let registrations = expected_registrations(blob, c);
-            let tracks = tracking::expected(blob, c, &registrations);
+            let tracks = tracking::expected(blob, c, &registrations, view::side_for(board.machine));
             let features = feature::expected(blob, c, &registrations);
             let views = view::expected(blob, c, &registrations, view::side_for(board.machine));
             (

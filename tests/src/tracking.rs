@@ -1,8 +1,11 @@
 //! Tracking steps in the harness: after each successful `register`, the
 //! device runs `Int8Model::track` with the same options from the starts
-//! [`starts`] names, and the host computes the same ([`expected`]); every
-//! field of the result and its outcome are compared bit for bit
-//! ([`difference`]).
+//! [`starts`] names, and with the default options also
+//! `Int8Model::track_view` from the predicted start and
+//! [`pcrnet_core::testing::harness_viewpoint`] (start name `viewed`; not
+//! on the micro:bit, whose flash the view code does not fit); the host
+//! computes the same ([`expected`]); every field of the result and its
+//! outcome are compared bit for bit ([`difference`]).
 
 use std::collections::BTreeMap;
 
@@ -33,10 +36,18 @@ pub type TrackResult = Result<(RegistrationBits, String), String>;
 pub type Tracks = BTreeMap<(usize, String), TrackResult>;
 
 /// What the host computes for the tracking steps of a case, given its
-/// registrations' outcomes (the host's own, in order).
-pub fn expected(model: &[u8], case: &Case, registrations: &[RegistrationOutcome]) -> Tracks {
+/// registrations' outcomes (the host's own, in order); `view_side` the
+/// board's view image side (`view::side_for`: none, no `viewed` step).
+pub fn expected(
+    model: &[u8],
+    case: &Case,
+    registrations: &[RegistrationOutcome],
+    view_side: Option<usize>,
+) -> Tracks {
     let m = Int8Model::from_bytes(model).expect("test models are valid");
     let mut scratch = vec![0i8; SCRATCH_LEN];
+    let mut buffer = vec![0f32; pcrnet_core::scene::view::buffer_len(view_side.unwrap_or(0))];
+    let viewpoint = pcrnet_core::testing::harness_viewpoint(&case.cloud);
     let mut out = Tracks::new();
     for (k, (options, r)) in case.registrations.iter().zip(registrations).enumerate() {
         let Ok(r) = r else {
@@ -47,15 +58,28 @@ pub fn expected(model: &[u8], case: &Case, registrations: &[RegistrationOutcome]
             rotation: [p[0], p[1], p[2], p[3]],
             translation: [p[4], p[5], p[6]],
         };
+        let as_result = |t: pcrnet_core::Result<pcrnet_core::Tracking>| {
+            t.map(|t| {
+                let outcome = format!("{:?}", t.outcome);
+                (RegistrationBits::from(&t.registration), outcome)
+            })
+            .map_err(|e| error_text(&e))
+        };
         for (name, start) in starts(&registered, options) {
-            let result = m
-                .track(&case.cloud, &start, options, &mut scratch)
-                .map(|t| {
-                    let outcome = format!("{:?}", t.outcome);
-                    (RegistrationBits::from(&t.registration), outcome)
-                })
-                .map_err(|e| error_text(&e));
+            let result = as_result(m.track(&case.cloud, &start, options, &mut scratch));
             out.insert((k, name.to_string()), result);
+        }
+        if view_side.is_some() && *options == Options::default() {
+            let start = pose::predict(&Pose::IDENTITY, &registered);
+            let result = as_result(m.track_view(
+                &case.cloud,
+                &start,
+                viewpoint,
+                options,
+                &mut scratch,
+                &mut buffer,
+            ));
+            out.insert((k, "viewed".to_string()), result);
         }
     }
     out

@@ -378,7 +378,50 @@ fn run_case(
             }
             emit(line);
         }
+        // The same cloud tracked as a view from the harness's viewpoint,
+        // from the predicted start (the host's `tracking::expected`).
+        #[cfg(not(feature = "microbit"))]
+        if options == Options::default() {
+            track_view(c, k, cloud, model, &predicted, scratch, counter, line);
+        }
     }
+}
+
+/// `case C track K viewed ...`: a tracking step of the cloud as a view
+/// from the harness's viewpoint (`Int8Model::track_view`), its
+/// instructions and peak stack.
+#[cfg(not(feature = "microbit"))]
+#[allow(clippy::too_many_arguments)]
+fn track_view(
+    c: usize,
+    k: usize,
+    cloud: &[[f32; 3]],
+    model: &Int8Model,
+    start: &Pose,
+    scratch: &mut [i8],
+    counter: &icount::Counter,
+    line: &mut String<LINE>,
+) {
+    let viewpoint = pcrnet_core::testing::harness_viewpoint(cloud);
+    let view = view_buffer();
+    let baseline = stack::paint();
+    let t0 = counter.instructions();
+    let tracked = model.track_view(cloud, start, viewpoint, &Options::default(), scratch, view);
+    let t1 = counter.instructions();
+    let peak = stack::used_below(baseline);
+    line.clear();
+    let _ = write!(line, "case {c} track {k} viewed ");
+    match tracked {
+        Ok(t) => {
+            let _ = write!(line, "ok {} {peak}", t1 - t0);
+            write_registration(line, &t.registration);
+            let _ = write!(line, " {:?}", t.outcome);
+        }
+        Err(e) => {
+            let _ = write!(line, "error {} {peak} {e:?}", t1 - t0);
+        }
+    }
+    emit(line);
 }
 
 /// `case C view K ...`: the viewed registration of the cloud (see the
