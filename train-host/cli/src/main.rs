@@ -189,8 +189,9 @@ enum Command {
         /// SOURCE is one object as a depth sensor saw it from X,Y,Z (the
         /// sensor's position in the source file's frame; 0,0,0 for points
         /// in the camera's own frame), everything else cut away: the
-        /// device pipeline registers with that view (of the turned starts,
-        /// the lowest-residual one that explains it finishes) and its pose
+        /// device pipeline registers with that view (every start placed by
+        /// what the sensor would see of the template there; of the turned
+        /// starts, the lowest-residual one that explains it finishes) and its pose
         /// is reliable only if it also explains the view (the template's
         /// points it puts in view lie on the seen surface, none where the
         /// sensor saw past the object).

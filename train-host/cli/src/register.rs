@@ -155,6 +155,17 @@ pub(crate) struct Seen {
 }
 
 /// Parses `X,Y,Z` (finite numbers).
+/// `--viewpoint` (the files' frame) in the clouds' local frame, as the
+/// points were moved by `origin`; refused when f32 cannot hold it.
+pub(crate) fn local_viewpoint(v: [f64; 3], origin: [f64; 3]) -> anyhow::Result<[f32; 3]> {
+    let local = [0, 1, 2].map(|k| (v[k] - origin[k]) as f32);
+    anyhow::ensure!(
+        local.iter().all(|c| c.is_finite()),
+        "--viewpoint lies too far from the clouds for f32 (is it in the files' frame?)"
+    );
+    Ok(local)
+}
+
 pub(crate) fn parse_point(s: &str) -> Result<[f64; 3], String> {
     let v: Vec<f64> = s
         .split(',')
@@ -188,14 +199,10 @@ pub(crate) fn register(
         seen.viewpoint.is_none() || !options.refine_icp,
         "--viewpoint checks the device pipeline's own pose, which --refine-icp would move: leave out one of them"
     );
-    // In the clouds' local frame, as the points were moved.
     let viewpoint = seen
         .viewpoint
-        .map(|v| [0, 1, 2].map(|k| (v[k] - origin[k]) as f32));
-    anyhow::ensure!(
-        viewpoint.is_none_or(|v| v.iter().all(|c| c.is_finite())),
-        "--viewpoint lies too far from the clouds for f32 (is it in the files' frame?)"
-    );
+        .map(|v| local_viewpoint(v, origin))
+        .transpose()?;
     let mut method = options.method(kind);
     method.view_check = viewpoint.is_some();
     let (blob, model_note) = match options.read_model()? {

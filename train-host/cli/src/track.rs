@@ -15,6 +15,7 @@ use pcrnet_io::frame::FilePose;
 
 use crate::device::DeviceModel;
 use crate::register::{Reading, json_on_stdout, say, write_json};
+use pcrnet_eval::register::VIEW_SIDE;
 
 /// The arguments of `pcrnet track`.
 #[derive(clap::Args)]
@@ -31,6 +32,14 @@ pub(crate) struct TrackArgs {
     /// fast and steadily).
     #[arg(long)]
     predict: bool,
+    /// The frames are single views from a sensor standing at X,Y,Z (the
+    /// files' frame; 0,0,0 for points in the camera's own frame): the
+    /// registrations place their starts by what the sensor would see of
+    /// the template and let the view choose among the turned starts
+    /// (`Int8Model::register_view` until the first reliable pose,
+    /// `track_view` after); the verdict is the residual's, as without it.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = crate::register::parse_point)]
+    viewpoint: Option<[f64; 3]>,
     /// Model (an int8 blob) and settings of the device pipeline.
     #[command(flatten)]
     options: MethodOptions,
@@ -96,6 +105,7 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
         template,
         frames,
         predict,
+        viewpoint,
         options,
         json,
         reading,
@@ -117,6 +127,10 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{model_label} with {} bound in", template.display()))?;
     let device = loaded.options;
     let mut scratch = vec![0i8; model.host_scratch_len()];
+    let viewpoint = viewpoint
+        .map(|v| crate::register::local_viewpoint(v, origin))
+        .transpose()?;
+    let mut view = vec![0f32; pcrnet_core::scene::view::buffer_len(VIEW_SIDE)];
 
     let to_stdout = json_on_stdout(json.as_deref());
     let say = |line: String| say(to_stdout, &line);
@@ -139,6 +153,11 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
         }
     ));
 
+    if let Some(at) = viewpoint {
+        say(format!(
+            "frames seen from {at:?} (about the local origin): registrations place their starts by what the sensor sees (register_view, track_view); the verdict is the residual's"
+        ));
+    }
     // The last two reliable poses while the track holds, the older first;
     // after a frame without one, the last reliable pose alone.
     let (mut before, mut last): (Option<Pose>, Option<Pose>) = (None, None);
@@ -156,12 +175,18 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
             (_, _, l) => l,
         };
         let began = Instant::now();
-        let result = match start {
-            None => model
+        let result = match (start, viewpoint) {
+            (None, None) => model
                 .register(&source, &device, &mut scratch)
                 .map(|r| (r, Step::Registered)),
-            Some(previous) => model
+            (None, Some(at)) => model
+                .register_view(&source, at, &device, &mut scratch, &mut view)
+                .map(|v| (v.registration, Step::Registered)),
+            (Some(previous), None) => model
                 .track(&source, &previous, &device, &mut scratch)
+                .map(|t| (t.registration, Step::Tracked(t.outcome))),
+            (Some(previous), Some(at)) => model
+                .track_view(&source, &previous, at, &device, &mut scratch, &mut view)
                 .map(|t| (t.registration, Step::Tracked(t.outcome))),
         };
         let ms = began.elapsed().as_secs_f64() * 1e3;
@@ -205,6 +230,7 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
             "template_floor": loaded.floor.map(crate::device::short),
             "verdict_max_residual": crate::device::short(device.max_residual),
             "predict": predict,
+            "viewpoint": viewpoint,
             "frames": results,
         });
         write_json(&path, &value)?;

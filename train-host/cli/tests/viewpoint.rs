@@ -126,3 +126,52 @@ fn a_single_view_is_checked_from_its_viewpoint() {
     assert!(stderr.contains("viewpoint"), "{stderr}");
     std::fs::remove_dir_all(d).unwrap();
 }
+
+#[test]
+fn a_stream_of_views_is_tracked_from_its_viewpoint() {
+    let template = pcrnet_io::read_cloud(&models().join("embedded-default-template.xyz")).unwrap();
+    let (view, at) = moved_view(&template, [0.3, -0.5, 0.81]);
+    let d = dir().join("stream");
+    std::fs::create_dir_all(&d).unwrap();
+    for k in 0..3 {
+        write_xyz(&d.join(format!("frame{k}.xyz")), &view);
+    }
+    let track = |extra: &[&str]| {
+        let out = pcrnet()
+            .arg("track")
+            .arg(models().join("embedded-default-template.xyz"))
+            .arg(&d)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, stdout, stderr) = track(&["--viewpoint", &point(at), "--json", "-"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(stderr.contains("register_view, track_view"), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let outcomes: Vec<&str> = v["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["outcome"].as_str().unwrap())
+        .collect();
+    assert_eq!(outcomes, ["registered", "kept", "kept"], "{v}");
+    assert!(
+        v["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|f| f["reliable"] == true),
+        "{v}"
+    );
+    // A viewpoint among the points is refused at the first frame.
+    let (code, _, stderr) = track(&["--viewpoint", &point(view[0])]);
+    assert_ne!(code, Some(0));
+    assert!(stderr.contains("viewpoint"), "{stderr}");
+    std::fs::remove_dir_all(d).unwrap();
+}
