@@ -41,6 +41,31 @@ pub fn smlad(a: u32, b: u32, acc: i32) -> i32 {
     r
 }
 
+/// `a.lo - b.lo` and `a.hi - b.hi` (16-bit halves, wrapping): exact for
+/// differences within `i16`.
+#[inline(always)]
+pub fn ssub16(a: u32, b: u32) -> u32 {
+    let r;
+    // SAFETY: register-only arithmetic; SSUB16 sets the GE flags, which
+    // nothing reads (no `preserves_flags`).
+    unsafe {
+        asm!("ssub16 {0}, {1}, {2}", out(reg) r, in(reg) a, in(reg) b, options(pure, nomem, nostack))
+    };
+    r
+}
+
+/// `a.lo * b.lo + a.hi * b.hi` (16-bit halves, signed; wrapping).
+#[inline(always)]
+pub fn smuad(a: u32, b: u32) -> i32 {
+    let r;
+    // SAFETY: register-only arithmetic; SMUAD may set the sticky Q flag,
+    // which nothing reads.
+    unsafe {
+        asm!("smuad {0}, {1}, {2}", out(reg) r, in(reg) a, in(reg) b, options(pure, nomem, nostack))
+    };
+    r
+}
+
 /// Expands four rows of `inputs` int8 activations (`inputs % 4 == 0`)
 /// into int16 pairs in the order [`dot4`] reads them: for every group
 /// of four inputs `x[4g..4g+4]`, for each row in turn, the word

@@ -142,7 +142,7 @@ fn int8_dot<X: QValue>(w: &[u8], x: &[X], byte: impl Fn(X) -> u8) -> i32 {
 
 #[cfg(pcrnet_arm_dsp)]
 #[allow(unsafe_code)]
-mod dsp;
+pub(crate) mod dsp;
 
 #[cfg(all(target_arch = "x86_64", feature = "std"))]
 mod x86;
