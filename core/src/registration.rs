@@ -421,11 +421,7 @@ pub(crate) fn check<'s>(
     source: &'s [[f32; 3]],
     options: &Options,
 ) -> Result<Checked<'s>> {
-    options.validate()?;
-    if source.is_empty() {
-        return Err(Error::EmptyCloud);
-    }
-    all_finite(source)?;
+    check_input(source, options)?;
     let subset = Subset::new(source, *frame, options.max_points);
     let degenerate = refine::degeneracy(template, &subset, MIN_EXTENT);
     Ok(Checked { subset, degenerate })
@@ -496,6 +492,16 @@ pub(crate) fn run_checked(
         counts,
     };
     conclude(frame, template, checked, &r, stage, options)
+}
+
+/// What [`check`] refuses first: invalid options, an empty source, a
+/// point that is not finite.
+pub(crate) fn check_input(source: &[[f32; 3]], options: &Options) -> Result<()> {
+    options.validate()?;
+    if source.is_empty() {
+        return Err(Error::EmptyCloud);
+    }
+    all_finite(source)
 }
 
 /// [`Error::NonFiniteCoordinate`] for the first point with a NaN or

@@ -9,7 +9,7 @@
 use crate::error::Result;
 use crate::format::Frame;
 use crate::pose::{Centring, PointMap, Pose};
-use crate::refine::Guide;
+use crate::refine::{Guide, Subset};
 use crate::registration::{self, Options, PassCounts, Registration, Sample, Step};
 use crate::scene::view::{View, settings_for};
 use crate::scene::visible::Placing;
@@ -47,13 +47,7 @@ pub(crate) fn register(
 ) -> Result<Viewed> {
     let checked = registration::check(model, template, source, options)?;
     let view = View::render(source, viewpoint, buffer)?;
-    let mut guide = ViewGuide {
-        placing: Placing::new(template, &checked.subset, viewpoint, None),
-        template,
-        model,
-        view: &view,
-        settings: settings_for(template, model),
-    };
+    let mut guide = ViewGuide::new(template, model, &view, &checked.subset, viewpoint);
     let registration = registration::run_checked(
         model, centring, template, &checked, options, pass, &mut guide,
     )?;
@@ -68,8 +62,9 @@ pub(crate) fn register(
 /// One tracking step ([`crate::track`]) of a cut single view seen from
 /// `viewpoint`: `previous` refined by ICP and kept when reliable, else the
 /// registration in the same call guided by the view as in [`register`].
-/// The view is rendered into `buffer` first, so a viewpoint it refuses is
-/// an error whether or not the step falls back.
+/// The options and the source are checked first (their errors as
+/// `register`'s), then the view is rendered into `buffer`, so a viewpoint
+/// it refuses is an error whether or not the step falls back.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn track(
     model: &Frame,
@@ -82,8 +77,9 @@ pub(crate) fn track(
     buffer: &mut [f32],
     pass: impl FnMut(Sample<'_>, &PointMap, Step) -> Result<(Pose, PassCounts)>,
 ) -> Result<Tracking> {
+    // The source's errors first, as `register` gives them.
+    registration::check_input(source, options)?;
     let view = View::render(source, viewpoint, buffer)?;
-    let settings = settings_for(template, model);
     crate::track::step(
         model,
         centring,
@@ -91,13 +87,7 @@ pub(crate) fn track(
         source,
         previous,
         options,
-        |subset| ViewGuide {
-            placing: Placing::new(template, subset, viewpoint, None),
-            template,
-            model,
-            view: &view,
-            settings,
-        },
+        |subset| ViewGuide::new(template, model, &view, subset, viewpoint),
         pass,
     )
 }
@@ -115,7 +105,25 @@ struct ViewGuide<'a, 't, 'b> {
     settings: VerifySettings,
 }
 
-impl ViewGuide<'_, '_, '_> {
+impl<'a, 't, 'b> ViewGuide<'a, 't, 'b> {
+    /// The guide of `view` for the used points of `subset`, seen from
+    /// `viewpoint` (the source's frame, user units).
+    fn new(
+        template: &'a Template<'t>,
+        model: &'a Frame,
+        view: &'a View<'b>,
+        subset: &Subset<'_>,
+        viewpoint: [f32; 3],
+    ) -> Self {
+        ViewGuide {
+            placing: Placing::new(template, subset, viewpoint, None),
+            template,
+            model,
+            view,
+            settings: settings_for(template, model),
+        }
+    }
+
     /// `pose` (user units) checked against the view.
     fn judge(&self, pose: &Pose) -> Verification {
         self.view

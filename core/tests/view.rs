@@ -371,3 +371,39 @@ fn a_view_is_tracked_and_recovered_as_registered_with_it() {
         Err(Error::InvalidOption { .. })
     ));
 }
+
+#[test]
+fn the_f32_model_tracks_a_view_as_the_int8_one_does() {
+    let int8 = pcrnet_core::Int8Model::from_bytes(MODEL).unwrap();
+    let (source, at, truth) = shipped_view(&int8);
+    let model =
+        pcrnet_core::F32Model::from_bytes(include_bytes!("../../models/embedded-default-f32.pcrn"))
+            .unwrap();
+    let mut scratch = vec![0f32; model.tiled_scratch_len()];
+    let mut buffer = vec![0f32; view::buffer_len(32)];
+    let options = pcrnet_core::Options::default();
+    let kept = model
+        .track_view(&source, &truth, at, &options, &mut scratch, &mut buffer)
+        .unwrap();
+    assert_eq!(kept.outcome, pcrnet_core::TrackOutcome::Kept);
+    assert_eq!(
+        kept,
+        model
+            .track(&source, &truth, &options, &mut scratch)
+            .unwrap()
+    );
+    // The source's errors come first, as `register` gives them.
+    let mut broken = source.clone();
+    broken[2][0] = f32::NAN;
+    assert!(matches!(
+        model.track_view(
+            &broken,
+            &truth,
+            source[0],
+            &options,
+            &mut scratch,
+            &mut buffer
+        ),
+        Err(Error::NonFiniteCoordinate { index: 2 })
+    ));
+}

@@ -255,6 +255,20 @@ fn c_api(model: &mut capi::PcrnetModel, scratch: &mut [i8]) {
             black_box(out.as_mut_ptr()),
             black_box(seen.as_mut_ptr()),
         ));
+        black_box(capi::pcrnet_track_view(
+            model,
+            points,
+            n_points,
+            black_box(pose.as_ptr()),
+            black_box([0f32, 0.0, 3.0].as_ptr()),
+            black_box(options.as_ptr()),
+            scratch,
+            scratch_len,
+            black_box(view.as_mut_ptr()),
+            black_box(view.len()),
+            black_box(out.as_mut_ptr()),
+            black_box(&mut outcome),
+        ));
         black_box(capi::pcrnet_status_message(black_box(-3)));
         c_locate(model, scratch, scratch_len);
     }

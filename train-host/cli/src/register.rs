@@ -154,7 +154,6 @@ pub(crate) struct Seen {
     pub viewpoint: Option<[f64; 3]>,
 }
 
-/// Parses `X,Y,Z` (finite numbers).
 /// `--viewpoint` (the files' frame) in the clouds' local frame, as the
 /// points were moved by `origin`; refused when f32 cannot hold it.
 pub(crate) fn local_viewpoint(v: [f64; 3], origin: [f64; 3]) -> anyhow::Result<[f32; 3]> {
@@ -166,6 +165,7 @@ pub(crate) fn local_viewpoint(v: [f64; 3], origin: [f64; 3]) -> anyhow::Result<[
     Ok(local)
 }
 
+/// Parses `X,Y,Z` (finite numbers).
 pub(crate) fn parse_point(s: &str) -> Result<[f64; 3], String> {
     let v: Vec<f64> = s
         .split(',')

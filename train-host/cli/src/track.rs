@@ -127,6 +127,7 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{model_label} with {} bound in", template.display()))?;
     let device = loaded.options;
     let mut scratch = vec![0i8; model.host_scratch_len()];
+    let given_viewpoint = viewpoint;
     let viewpoint = viewpoint
         .map(|v| crate::register::local_viewpoint(v, origin))
         .transpose()?;
@@ -230,7 +231,7 @@ pub(crate) fn track(args: TrackArgs) -> anyhow::Result<()> {
             "template_floor": loaded.floor.map(crate::device::short),
             "verdict_max_residual": crate::device::short(device.max_residual),
             "predict": predict,
-            "viewpoint": viewpoint,
+            "viewpoint": given_viewpoint,
             "frames": results,
         });
         write_json(&path, &value)?;
