@@ -92,6 +92,16 @@ fn shipped(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
             "feature-space check (Int8Model::feature_distance), 512 points: {check} instructions"
         );
     }
+    let viewed_step = demo(512).and_then(|(i, c)| {
+        let k = c.registrations.iter().position(|r| *r == default)?;
+        let d = device.tracks.get(&(i, k, "viewed-held".to_string()))?;
+        Some((d.instructions, d.stack))
+    });
+    if let Some((step, stack)) = viewed_step {
+        println!(
+            "tracking step of a view (Int8Model::track_view, the pose held, the view rendered), 512 points: {step} instructions, peak stack {stack} B"
+        );
+    }
     let view = demo(512).and_then(|(i, c)| {
         let k = c.registrations.iter().position(|r| *r == default)?;
         let d = device.views.get(&(i, k))?;

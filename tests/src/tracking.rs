@@ -1,8 +1,8 @@
 //! Tracking steps in the harness: after each successful `register`, the
 //! device runs `Int8Model::track` with the same options from the starts
 //! [`starts`] names, and with the default options also
-//! `Int8Model::track_view` from the predicted start and
-//! [`pcrnet_core::testing::harness_viewpoint`] (start name `viewed`; not
+//! `Int8Model::track_view` from the starts [`viewed_starts`] names and
+//! [`pcrnet_core::testing::harness_viewpoint`] (not
 //! on the micro:bit, whose flash the view code does not fit); the host
 //! computes the same ([`expected`]); every field of the result and its
 //! outcome are compared bit for bit ([`difference`]).
@@ -26,6 +26,17 @@ pub fn starts(registered: &Pose, options: &Options) -> Vec<(&'static str, Pose)>
         out.push(("predicted", pose::predict(&Pose::IDENTITY, registered)));
     }
     out
+}
+
+/// The starts of the `track_view` steps after a default registration:
+/// `viewed-held` (the registered pose: a kept step's cost with the view
+/// rendered) and `viewed` (the prediction after the identity, usually the
+/// fallback). The device runner applies the same rule.
+pub fn viewed_starts(registered: &Pose) -> [(&'static str, Pose); 2] {
+    [
+        ("viewed-held", *registered),
+        ("viewed", pose::predict(&Pose::IDENTITY, registered)),
+    ]
 }
 
 /// A tracking step's result: the registration's fields and the outcome's
@@ -70,16 +81,17 @@ pub fn expected(
             out.insert((k, name.to_string()), result);
         }
         if view_side.is_some() && *options == Options::default() {
-            let start = pose::predict(&Pose::IDENTITY, &registered);
-            let result = as_result(m.track_view(
-                &case.cloud,
-                &start,
-                viewpoint,
-                options,
-                &mut scratch,
-                &mut buffer,
-            ));
-            out.insert((k, "viewed".to_string()), result);
+            for (name, start) in viewed_starts(&registered) {
+                let result = as_result(m.track_view(
+                    &case.cloud,
+                    &start,
+                    viewpoint,
+                    options,
+                    &mut scratch,
+                    &mut buffer,
+                ));
+                out.insert((k, name.to_string()), result);
+            }
         }
     }
     out

@@ -382,19 +382,22 @@ fn run_case(
         // from the predicted start (the host's `tracking::expected`).
         #[cfg(not(feature = "microbit"))]
         if options == Options::default() {
-            track_view(c, k, cloud, model, &predicted, scratch, counter, line);
+            for (name, start) in [("viewed-held", r.pose), ("viewed", predicted)] {
+                track_view(c, k, name, cloud, model, &start, scratch, counter, line);
+            }
         }
     }
 }
 
-/// `case C track K viewed ...`: a tracking step of the cloud as a view
-/// from the harness's viewpoint (`Int8Model::track_view`), its
-/// instructions and peak stack.
+/// `case C track K NAME ...`: a tracking step of the cloud as a view
+/// from the harness's viewpoint (`Int8Model::track_view`) from `start`
+/// (the host's `tracking::viewed_starts`), its instructions and peak stack.
 #[cfg(not(feature = "microbit"))]
 #[allow(clippy::too_many_arguments)]
 fn track_view(
     c: usize,
     k: usize,
+    name: &str,
     cloud: &[[f32; 3]],
     model: &Int8Model,
     start: &Pose,
@@ -410,7 +413,7 @@ fn track_view(
     let t1 = counter.instructions();
     let peak = stack::used_below(baseline);
     line.clear();
-    let _ = write!(line, "case {c} track {k} viewed ");
+    let _ = write!(line, "case {c} track {k} {name} ");
     match tracked {
         Ok(t) => {
             let _ = write!(line, "ok {} {peak}", t1 - t0);
