@@ -1,10 +1,9 @@
 //! The feature-space check of a pose: `pcrnet_feature_distance`.
 
 use PcrnetStatus::*;
-use pcrnet_core::Pose;
 
 use crate::types::PcrnetStatus;
-use crate::{PcrnetModel, cloud, scratch_mut, slice};
+use crate::{PcrnetModel, cloud, pose_at, scratch_mut};
 
 /// How far the points moved by `pose` `[qw, qx, qy, qz, tx, ty, tz]`
 /// (source units, as `PcrnetRegistration` gives it) lie from the template
@@ -34,12 +33,8 @@ pub unsafe extern "C" fn pcrnet_feature_distance(
         if pose.is_null() || out.is_null() {
             return Err(PCRNET_ERROR_NULL_POINTER);
         }
-        // SAFETY: non-null; the caller's contract (7 floats); alignment checked.
-        let p = unsafe { slice(pose, 7)? };
-        let pose = Pose {
-            rotation: [p[0], p[1], p[2], p[3]],
-            translation: [p[4], p[5], p[6]],
-        };
+        // SAFETY: non-null; the caller's contract (7 floats).
+        let pose = unsafe { pose_at(pose)? };
         // SAFETY: the caller's contract for `points` and `scratch`.
         let (source, scratch) =
             unsafe { (cloud(points, n_points)?, scratch_mut(scratch, scratch_len)?) };

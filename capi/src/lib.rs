@@ -170,6 +170,20 @@ unsafe fn slice<'a, T>(ptr: *const T, len: usize) -> Result<&'a [T], PcrnetStatu
     Ok(unsafe { core::slice::from_raw_parts(ptr, len) })
 }
 
+/// The pose `[qw, qx, qy, qz, tx, ty, tz]` at `pose` (as
+/// `PcrnetRegistration` gives it); null or misaligned is an error.
+///
+/// # Safety
+/// If non-null, `pose` must point to 7 readable floats.
+unsafe fn pose_at(pose: *const f32) -> Result<pcrnet_core::Pose, PcrnetStatus> {
+    // SAFETY: the caller's contract.
+    let p = unsafe { slice(pose, 7) }?;
+    Ok(pcrnet_core::Pose {
+        rotation: [p[0], p[1], p[2], p[3]],
+        translation: [p[4], p[5], p[6]],
+    })
+}
+
 /// Validates `blob` (magic, version, CRC, sizes, every parameter) and fills
 /// `model`. The blob must stay valid and unchanged while `model` is used.
 /// On failure `model` is marked not loaded.

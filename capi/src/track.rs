@@ -5,10 +5,11 @@
 //! (`Int8Model::track_view`).
 
 use PcrnetStatus::*;
-use pcrnet_core::{Pose, TrackOutcome, Tracking};
+use pcrnet_core::{Int8Model, Options, Pose, TrackOutcome, Tracking};
 
 use crate::types::{PcrnetRegistration, PcrnetStatus};
-use crate::{PcrnetModel, PcrnetOptions, register_into, scratch_mut, slice, slice_mut};
+use crate::view::view_inputs;
+use crate::{PcrnetModel, PcrnetOptions, pose_at, register_into, scratch_mut};
 
 /// `pcrnet_track`'s outcome: refined from the previous pose, reliable: the
 /// track is kept (the network did not run).
@@ -45,34 +46,27 @@ pub unsafe extern "C" fn pcrnet_track(
     out: *mut PcrnetRegistration,
     outcome: *mut u32,
 ) -> PcrnetStatus {
-    let m = match crate::model(model) {
-        Ok(m) => m,
-        Err(s) => return s,
-    };
-    if previous.is_null() || outcome.is_null() {
-        return PCRNET_ERROR_NULL_POINTER;
-    }
-    // SAFETY: non-null; the caller's contract (7 floats).
-    let previous = match unsafe { previous_pose(previous) } {
-        Ok(p) => p,
-        Err(s) => return s,
-    };
-    let mut what = PCRNET_TRACK_LOST;
     // SAFETY: the caller's contract for every pointer.
-    let status = unsafe {
-        register_into(points, n_points, options, out, |source, options| {
-            let scratch = scratch_mut(scratch, scratch_len)?;
-            Ok(noted(
-                m.track(source, &previous, options, scratch)?,
-                &mut what,
-            ))
-        })
-    };
-    if status == PCRNET_OK {
-        // SAFETY: checked non-null above; the caller's contract.
-        unsafe { outcome.write(what) };
+    unsafe {
+        track_into(
+            model,
+            points,
+            n_points,
+            previous,
+            false,
+            options,
+            out,
+            outcome,
+            |m, source, previous, options| {
+                Ok(m.track(
+                    source,
+                    previous,
+                    options,
+                    scratch_mut(scratch, scratch_len)?,
+                )?)
+            },
+        )
     }
-    status
 }
 
 /// One tracking step of a cut single view seen from `viewpoint` `[x, y,
@@ -107,31 +101,70 @@ pub unsafe extern "C" fn pcrnet_track_view(
     out: *mut PcrnetRegistration,
     outcome: *mut u32,
 ) -> PcrnetStatus {
+    // SAFETY: the caller's contract for every pointer; `view_inputs`
+    // checks the viewpoint's length and alignment.
+    unsafe {
+        track_into(
+            model,
+            points,
+            n_points,
+            previous,
+            viewpoint.is_null(),
+            options,
+            out,
+            outcome,
+            |m, source, previous, options| {
+                let (viewpoint, scratch, buffer) =
+                    view_inputs(viewpoint, scratch, scratch_len, buffer, buffer_len)?;
+                Ok(m.track_view(source, previous, viewpoint, options, scratch, buffer)?)
+            },
+        )
+    }
+}
+
+/// What `pcrnet_track` and `pcrnet_track_view` share: the model, the
+/// pointers that must not be null (`previous`, `outcome`, and whatever
+/// `missing` says of the caller's own), the previous pose, then `step` on
+/// the points (`register_into`'s checks); the result to `out` and its
+/// outcome code to `outcome` on success, nothing written on an error.
+///
+/// # Safety
+/// As `pcrnet_track`.
+#[allow(clippy::too_many_arguments)]
+unsafe fn track_into(
+    model: *const PcrnetModel,
+    points: *const f32,
+    n_points: usize,
+    previous: *const f32,
+    missing: bool,
+    options: *const PcrnetOptions,
+    out: *mut PcrnetRegistration,
+    outcome: *mut u32,
+    step: impl FnOnce(&Int8Model<'_>, &[[f32; 3]], &Pose, &Options) -> Result<Tracking, PcrnetStatus>,
+) -> PcrnetStatus {
     let m = match crate::model(model) {
         Ok(m) => m,
         Err(s) => return s,
     };
-    if previous.is_null() || viewpoint.is_null() || outcome.is_null() {
+    if previous.is_null() || missing || outcome.is_null() {
         return PCRNET_ERROR_NULL_POINTER;
     }
     // SAFETY: non-null; the caller's contract (7 floats).
-    let previous = match unsafe { previous_pose(previous) } {
+    let previous = match unsafe { pose_at(previous) } {
         Ok(p) => p,
         Err(s) => return s,
     };
     let mut what = PCRNET_TRACK_LOST;
-    // SAFETY: the caller's contract for every pointer; `viewpoint` is
-    // non-null, its length 3 and alignment checked by `slice`.
+    // SAFETY: the caller's contract for every pointer.
     let status = unsafe {
         register_into(points, n_points, options, out, |source, options| {
-            let v = slice(viewpoint, 3)?;
-            let (scratch, buffer) = (
-                scratch_mut(scratch, scratch_len)?,
-                slice_mut(buffer, buffer_len)?,
-            );
-            let viewpoint = [v[0], v[1], v[2]];
-            let t = m.track_view(source, &previous, viewpoint, options, scratch, buffer)?;
-            Ok(noted(t, &mut what))
+            let t = step(m, source, &previous, options)?;
+            what = match t.outcome {
+                TrackOutcome::Kept => PCRNET_TRACK_KEPT,
+                TrackOutcome::Recovered => PCRNET_TRACK_RECOVERED,
+                TrackOutcome::Lost => PCRNET_TRACK_LOST,
+            };
+            Ok(t.registration)
         })
     };
     if status == PCRNET_OK {
@@ -139,28 +172,4 @@ pub unsafe extern "C" fn pcrnet_track_view(
         unsafe { outcome.write(what) };
     }
     status
-}
-
-/// The pose `[qw, qx, qy, qz, tx, ty, tz]` at `previous`.
-///
-/// # Safety
-/// `previous` is non-null and points to 7 readable floats (alignment is
-/// checked).
-unsafe fn previous_pose(previous: *const f32) -> Result<Pose, PcrnetStatus> {
-    // SAFETY: the caller's contract.
-    let p = unsafe { slice(previous, 7) }?;
-    Ok(Pose {
-        rotation: [p[0], p[1], p[2], p[3]],
-        translation: [p[4], p[5], p[6]],
-    })
-}
-
-/// A step's registration, its outcome written to `what` as a C code.
-fn noted(t: Tracking, what: &mut u32) -> pcrnet_core::Registration {
-    *what = match t.outcome {
-        TrackOutcome::Kept => PCRNET_TRACK_KEPT,
-        TrackOutcome::Recovered => PCRNET_TRACK_RECOVERED,
-        TrackOutcome::Lost => PCRNET_TRACK_LOST,
-    };
-    t.registration
 }

@@ -2,11 +2,10 @@
 //! `pcrnet_register_view` and `pcrnet_check_view`.
 
 use PcrnetStatus::*;
-use pcrnet_core::Pose;
 use pcrnet_core::scene::Verification;
 
 use crate::types::{PcrnetOptions, PcrnetRegistration, PcrnetStatus};
-use crate::{PcrnetModel, cloud, register_into, scratch_mut, slice, slice_mut};
+use crate::{PcrnetModel, cloud, pose_at, register_into, scratch_mut, slice, slice_mut};
 
 /// Floats of the image buffer `pcrnet_register_view` and
 /// `pcrnet_check_view` are best given: 32 x 32
@@ -87,12 +86,9 @@ pub unsafe extern "C" fn pcrnet_register_view(
     // non-null, its length 3 and alignment checked by `slice`.
     let status = unsafe {
         register_into(points, n_points, options, out, |source, options| {
-            let v = slice(viewpoint, 3)?;
-            let (scratch, buffer) = (
-                scratch_mut(scratch, scratch_len)?,
-                slice_mut(buffer, buffer_len)?,
-            );
-            let r = m.register_view(source, [v[0], v[1], v[2]], options, scratch, buffer)?;
+            let (viewpoint, scratch, buffer) =
+                view_inputs(viewpoint, scratch, scratch_len, buffer, buffer_len)?;
+            let r = m.register_view(source, viewpoint, options, scratch, buffer)?;
             seen = Some(r.view);
             Ok(pcrnet_core::Registration {
                 reliable: r.reliable,
@@ -105,6 +101,34 @@ pub unsafe extern "C" fn pcrnet_register_view(
         unsafe { out_view.write(v.into()) };
     }
     status
+}
+
+/// A viewed call's viewpoint, scratch and view buffer ([`view_inputs`]).
+pub(crate) type ViewInputs<'a> = ([f32; 3], &'a mut [i8], &'a mut [f32]);
+
+/// The viewpoint, the scratch and the view's buffer of a call that
+/// registers with a view (`pcrnet_register_view`, `pcrnet_track_view`).
+///
+/// # Safety
+/// If non-null, `viewpoint` points to 3 readable floats, `scratch` to
+/// `scratch_len` and `buffer` to `buffer_len` writable elements,
+/// overlapping nothing else.
+pub(crate) unsafe fn view_inputs<'a>(
+    viewpoint: *const f32,
+    scratch: *mut i8,
+    scratch_len: usize,
+    buffer: *mut f32,
+    buffer_len: usize,
+) -> Result<ViewInputs<'a>, PcrnetStatus> {
+    // SAFETY: the caller's contract; `slice` checks null, length and alignment.
+    unsafe {
+        let v = slice(viewpoint, 3)?;
+        Ok((
+            [v[0], v[1], v[2]],
+            scratch_mut(scratch, scratch_len)?,
+            slice_mut(buffer, buffer_len)?,
+        ))
+    }
 }
 
 /// Checks `pose` `[qw, qx, qy, qz, tx, ty, tz]` (a registration of the
@@ -144,11 +168,7 @@ pub unsafe extern "C" fn pcrnet_check_view(
             return Err(PCRNET_ERROR_NULL_POINTER);
         }
         // SAFETY: non-null; the caller's contract (7 and 3 floats); alignment checked.
-        let (p, v) = unsafe { (slice(pose, 7)?, slice(viewpoint, 3)?) };
-        let pose = Pose {
-            rotation: [p[0], p[1], p[2], p[3]],
-            translation: [p[4], p[5], p[6]],
-        };
+        let (pose, v) = unsafe { (pose_at(pose)?, slice(viewpoint, 3)?) };
         // SAFETY: the caller's contract for `points` and `buffer`.
         let (source, buffer) =
             unsafe { (cloud(points, n_points)?, slice_mut(buffer, buffer_len)?) };

@@ -359,57 +359,35 @@ fn run_case(
         let starts = [("held", r.pose), ("predicted", predicted)];
         let n_starts = if options == Options::default() { 2 } else { 1 };
         for (name, start) in starts.iter().take(n_starts) {
-            let baseline = stack::paint();
-            let t0 = counter.instructions();
-            let tracked = model.track(cloud, start, &options, scratch);
-            let t1 = counter.instructions();
-            let peak = stack::used_below(baseline);
-            line.clear();
-            let _ = write!(line, "case {c} track {k} {name} ");
-            match tracked {
-                Ok(t) => {
-                    let _ = write!(line, "ok {} {peak}", t1 - t0);
-                    write_registration(line, &t.registration);
-                    let _ = write!(line, " {:?}", t.outcome);
-                }
-                Err(e) => {
-                    let _ = write!(line, "error {} {peak} {e:?}", t1 - t0);
-                }
-            }
-            emit(line);
+            emit_track((c, k, name), counter, line, || {
+                model.track(cloud, start, &options, scratch)
+            });
         }
         // The same cloud tracked as a view from the harness's viewpoint,
-        // from the predicted start (the host's `tracking::expected`).
+        // from the starts of the host's `tracking::viewed_starts`.
         #[cfg(not(feature = "microbit"))]
         if options == Options::default() {
+            let viewpoint = pcrnet_core::testing::harness_viewpoint(cloud);
             for (name, start) in [("viewed-held", r.pose), ("viewed", predicted)] {
-                track_view(c, k, name, cloud, model, &start, scratch, counter, line);
+                emit_track((c, k, name), counter, line, || {
+                    model.track_view(cloud, &start, viewpoint, &options, scratch, view_buffer())
+                });
             }
         }
     }
 }
 
-/// `case C track K NAME ...`: a tracking step of the cloud as a view
-/// from the harness's viewpoint (`Int8Model::track_view`) from `start`
-/// (the host's `tracking::viewed_starts`), its instructions and peak stack.
-#[cfg(not(feature = "microbit"))]
-#[allow(clippy::too_many_arguments)]
-fn track_view(
-    c: usize,
-    k: usize,
-    name: &str,
-    cloud: &[[f32; 3]],
-    model: &Int8Model,
-    start: &Pose,
-    scratch: &mut [i8],
+/// `case C track K NAME ...`: the tracking step `step` runs (case `C`,
+/// option set `K`, start `NAME`), its instructions and peak stack.
+fn emit_track(
+    (c, k, name): (usize, usize, &str),
     counter: &icount::Counter,
     line: &mut String<LINE>,
+    step: impl FnOnce() -> pcrnet_core::Result<pcrnet_core::Tracking>,
 ) {
-    let viewpoint = pcrnet_core::testing::harness_viewpoint(cloud);
-    let view = view_buffer();
     let baseline = stack::paint();
     let t0 = counter.instructions();
-    let tracked = model.track_view(cloud, start, viewpoint, &Options::default(), scratch, view);
+    let tracked = step();
     let t1 = counter.instructions();
     let peak = stack::used_below(baseline);
     line.clear();
