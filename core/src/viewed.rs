@@ -139,4 +139,8 @@ impl Guide for ViewGuide<'_, '_, '_> {
     fn accept(&mut self, pose: &Pose) -> bool {
         self.judge(&self.model.pose_to_user(pose)).passed
     }
+
+    fn may_refuse(&self) -> bool {
+        true
+    }
 }

@@ -200,6 +200,92 @@ impl<F: FnMut(&Pose) -> bool> refine::Guide for Accepting<F> {
     fn accept(&mut self, pose: &Pose) -> bool {
         (self.0)(pose)
     }
+
+    fn may_refuse(&self) -> bool {
+        true
+    }
+}
+
+/// Screening drops a turned start that cannot win: from the right pose
+/// the network's start fits, every turned start is far above it after
+/// `SCREEN_CHECK` iterations and none is left to be the rival; with a
+/// guide that may refuse starts (and here takes every one) all are screened
+/// to the end and the best turned start is the rival. The pose is the same.
+#[test]
+fn screening_drops_turned_starts_that_cannot_win() {
+    let cloud = ell(4);
+    let half_z = [0.0, 0.0, 0.0, 1.0];
+    let half_x = [0.0, 1.0, 0.0, 0.0];
+    let t = template_of(&cloud, &[half_x, half_z]);
+    let mut rng = SplitMix64(9);
+    let source: Vec<[f32; 3]> = cloud
+        .iter()
+        .map(|p| p.map(|v| v + rng.uniform(-0.01, 0.01)))
+        .collect();
+    let subset = Subset::new(&source, Frame::IDENTITY, 300);
+    let settings = IcpSettings {
+        metric: Metric::PointToPlane,
+        iterations: 20,
+        tolerance: 1e-5,
+        max_distance: 0.3,
+    };
+    let resolve = |guide: &mut dyn FnMut() -> bool| {
+        let mut g = Accepting(|_: &Pose| guide());
+        refine::resolve(&t, &subset, Pose::IDENTITY, 3, 10, &settings, 0.05, &mut g).unwrap()
+    };
+    let mut takes_all = || true;
+    let screened = resolve(&mut takes_all);
+    let dropped = refine::resolve(
+        &t,
+        &subset,
+        Pose::IDENTITY,
+        3,
+        10,
+        &settings,
+        0.05,
+        &mut refine::Unguided,
+    )
+    .unwrap();
+    assert_eq!(dropped.hypothesis, 0);
+    assert_eq!(dropped.pose, screened.pose);
+    assert_eq!(dropped.fit, screened.fit);
+    assert!(
+        angle_deg(&dropped.pose, &Pose::IDENTITY) < 1.0,
+        "{dropped:?}"
+    );
+    assert!(dropped.rival.is_none(), "{dropped:?}");
+    let rival = screened.rival.expect("every turned start screened");
+    assert!(rival.hypothesis > 0);
+    assert!(
+        rival.fit.residual > refine::SCREEN_DROP * dropped.fit.residual,
+        "{rival:?}"
+    );
+}
+
+/// ICP resumed where a run stopped at its budget gives the pose one
+/// longer run gives, bit for bit (what screening relies on when it
+/// checks a start after `SCREEN_CHECK` iterations and goes on).
+#[test]
+fn icp_resumed_equals_one_run() {
+    let cloud = ell(5);
+    let t = template_of(&cloud, &[]);
+    let turn = rotation([0.2, 1.0, -0.4], 20.0);
+    let source: Vec<[f32; 3]> = cloud.iter().map(|&p| turn.transform_point(p)).collect();
+    let subset = Subset::new(&source, Frame::IDENTITY, 256);
+    for metric in [Metric::PointToPoint, Metric::PointToPlane] {
+        let budget = |iterations| IcpSettings {
+            metric,
+            iterations,
+            // Never met: every run ends at its budget.
+            tolerance: 0.0,
+            max_distance: 0.3,
+        };
+        let (whole, n) = refine::icp(&t, &subset, Pose::IDENTITY, &budget(10));
+        let (part, a) = refine::icp(&t, &subset, Pose::IDENTITY, &budget(refine::SCREEN_CHECK));
+        let (resumed, b) = refine::icp(&t, &subset, part, &budget(10 - refine::SCREEN_CHECK));
+        assert_eq!((n, a + b), (10, 10), "{metric:?}");
+        assert_eq!(resumed, whole, "{metric:?}");
+    }
 }
 
 /// A guide that starts every screening from one pose.

@@ -4,7 +4,7 @@
 //! scene path ([`report`]), and PointNetLK's registration and step.
 
 use crate::compare::DeviceRun;
-use crate::plan::{SHIPPED_LK, lk_only};
+use crate::plan::{NOISY, SHIPPED_LK, lk_only};
 use crate::vectors::{Case, TestModel};
 
 /// Prints every figure whose cases ran (a figure whose registration did
@@ -82,6 +82,19 @@ fn shipped(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
     if let Some([_, _, registration, track]) = figures(512) {
         println!("default registration, 512 points: {registration} instructions");
         println!("tracking step, 256 points: {track} instructions");
+    }
+    let noisy = cases.iter().enumerate().find_map(|(i, c)| {
+        let shipped = models[c.model].name == "embedded-default-int8.pcrn";
+        let k = c.registrations.iter().position(|r| *r == default)?;
+        (shipped && c.label.starts_with(NOISY))
+            .then(|| device.registrations.get(&(i, k)))
+            .flatten()
+    });
+    if let Some(d) = noisy {
+        println!(
+            "default registration, 512 points with noise (sigma 0.01): {} instructions",
+            d.instructions
+        );
     }
     let check = demo(512).and_then(|(i, c)| {
         let k = c.registrations.iter().position(|r| *r == default)?;

@@ -10,12 +10,21 @@ use pcrnet_core::{Frame, Int8Model, MAX_TILE, Metric, Options};
 use crate::hostile;
 use crate::qemu::{self, CaseSet};
 use crate::vectors::{
-    Case, TestModel, clouds_for, doubled, random_model, random_model_with, read_cloud,
+    Case, TestModel, clouds_for, doubled, jittered, random_model, random_model_with, read_cloud,
     with_lk_solver,
 };
 
 /// The shipped model that gets the realistic sources.
 const SHIPPED_DEFAULT: &str = "embedded-default-int8.pcrn";
+
+/// The label of the shipped model's noisy source: its demo source with
+/// every coordinate jittered by [`NOISY_JITTER`] (standard deviation
+/// 0.01 of the template's size, the `trust` experiment's noise), where the
+/// right pose's residual is the noise's, not near 0.
+pub const NOISY: &str = "noisy demo source";
+
+/// Half-width of the noisy source's uniform jitter: `0.01 x sqrt(3)`.
+const NOISY_JITTER: f32 = 0.017_320_5;
 
 /// The shipped model's encoder with a random PointNetLK solver and no
 /// head (no PointNetLK model is shipped): PointNetLK's cost at the
@@ -240,11 +249,13 @@ pub fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
                 options,
             });
             let dense = doubled(&demo, 1024, 0.005);
+            let noisy = jittered(&demo, 512, NOISY_JITTER);
             let half: Vec<[f32; 3]> = demo.iter().step_by(2).copied().collect();
             sources.push((
                 format!("demo source {} (every other point)", half.len()),
                 half,
             ));
+            sources.push((format!("{NOISY} {}", noisy.len()), noisy));
             sources.push((format!("demo source {}", demo.len()), demo));
             sources.push((
                 format!("demo source {} (twice, jitter 0.005)", dense.len()),

@@ -538,13 +538,19 @@ pub fn read_cloud(path: &std::path::Path) -> anyhow::Result<Vec<[f32; 3]>> {
         .collect())
 }
 
-/// The cloud twice, the second copy moved by a seeded jitter in
-/// `[-jitter, jitter)` per coordinate: a denser scan of the same surface.
+/// The cloud twice, the second copy [`jittered`]: a denser scan of the
+/// same surface.
 pub fn doubled(cloud: &[[f32; 3]], seed: u64, jitter: f32) -> Vec<[f32; 3]> {
+    let second = jittered(cloud, seed, jitter);
+    cloud.iter().copied().chain(second).collect()
+}
+
+/// The cloud with every coordinate moved by a seeded jitter in
+/// `[-jitter, jitter)` (uniform: standard deviation `jitter / sqrt(3)`).
+pub fn jittered(cloud: &[[f32; 3]], seed: u64, jitter: f32) -> Vec<[f32; 3]> {
     let mut rng = SplitMix64(seed);
-    let second: Vec<[f32; 3]> = cloud
+    cloud
         .iter()
         .map(|p| p.map(|x| x + rng.uniform(-jitter, jitter)))
-        .collect();
-    cloud.iter().copied().chain(second).collect()
+        .collect()
 }

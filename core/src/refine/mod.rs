@@ -15,8 +15,8 @@ use core::num::NonZeroUsize;
 mod resolve;
 pub(crate) use resolve::apart;
 pub use resolve::{
-    FLIP_MARGIN, Guide, RIVAL_MIN_TURN_COS, RIVAL_SCREEN_RATIO, Resolved, Rival, Unguided, resolve,
-    resolve_starts,
+    FLIP_MARGIN, Guide, RIVAL_MIN_TURN_COS, RIVAL_SCREEN_RATIO, Resolved, Rival, SCREEN_CHECK,
+    SCREEN_DROP, Unguided, resolve, resolve_starts,
 };
 
 use crate::eigen;
@@ -197,6 +197,30 @@ pub fn icp(
     start: Pose,
     settings: &IcpSettings,
 ) -> (Pose, usize) {
+    let run = icp_run(template, subset, start, settings);
+    (run.pose, run.iterations)
+}
+
+/// Where an ICP run ended ([`icp_run`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct IcpRun {
+    /// The refined pose (model frame).
+    pub pose: Pose,
+    /// Iterations that updated the pose.
+    pub iterations: usize,
+    /// Whether it stopped on its own (converged, or too few pairs) rather
+    /// than at the iteration budget: a run that did not can be resumed from
+    /// `pose` with the same result as one longer run.
+    pub stopped: bool,
+}
+
+/// [`icp`], saying whether the run stopped on its own.
+pub(crate) fn icp_run(
+    template: &Template<'_>,
+    subset: &Subset<'_>,
+    start: Pose,
+    settings: &IcpSettings,
+) -> IcpRun {
     let lim = limit(template, settings.max_distance);
     let mut pose = start;
     for done in 1..=settings.iterations {
@@ -205,14 +229,26 @@ pub fn icp(
             Metric::PointToPlane => plane_step(template, subset, &pose, lim),
         };
         let Some(delta) = step else {
-            return (pose, done - 1);
+            return IcpRun {
+                pose,
+                iterations: done - 1,
+                stopped: true,
+            };
         };
         pose = pose.then(&delta);
         if delta.distance_to_identity_squared() < settings.tolerance * settings.tolerance {
-            return (pose, done);
+            return IcpRun {
+                pose,
+                iterations: done,
+                stopped: true,
+            };
         }
     }
-    (pose, settings.iterations)
+    IcpRun {
+        pose,
+        iterations: settings.iterations,
+        stopped: false,
+    }
 }
 
 /// One ICP update (model frame), or `None` with fewer than 3 pairs.
