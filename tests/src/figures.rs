@@ -4,7 +4,7 @@
 //! scene path ([`report`]), and PointNetLK's registration and step.
 
 use crate::compare::DeviceRun;
-use crate::plan::{NOISY, SHIPPED_LK, lk_only};
+use crate::plan::{NOISY, SHIPPED_LK, every_point, lk_only};
 use crate::vectors::{Case, TestModel};
 
 /// Prints every figure whose cases ran (a figure whose registration did
@@ -82,6 +82,13 @@ fn shipped(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
     if let Some([_, _, registration, track]) = figures(512) {
         println!("default registration, 512 points: {registration} instructions");
         println!("tracking step, 256 points: {track} instructions");
+    }
+    let dense_step = demo(512).and_then(|(i, c)| {
+        let k = c.registrations.iter().position(|r| *r == every_point())?;
+        Some(device.tracks.get(&(i, k, "held".to_string()))?.instructions)
+    });
+    if let Some(step) = dense_step {
+        println!("tracking step, 512 scored points: {step} instructions");
     }
     let noisy = cases.iter().enumerate().find_map(|(i, c)| {
         let shipped = models[c.model].name == "embedded-default-int8.pcrn";

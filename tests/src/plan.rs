@@ -59,6 +59,16 @@ fn net_k1_k4_default() -> Vec<Options> {
     vec![Options::network_only(), k(1), k(4), Options::default()]
 }
 
+/// The default options scoring and refining up to 512 points (every point
+/// of the demo source): what a tracker that wants the last half degree
+/// runs (the `tracking` experiment's 512-point rows).
+pub fn every_point() -> Options {
+    Options {
+        max_points: 512,
+        ..Options::default()
+    }
+}
+
 /// Every field away from its default (i-PCRNet passes stopping early,
 /// three hypotheses screened with 3 ICP iterations before the finalists
 /// get 10, fewer points): the screening path, and a check that the
@@ -266,7 +276,10 @@ pub fn models(set: CaseSet) -> anyhow::Result<Vec<Plan>> {
             model: TestModel { name, blob },
             sizes: vec![1, 100, 1024, 4096],
             sources,
-            options: net_k1_k4_default(),
+            options: net_k1_k4_default()
+                .into_iter()
+                .chain([every_point()])
+                .collect(),
         });
         out.extend(lk);
     }

@@ -50,6 +50,15 @@ const TAIL: usize = 30;
 /// A reliable pose further off than this counts as far off.
 const FAR_DEG: f64 = 30.0;
 
+/// Points each step scores and refines (`Options::max_points`): the
+/// default 256, and every point of a 512-point view (a tracking step then
+/// costs about twice as much: the QEMU harness's `tracking step, 512
+/// scored points` line).
+pub const SCORED: [usize; 2] = [256, 512];
+
+/// The scored points the plots and the per-template table show.
+const PLOTTED: usize = SCORED[0];
+
 /// The verdict threshold a sequence is followed with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 enum Verdict {
@@ -89,6 +98,8 @@ struct Followed {
     floor: f32,
     /// The verdict's threshold in this run.
     max_residual: f32,
+    /// `Options::max_points` of this run.
+    scored: usize,
     frames: Vec<FrameResult>,
 }
 
@@ -148,7 +159,7 @@ pub fn tracking(ctx: &Context) -> anyhow::Result<Report> {
         "Tracking sensor streams",
         vec![
             format!("{FRAMES} frames per sequence at {} frames a second; the object turns up to 90 deg/s and shifts up to half its size a second along a smooth random trajectory (each Euler angle and coordinate a sine about a start in the network's range: Euler U[-45°, 45°], translation U[-0.5, 0.5]; periods 5 to 20 s), seen by a fixed depth camera.", RATES.map(|r| r.to_string()).join(" and ")),
-            format!("Every frame a fresh single view (point z-buffer) of {POINTS} points drawn from the shape's points the template did not keep, Gaussian noise sigma {SIGMA} per coordinate. ModelNet10: {SHAPES} seeded test shapes (512-point templates); airplane_0001: one ModelNet40 airplane (1,024-point template, 512 stored), both with the shipped model (`{SHIPPED_INT8}`) and `Options::default()` (its `max_residual` replaced in the calibrated runs, below)."),
+            format!("Every frame a fresh single view (point z-buffer) of {POINTS} points drawn from the shape's points the template did not keep, Gaussian noise sigma {SIGMA} per coordinate. ModelNet10: {SHAPES} seeded test shapes (512-point templates); airplane_0001: one ModelNet40 airplane (1,024-point template, 512 stored), both with the shipped model (`{SHIPPED_INT8}`) and `Options::default()` (its `max_residual` replaced in the calibrated runs, below), which scores and refines 256 of the view's points (`max_points`); the rows of 512 scored points use every point of the view (a tracking step then costs 1.5 M instructions on the M4F instead of 0.77 M: the QEMU harness's `tracking step, 512 scored points` line). The plots and the per-template table are of 256 scored points."),
             "The camera's position is known (the frame's viewpoint), so the tracker uses the view-aware calls: frames until the first reliable pose: `register_view` (its starts placed by what the camera sees, its verdict the residual's). Every later frame: `track_view` from the constant-velocity prediction of the last two poses (`pose::predict`; the last pose after a registration; after a lost frame, the last reliable pose: coasting), kept when reliable and within one step, else the view-guided registration in the same call (recovered if reliable). Lost: no reliable pose for the frame. Wrong: reliable but more than 5° off.".into(),
             "View check: after each step, its pose checked against the frame's view from the camera (`Int8Model::check_view`, scene.md); the step's verdict does not use it, so the columns say what a tracker acting on it would have refused, frame by frame. Acquired: a sequence with a reliable pose at some frame; lost after acquisition: the lost frames from each sequence's first reliable frame on (what tracking itself loses; a sequence's first frame is a single view of the full model in the network's range, where registration alone often fails: issue 37). Errors are of the frames with a reliable pose. Drift: the mean rotation error of a sequence's last 30 frames, the median over sequences. Host times are one thread, the int8 model with the host scratch (AVX2 kernels where the CPU has them); the device's counts are the QEMU harness's `tracking step` line.".into(),
             format!("Verdict: every sequence is followed twice, with `Options::max_residual` at its default 0.015 and calibrated for its template (`pcrnet_train::floor`): the template's residual floor (the relative plane residual of the shape's points the template did not store, at the template's own pose, no noise) plus {} for the noise, never below 0.015. The floor is measured once per template, from points a user training for their own object has at hand.", pcrnet_core::registration::NOISE_ALLOWANCE),
@@ -182,7 +193,10 @@ fn follow_shape(
     .with_context(|| format!("{name} has no finite points beside its template's"))?;
     let trajectory = Trajectory::new(seed);
     let mut out = Vec::new();
-    for verdict in Verdict::ALL {
+    for (scored, verdict) in SCORED
+        .into_iter()
+        .flat_map(|n| Verdict::ALL.map(|v| (n, v)))
+    {
         let max_residual = match verdict {
             Verdict::Default => defaults.max_residual,
             Verdict::Calibrated => {
@@ -191,6 +205,7 @@ fn follow_shape(
         };
         let options = Options {
             max_residual,
+            max_points: scored,
             ..defaults
         };
         let frames = follow(
@@ -212,6 +227,7 @@ fn follow_shape(
             verdict,
             floor,
             max_residual,
+            scored,
             frames,
         });
     }
@@ -233,15 +249,18 @@ fn floors(all: &[Followed]) -> Table {
         (100.0 * lost as f64 / n, wrong)
     };
     let mut rows = Vec::new();
-    for d in all
-        .iter()
-        .filter(|f| f.set == "ModelNet10" && f.rate == rate && f.verdict == Verdict::Default)
-    {
+    for d in all.iter().filter(|f| {
+        f.set == "ModelNet10"
+            && f.rate == rate
+            && f.verdict == Verdict::Default
+            && f.scored == PLOTTED
+    }) {
         let Some(c) = all.iter().find(|f| {
             f.set == d.set
                 && f.shape == d.shape
                 && f.rate == rate
                 && f.verdict == Verdict::Calibrated
+                && f.scored == PLOTTED
         }) else {
             continue;
         };
@@ -287,17 +306,19 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
 /// One row per set and rate.
 fn table(all: &[Followed]) -> Table {
     let mut rows = Vec::new();
-    let mut keys: Vec<(String, f32, Verdict)> = Vec::new();
+    let mut keys: Vec<(String, f32, usize, Verdict)> = Vec::new();
     for f in all {
-        let key = (f.set.clone(), f.rate, f.verdict);
+        let key = (f.set.clone(), f.rate, f.scored, f.verdict);
         if !keys.contains(&key) {
             keys.push(key);
         }
     }
-    for (set, rate, verdict) in keys {
+    for (set, rate, scored, verdict) in keys {
         let seqs: Vec<&Followed> = all
             .iter()
-            .filter(|f| f.set == set && f.rate == rate && f.verdict == verdict)
+            .filter(|f| {
+                f.set == set && f.rate == rate && f.scored == scored && f.verdict == verdict
+            })
             .collect();
         let frames: Vec<&FrameResult> = seqs.iter().flat_map(|f| &f.frames).collect();
         let n = frames.len().max(1) as f64;
@@ -363,6 +384,7 @@ fn table(all: &[Followed]) -> Table {
         rows.push(vec![
             set.clone(),
             format!("{rate}"),
+            scored.to_string(),
             verdict.label().to_string(),
             seqs.len().to_string(),
             frames.len().to_string(),
@@ -390,6 +412,7 @@ fn table(all: &[Followed]) -> Table {
         header: [
             "shapes",
             "fps",
+            "scored points",
             "verdict",
             "sequences",
             "frames",
@@ -424,7 +447,9 @@ fn error_chart(set: &str, verdict: Verdict, all: &[Followed]) -> Chart {
     for rate in RATES {
         for f in all
             .iter()
-            .filter(|f| f.set == set && f.rate == rate && f.verdict == verdict)
+            .filter(|f| {
+                f.set == set && f.rate == rate && f.verdict == verdict && f.scored == PLOTTED
+            })
             .take(4)
         {
             series.push(Series {
