@@ -260,7 +260,8 @@ typedef struct {
    */
   uint32_t hypotheses;
   /*
-   ICP iterations every start gets before the two best continue.
+   ICP iterations every start gets before the two best continue (a
+   turned start far above the best after 3 of them is dropped).
    */
   uint32_t screen_iterations;
   /*

@@ -123,7 +123,8 @@ pub struct PcrnetOptions {
     pub tolerance: f32,
     /// Starting poses of flip resolution, 1 up to 1 + the blob's turns.
     pub hypotheses: u32,
-    /// ICP iterations every start gets before the two best continue.
+    /// ICP iterations every start gets before the two best continue (a
+    /// turned start far above the best after 3 of them is dropped).
     pub screen_iterations: u32,
     /// Most ICP iterations in all (0: no refinement).
     pub icp_iterations: u32,

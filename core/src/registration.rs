@@ -94,7 +94,9 @@ pub struct Options {
     /// up to 1 + the turns stored in the blob (clamped).
     pub hypotheses: usize,
     /// ICP iterations every hypothesis gets before the network's own and
-    /// the best turned one go on to `icp_iterations` (see [`crate::refine::resolve`]).
+    /// the best turned one go on to `icp_iterations`; a turned one far
+    /// above the best after [`crate::refine::SCREEN_CHECK`] of them is
+    /// dropped (see [`crate::refine::resolve`]).
     pub screen_iterations: usize,
     /// Most ICP iterations in all for a finalist (0: no refinement).
     pub icp_iterations: usize,

@@ -210,56 +210,90 @@ impl<F: FnMut(&Pose) -> bool> refine::Guide for Accepting<F> {
 /// the network's start fits, every turned start is far above it after
 /// `SCREEN_CHECK` iterations and none is left to be the rival; with a
 /// guide that may refuse starts (and here takes every one) all are screened
-/// to the end and the best turned start is the rival. The pose is the same.
+/// to the end and the best turned start is the rival. Where a turned start
+/// wins (the source turned half about z), it is checked, kept and resumed:
+/// the result is the one of screening it in one run, field for field.
 #[test]
 fn screening_drops_turned_starts_that_cannot_win() {
     let cloud = ell(4);
     let half_z = [0.0, 0.0, 0.0, 1.0];
     let half_x = [0.0, 1.0, 0.0, 0.0];
     let t = template_of(&cloud, &[half_x, half_z]);
-    let mut rng = SplitMix64(9);
-    let source: Vec<[f32; 3]> = cloud
-        .iter()
-        .map(|p| p.map(|v| v + rng.uniform(-0.01, 0.01)))
-        .collect();
-    let subset = Subset::new(&source, Frame::IDENTITY, 300);
     let settings = IcpSettings {
         metric: Metric::PointToPlane,
         iterations: 20,
         tolerance: 1e-5,
         max_distance: 0.3,
     };
-    let resolve = |guide: &mut dyn FnMut() -> bool| {
-        let mut g = Accepting(|_: &Pose| guide());
-        refine::resolve(&t, &subset, Pose::IDENTITY, 3, 10, &settings, 0.05, &mut g).unwrap()
+    let flip = Pose {
+        rotation: half_z,
+        translation: [0.0; 3],
     };
-    let mut takes_all = || true;
-    let screened = resolve(&mut takes_all);
-    let dropped = refine::resolve(
-        &t,
-        &subset,
-        Pose::IDENTITY,
-        3,
-        10,
-        &settings,
-        0.05,
-        &mut refine::Unguided,
-    )
-    .unwrap();
-    assert_eq!(dropped.hypothesis, 0);
-    assert_eq!(dropped.pose, screened.pose);
-    assert_eq!(dropped.fit, screened.fit);
-    assert!(
-        angle_deg(&dropped.pose, &Pose::IDENTITY) < 1.0,
-        "{dropped:?}"
-    );
-    assert!(dropped.rival.is_none(), "{dropped:?}");
-    let rival = screened.rival.expect("every turned start screened");
-    assert!(rival.hypothesis > 0);
-    assert!(
-        rival.fit.residual > refine::SCREEN_DROP * dropped.fit.residual,
-        "{rival:?}"
-    );
+    // Half about z and 8 degrees more: the winning turned start needs more
+    // than `SCREEN_CHECK` iterations.
+    let off_flip = flip.then(&rotation([0.3, 1.0, 0.2], 8.0));
+    for (turn, winner) in [(Pose::IDENTITY, 0), (off_flip, 2)] {
+        let mut rng = SplitMix64(9);
+        let source: Vec<[f32; 3]> = cloud
+            .iter()
+            .map(|&p| {
+                turn.transform_point(p)
+                    .map(|v| v + rng.uniform(-0.01, 0.01))
+            })
+            .collect();
+        let subset = Subset::new(&source, Frame::IDENTITY, 300);
+        let screened = refine::resolve(
+            &t,
+            &subset,
+            Pose::IDENTITY,
+            3,
+            10,
+            &settings,
+            0.05,
+            &mut Accepting(|_: &Pose| true),
+        )
+        .unwrap();
+        let dropping = refine::resolve(
+            &t,
+            &subset,
+            Pose::IDENTITY,
+            3,
+            10,
+            &settings,
+            0.05,
+            &mut refine::Unguided,
+        )
+        .unwrap();
+        assert_eq!(dropping.hypothesis, winner);
+        // The pose takes the source back onto the template.
+        assert!(
+            angle_deg(&dropping.pose, &turn.inverse()) < 1.0,
+            "{dropping:?}"
+        );
+        if winner == 0 {
+            assert_eq!((dropping.pose, dropping.fit), (screened.pose, screened.fit));
+            assert!(dropping.rival.is_none(), "{dropping:?}");
+            let rival = screened.rival.expect("every turned start screened");
+            assert!(rival.hypothesis > 0);
+            assert!(
+                rival.fit.residual > refine::SCREEN_DROP * dropping.fit.residual,
+                "{rival:?}"
+            );
+        } else {
+            // Checked after `SCREEN_CHECK` iterations, then resumed.
+            assert!(
+                dropping.icp_iterations > refine::SCREEN_CHECK,
+                "{dropping:?}"
+            );
+            assert_eq!(dropping, screened);
+        }
+    }
+    // An optional guide may refuse exactly when the guide may.
+    type Test = fn(&Pose) -> bool;
+    let none: Option<Accepting<Test>> = None;
+    assert!(!refine::Guide::may_refuse(&none));
+    assert!(refine::Guide::may_refuse(&Some(Accepting(|_: &Pose| true))));
+    assert!(!refine::Guide::may_refuse(&refine::Unguided));
 }
 
 /// ICP resumed where a run stopped at its budget gives the pose one

@@ -8,11 +8,13 @@
 use pcrnet_core::format::{CRC_LEN, FORMAT_VERSION, HEADER_LEN, MAGIC, ModelKind, OLDEST_READABLE};
 use pcrnet_core::{F32Model, Int8Model, Metric, Options, Registration};
 
-/// Fewer ICP iterations than the default: the same code, faster runs.
+/// Fewer ICP iterations than the default: the same code (screening one
+/// iteration past `refine::SCREEN_CHECK`, so its check and resumed ICP
+/// run), faster runs.
 pub fn quick_options() -> Options {
     Options {
-        icp_iterations: 4,
-        screen_iterations: 2,
+        icp_iterations: 6,
+        screen_iterations: 4,
         ..Options::default()
     }
 }
@@ -24,8 +26,10 @@ pub fn options_from(bytes: &[u8; 16]) -> Options {
         passes: 1 + (bytes[0] % 3) as usize,
         tolerance: f(1).abs(),
         hypotheses: bytes[5] as usize,
-        screen_iterations: (bytes[6] % 4) as usize,
-        icp_iterations: (bytes[7] % 6) as usize,
+        // Past `refine::SCREEN_CHECK`, so that screening's check and its
+        // resumed ICP are reached.
+        screen_iterations: (bytes[6] % 8) as usize,
+        icp_iterations: (bytes[7] % 12) as usize,
         metric: if bytes[8] & 1 == 0 {
             Metric::PointToPoint
         } else {

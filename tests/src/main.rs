@@ -26,7 +26,7 @@ use pcrnet_qemu_tests::compare::{
     DeviceRun, first_difference, iterative_difference, parse, registration_difference,
 };
 use pcrnet_qemu_tests::hostile::load_verdict;
-use pcrnet_qemu_tests::plan::{Plan, build_cases, models};
+use pcrnet_qemu_tests::plan::{NOISY, Plan, build_cases, models};
 use pcrnet_qemu_tests::vectors::{
     Case, TestModel, container, describe, expected, expected_iterative, expected_registrations,
 };
@@ -401,7 +401,10 @@ fn report_registrations(models: &[TestModel], cases: &[Case], device: &DeviceRun
             .max_by_key(|(_, c)| c.cloud.len())
             .map(|(i, _)| i);
         let shown = cases.iter().enumerate().filter(|&(i, c)| {
-            ok(i, c) && (c.label.starts_with("demo") || Some(i) == largest_uniform)
+            ok(i, c)
+                && (c.label.starts_with("demo")
+                    || c.label.starts_with(NOISY)
+                    || Some(i) == largest_uniform)
         });
         for (i, c) in shown {
             for (k, options) in c.registrations.iter().enumerate() {

@@ -18,7 +18,7 @@ use crate::vectors::{
 const SHIPPED_DEFAULT: &str = "embedded-default-int8.pcrn";
 
 /// The label of the shipped model's noisy source: its demo source with
-/// every coordinate jittered by [`NOISY_JITTER`] (standard deviation
+/// every coordinate jittered uniformly by `0.01 x sqrt(3)` (standard deviation
 /// 0.01 of the template's size, the `trust` experiment's noise), where the
 /// right pose's residual is the noise's, not near 0.
 pub const NOISY: &str = "noisy demo source";

@@ -95,7 +95,8 @@ pub struct Method {
     /// Most ICP iterations of the device pipeline.
     #[serde(default = "default_icp_iterations")]
     pub icp_iterations: usize,
-    /// ICP iterations of every hypothesis before the two best go on.
+    /// ICP iterations of every hypothesis before the two best go on (a
+    /// turned one far above the best after 3 of them is dropped).
     #[serde(default = "default_screen_iterations")]
     pub screen_iterations: usize,
     /// Most source points the device pipeline scores and refines.
