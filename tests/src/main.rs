@@ -106,7 +106,14 @@ fn run_plans(
     };
     let dir = root.join("target/qemu");
     std::fs::create_dir_all(&dir)?;
-    let vectors = dir.join("vectors.bin");
+    // One file per run: two runs at once (say `cargo xtask cores` beside
+    // `qemu-test`) must not load each other's cases, which fails every
+    // case after the first difference with outputs off by one.
+    let vectors = dir.join(format!(
+        "vectors-{}-{}.bin",
+        board.machine,
+        std::process::id()
+    ));
     std::fs::write(&vectors, container(&models, &cases, board.data_len)?)?;
 
     let features: &[&str] = if args.mutate {
@@ -134,6 +141,8 @@ fn run_plans(
         qemu::qemu_command(board, &elf, Some(&vectors)),
         args.timeout,
     )?;
+    // Gone with the run (a leftover is only disk space).
+    let _ = std::fs::remove_file(&vectors);
     println!("QEMU ran for {:.1} s", started.elapsed().as_secs_f64());
     std::fs::write(
         dir.join(format!("device-output-{}.txt", board.machine)),
