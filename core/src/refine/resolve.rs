@@ -303,8 +303,8 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
         for (hypothesis, from) in starts {
             let lowest = match (dropping, kept[0]) {
                 (Dropping::Never, _) => None,
-                (Dropping::Above(Some(b)), Some(k)) => Some(b.min(k.fit.residual)),
-                (Dropping::Above(b), k) => b.or(k.map(|k| k.fit.residual)),
+                (Dropping::Above(b), Some(k)) => Some(b.min(k.fit.residual)),
+                (Dropping::Above(b), None) => Some(b),
             };
             let Some(r) = self.screen(guide.place(from), hypothesis, lowest)? else {
                 continue;
@@ -361,7 +361,7 @@ enum Dropping {
     /// Starts are dropped above [`SCREEN_DROP`] times the lowest residual
     /// reached: by an earlier start of the search, or the one given (a
     /// start already refined outside it).
-    Above(Option<f32>),
+    Above(f32),
 }
 
 /// What [`Search::best_of`] found.
@@ -436,7 +436,7 @@ pub fn resolve(
     let dropping = if guide.may_refuse() {
         Dropping::Never
     } else {
-        Dropping::Above(Some(network.fit.residual))
+        Dropping::Above(network.fit.residual)
     };
     let turned = turns
         .iter()
