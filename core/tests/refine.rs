@@ -9,6 +9,7 @@ use common::{angle_deg, rotation};
 use pcrnet_core::format::Frame;
 use pcrnet_core::pose::Pose;
 use pcrnet_core::refine::{self, Degeneracy, IcpSettings, Metric, Subset};
+use pcrnet_core::template::Template;
 use pcrnet_core::testing::SplitMix64;
 use shapes::template_of;
 
@@ -110,28 +111,8 @@ fn flip_resolution_picks_the_turn_that_fits() {
         tolerance: 1e-5,
         max_distance: 0.1,
     };
-    let one = refine::resolve(
-        &t,
-        &subset,
-        Pose::IDENTITY,
-        1,
-        10,
-        &settings,
-        0.05,
-        &mut refine::Unguided,
-    )
-    .unwrap();
-    let three = refine::resolve(
-        &t,
-        &subset,
-        Pose::IDENTITY,
-        3,
-        4,
-        &settings,
-        0.05,
-        &mut refine::Unguided,
-    )
-    .unwrap();
+    let one = resolve_from_identity(&t, &subset, 1, 10, &settings, &mut refine::Unguided);
+    let three = resolve_from_identity(&t, &subset, 3, 4, &settings, &mut refine::Unguided);
     assert_eq!(three.hypothesis, 2);
     assert!(three.fit.residual < 1e-3, "{three:?}");
     assert!(one.fit.residual > 10.0 * three.fit.residual, "{one:?}");
@@ -142,55 +123,47 @@ fn flip_resolution_picks_the_turn_that_fits() {
     // to finish, so the right pose is not chosen; one that refuses every
     // fit changes nothing (the lowest finishes, as without a test).
     let mut refuse_flip = Accepting(|p: &Pose| angle_deg(p, &flip) > 10.0);
-    let refusing = refine::resolve(
-        &t,
-        &subset,
-        Pose::IDENTITY,
-        3,
-        4,
-        &settings,
-        0.05,
-        &mut refuse_flip,
-    )
-    .unwrap();
+    let refusing = resolve_from_identity(&t, &subset, 3, 4, &settings, &mut refuse_flip);
     assert_ne!(refusing.hypothesis, 2, "{refusing:?}");
     assert!(angle_deg(&refusing.pose, &flip) > 10.0, "{refusing:?}");
     let mut refuse_all = Accepting(|_: &Pose| false);
-    let none = refine::resolve(
-        &t,
-        &subset,
-        Pose::IDENTITY,
-        3,
-        4,
-        &settings,
-        0.05,
-        &mut refuse_all,
-    )
-    .unwrap();
+    let none = resolve_from_identity(&t, &subset, 3, 4, &settings, &mut refuse_all);
     assert_eq!(none, three);
 
     // A guide that places every start: the network's own start put on the
     // right pose wins with one hypothesis, where unplaced it did not.
     let mut onto_flip = StartFrom(flip);
-    let placed = refine::resolve(
-        &t,
-        &subset,
-        Pose::IDENTITY,
-        1,
-        10,
-        &settings,
-        0.05,
-        &mut onto_flip,
-    )
-    .unwrap();
+    let placed = resolve_from_identity(&t, &subset, 1, 10, &settings, &mut onto_flip);
     assert_eq!(placed.hypothesis, 0);
     assert!(angle_deg(&placed.pose, &flip) < 0.1, "{placed:?}");
     // An optional guide: none is no guide, some is the guide.
-    let resolve = |guide: &mut Option<StartFrom>| {
-        refine::resolve(&t, &subset, Pose::IDENTITY, 1, 10, &settings, 0.05, guide).unwrap()
-    };
+    let resolve =
+        |guide: &mut Option<StartFrom>| resolve_from_identity(&t, &subset, 1, 10, &settings, guide);
     assert_eq!(resolve(&mut None), one);
     assert_eq!(resolve(&mut Some(StartFrom(flip))), placed);
+}
+
+/// Flip resolution of `subset` from the identity (the network's pose in
+/// these tests), scoring within 0.05.
+fn resolve_from_identity(
+    t: &Template<'_>,
+    subset: &Subset<'_>,
+    hypotheses: usize,
+    screen: usize,
+    settings: &IcpSettings,
+    guide: &mut impl refine::Guide,
+) -> refine::Resolved {
+    refine::resolve(
+        t,
+        subset,
+        Pose::IDENTITY,
+        hypotheses,
+        screen,
+        settings,
+        0.05,
+        guide,
+    )
+    .unwrap()
 }
 
 /// A guide with a test besides the residual, starts as given.
@@ -242,28 +215,15 @@ fn screening_drops_turned_starts_that_cannot_win() {
             })
             .collect();
         let subset = Subset::new(&source, Frame::IDENTITY, 300);
-        let screened = refine::resolve(
+        let screened = resolve_from_identity(
             &t,
             &subset,
-            Pose::IDENTITY,
             3,
             10,
             &settings,
-            0.05,
             &mut Accepting(|_: &Pose| true),
-        )
-        .unwrap();
-        let dropping = refine::resolve(
-            &t,
-            &subset,
-            Pose::IDENTITY,
-            3,
-            10,
-            &settings,
-            0.05,
-            &mut refine::Unguided,
-        )
-        .unwrap();
+        );
+        let dropping = resolve_from_identity(&t, &subset, 3, 10, &settings, &mut refine::Unguided);
         assert_eq!(dropping.hypothesis, winner);
         // The pose takes the source back onto the template.
         assert!(

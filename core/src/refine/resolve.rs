@@ -210,6 +210,18 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
         on: &Subset<'_>,
     ) -> Result<Resolved> {
         let (pose, icp_iterations) = icp(self.template, on, from, settings);
+        self.scored(pose, hypothesis, icp_iterations, on)
+    }
+
+    /// `pose` (reached from start `hypothesis` in `icp_iterations`)
+    /// scored on `on`; a non-finite residual is an error.
+    fn scored(
+        &self,
+        pose: Pose,
+        hypothesis: usize,
+        icp_iterations: usize,
+        on: &Subset<'_>,
+    ) -> Result<Resolved> {
         let fit = score(self.template, on, &pose, self.max_distance);
         if fit.residual.is_finite() {
             Ok(Resolved {
@@ -247,20 +259,11 @@ impl<'a, 't, 's> Search<'a, 't, 's> {
             ..self.first
         };
         let run = icp_run(self.template, self.subset, from, &check);
-        let fit = score(self.template, self.subset, &run.pose, self.max_distance);
-        if !fit.residual.is_finite() {
-            return Err(Error::NonFiniteResult);
-        }
+        let checked = self.scored(run.pose, hypothesis, run.iterations, self.subset)?;
         if run.stopped {
-            return Ok(Some(Resolved {
-                pose: run.pose,
-                fit,
-                hypothesis,
-                icp_iterations: run.iterations,
-                rival: None,
-            }));
+            return Ok(Some(checked));
         }
-        if fit.residual > SCREEN_DROP * bound {
+        if checked.fit.residual > SCREEN_DROP * bound {
             return Ok(None);
         }
         let rest = IcpSettings {
