@@ -204,10 +204,11 @@ static void locate(void) {
     } else {
         printf("  no cluster of the object's size\n");
     }
-    printf("@ locate sweep 0 %d %d %d %d %lu %lu %lu %lu %lu %lu %lu", found.found ? 1 : 0, found.reliable ? 1 : 0,
+    printf("@ locate sweep 0 %d %d %d %d %lu %lu %lu %lu %lu %lu %lu %lu", found.found ? 1 : 0, found.reliable ? 1 : 0,
            found.verified ? 1 : 0, found.has_plane ? 1 : 0, (unsigned long)found.cluster,
            (unsigned long)found.clusters_kept, (unsigned long)found.candidates_tried, (unsigned long)found.supported,
-           (unsigned long)found.violations, (unsigned long)found.occluded, (unsigned long)found.unobserved);
+           (unsigned long)found.violations, (unsigned long)found.occluded, (unsigned long)found.unobserved,
+           (unsigned long)found.outside);
     print_bits(found.plane_normal, 3);
     print_bits(&found.plane_offset, 1);
     print_registration_bits(&found.registration);

@@ -561,9 +561,14 @@ typedef struct {
    */
   uint32_t occluded;
   /*
-   ... and outside the frame or at a pixel without depth.
+   ... at a pixel without depth ...
    */
   uint32_t unobserved;
+  /*
+   ... and outside the frame or behind the sensor (a winner with more
+   than 5% of its points here is not reliable: out of view).
+   */
+  uint32_t outside;
   /*
    The winner's place among the kept clusters (largest first).
    */

@@ -92,8 +92,11 @@ pub struct PcrnetLocated {
     pub violations: u32,
     /// ... behind it ...
     pub occluded: u32,
-    /// ... and outside the frame or at a pixel without depth.
+    /// ... at a pixel without depth ...
     pub unobserved: u32,
+    /// ... and outside the frame or behind the sensor (a winner with more
+    /// than 5% of its points here is not reliable: out of view).
+    pub outside: u32,
     /// The winner's place among the kept clusters (largest first).
     pub cluster: u32,
     /// Clusters kept by their size.
@@ -171,6 +174,7 @@ impl From<&Located> for PcrnetLocated {
             violations: check.map_or(0, |v| v.violations),
             occluded: check.map_or(0, |v| v.occluded),
             unobserved: check.map_or(0, |v| v.unobserved),
+            outside: check.map_or(0, |v| v.outside),
             cluster: best.map_or(0, |b| count(b.cluster)),
             clusters_kept: count(located.segmentation.clusters.kept.len()),
             candidates_tried: count(located.tried.len()),

@@ -79,6 +79,7 @@ fn untouched() -> PcrnetLocated {
         violations: 7,
         occluded: 7,
         unobserved: 7,
+        outside: 7,
         cluster: 7,
         clusters_kept: 7,
         candidates_tried: 7,
@@ -171,9 +172,16 @@ fn the_harness_frame_is_located_as_the_rust_api_locates_it() {
                 found.supported,
                 found.violations,
                 found.occluded,
-                found.unobserved
+                found.unobserved,
+                found.outside
             ],
-            [v.supported, v.violations, v.occluded, v.unobserved]
+            [
+                v.supported,
+                v.violations,
+                v.occluded,
+                v.unobserved,
+                v.outside
+            ]
         );
         let plane = located.segmentation.plane.unwrap();
         assert_eq!(

@@ -15,7 +15,7 @@
 
 use crate::error::Result;
 use crate::registration::Registration;
-use crate::scene::{self, Organised, SceneOptions, Segmentation, Verification};
+use crate::scene::{self, Organised, Plane, SceneOptions, Segmentation, Verification};
 use crate::sweep::Sweep;
 
 /// Most candidates registered per frame.
@@ -91,7 +91,9 @@ pub enum Start<'a> {
 /// Segments `frame` and registers up to `candidates` (at most
 /// [`MAX_CANDIDATES`]) of the largest kept clusters with `register`, each
 /// from at most `points.len()` of its points, and checks each registration
-/// with `verify` (`None`: not verified). `register` starts from the sweep
+/// with `check` (given the plane the segmentation took out, if any, for
+/// [`crate::scene::verify::verify`]'s test beneath the surface; `None`: not
+/// verified). `register` starts from the sweep
 /// ([`crate::sweep`]) when the scene options name the template's up axis
 /// and a plane was found or given, else from the network's hypotheses.
 ///
@@ -113,9 +115,11 @@ pub fn locate<F: Organised>(
     labels: &mut [u16],
     points: &mut [[f32; 3]],
     mut register: impl FnMut(&[[f32; 3]], Start<'_>) -> Result<Registration>,
-    mut verify: impl FnMut(&F, &Registration) -> Option<(Verification, f32)>,
+    mut check: impl FnMut(&F, &Registration, Option<Plane>) -> Option<(Verification, f32)>,
 ) -> Result<Located> {
     let segmentation = scene::segment(frame, scene, labels)?;
+    let surface = segmentation.plane;
+    let mut verify = |f: &F, r: &Registration| check(f, r, surface);
     let sweep = match (scene.up, segmentation.plane) {
         (Some(up), Some(plane)) => Some(Sweep {
             plane,
@@ -286,6 +290,7 @@ mod tests {
             violations,
             occluded: 0,
             unobserved: 0,
+            outside: 0,
             passed: violations < 10,
         };
         (v, 0.025)

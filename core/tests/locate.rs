@@ -243,3 +243,96 @@ fn any_yaw_on_the_table_is_found_by_the_sweep() {
         assert!(error < 5.0 && reliable, "yaw {deg}: {error} deg off");
     }
 }
+
+/// The check judges each template point by where the pose puts it: a pose
+/// that leaves more than 5% of the template outside the frame cannot be
+/// checked (a cluster cut by the frame's edge), and a point beneath the
+/// table the object stands on is a violation (the object cannot be inside
+/// it; the sensor sees the table's top, so by depth alone the point would
+/// pass as occluded).
+#[test]
+fn a_pose_out_of_view_or_inside_the_table_fails_the_check() {
+    use pcrnet_core::scene::{Plane, VerifySettings, verify::verify};
+    let model = Int8Model::from_bytes(MODEL).unwrap();
+    let points = template();
+    let k = Tabletop::tof_intrinsics();
+    let settings = VerifySettings::for_object(model.object_radius());
+    let table = Plane {
+        normal: [0.0, 0.0, -1.0],
+        offset: DISTANCE,
+    };
+    let check = |depth: &[u16], at: &Pose, surface: Option<Plane>, settings: &VerifySettings| {
+        let frame = DepthImage::new(depth, W, H, W, k, DEPTH_SCALE, 0).unwrap();
+        // A registration's pose maps the sensor frame onto the template.
+        let pose = at.inverse();
+        verify(
+            &frame,
+            &k,
+            model.template(),
+            model.frame(),
+            &pose,
+            settings,
+            surface,
+        )
+    };
+    let seen = |pose: Pose| {
+        render(
+            &[Placed {
+                points: &points,
+                pose,
+                splat: 0.03,
+            }],
+            &[],
+        )
+    };
+    let n = model.template().len() as u32;
+
+    // In view on the table: nothing outside, nothing beneath.
+    let truth = placed(&points, 20.0, 0.1, -0.05);
+    let depth = seen(truth);
+    let right = check(&depth, &truth, Some(table), &settings);
+    assert!(right.passed && right.outside == 0, "{right:?}");
+    assert_eq!(right, check(&depth, &truth, None, &settings));
+
+    // The object itself at the frame's edge (about 1.44 from the axis at
+    // this distance), checked at its true pose: what is in view is seen,
+    // but a third or more of it is outside.
+    let edge = placed(&points, 20.0, 1.45, -0.05);
+    let depth_edge = seen(edge);
+    let cut = check(&depth_edge, &edge, Some(table), &settings);
+    let total = cut.supported + cut.violations + cut.occluded + cut.unobserved + cut.outside;
+    assert_eq!(total, n);
+    assert!(cut.outside > n / 4 && !cut.passed, "{cut:?}");
+    let lenient = VerifySettings {
+        max_outside: 1.0,
+        ..settings
+    };
+    assert!(
+        check(&depth_edge, &edge, Some(table), &lenient).passed,
+        "only the share outside fails it: {cut:?}"
+    );
+
+    // Sunk into the table by a fifth of the object's radius.
+    let sink = 0.2 * model.object_radius();
+    let sunk = Pose {
+        translation: [
+            truth.translation[0],
+            truth.translation[1],
+            truth.translation[2] + sink,
+        ],
+        ..truth
+    };
+    let beneath = (0..model.template().len())
+        .map(|i| sunk.transform_point(model.template().user_point(i, model.frame())))
+        .filter(|p| p[2] > DISTANCE + settings.tolerance)
+        .count() as u32;
+    assert!(
+        beneath > n / 10,
+        "{beneath} of {n} beneath: the test proves nothing"
+    );
+    let with = check(&depth, &sunk, Some(table), &settings);
+    let without = check(&depth, &sunk, None, &settings);
+    assert!(with.violations >= beneath && !with.passed, "{with:?}");
+    assert!(with.violations > without.violations, "{with:?} {without:?}");
+    assert!(with.occluded < without.occluded, "{with:?} {without:?}");
+}

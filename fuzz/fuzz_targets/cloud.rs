@@ -25,7 +25,7 @@ fuzz_target!(|data: &[u8]| {
     };
     let mut view = vec![0f32; pcrnet_core::scene::view::buffer_len(16)];
     let counted = |v: &pcrnet_core::scene::Verification| {
-        let total = v.supported + v.violations + v.occluded + v.unobserved;
+        let total = v.supported + v.violations + v.occluded + v.unobserved + v.outside;
         assert_eq!(total as usize, model.template().len(), "{v:?}");
     };
     if let Ok(v) = model.register_view(seen, *viewpoint, &options, &mut scratch, &mut view) {

@@ -32,7 +32,7 @@ const REQUIRED: [&str; 6] = [
 
 /// Names of the values of an `@ locate` line after its status, before the
 /// registration's ([`REG_FIELDS`]).
-const LOCATE_FIELDS: [&str; 15] = [
+const LOCATE_FIELDS: [&str; 16] = [
     "found",
     "reliable",
     "verified",
@@ -44,6 +44,7 @@ const LOCATE_FIELDS: [&str; 15] = [
     "violations",
     "occluded",
     "unobserved",
+    "outside",
     "plane_normal x",
     "plane_normal y",
     "plane_normal z",
@@ -189,6 +190,7 @@ fn locate_line(model: &Int8Model<'_>, depth: &[u16], scratch: &mut [i8]) -> Stri
         out.violations,
         out.occluded,
         out.unobserved,
+        out.outside,
     ];
     let counts: String = counts.iter().map(|c| format!(" {c}")).collect();
     format!(

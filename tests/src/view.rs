@@ -183,7 +183,7 @@ mod tests {
             .register_view(&source, at, &Options::default(), &mut scratch, &mut buffer)
             .unwrap();
         let c = v.view;
-        let total = c.supported + c.violations + c.occluded + c.unobserved;
+        let total = c.supported + c.violations + c.occluded + c.unobserved + c.outside;
         assert_eq!(total as usize, m.template().len(), "{c:?}");
         let again = m
             .check_view(&source, at, &v.registration.pose, &mut buffer)

@@ -213,7 +213,14 @@ impl<'b> View<'b> {
             let p = back.transform_point(template.user_point(i, model));
             to_camera(&self.axes, self.viewpoint, p)
         });
-        tally(points, self, &self.intrinsics, settings, Empty::FreeSpace)
+        tally(
+            points,
+            self,
+            &self.intrinsics,
+            settings,
+            Empty::FreeSpace,
+            None,
+        )
     }
 }
 

@@ -406,8 +406,8 @@ pub fn describe(
         match t.verification {
             Some(v) => write!(
                 out,
-                " v {} {} {} {} {}",
-                v.supported, v.violations, v.occluded, v.unobserved, v.passed
+                " v {} {} {} {} {} {}",
+                v.supported, v.violations, v.occluded, v.unobserved, v.outside, v.passed
             )?,
             None => write!(out, " v none")?,
         }

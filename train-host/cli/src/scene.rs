@@ -281,11 +281,12 @@ fn report_lines(located: &Located) -> Vec<String> {
     for (i, t) in located.tried.iter().enumerate() {
         let check = match t.verification {
             Some(v) => format!(
-                "against the frame: {} template points supported, {} in free space, {} occluded, {} unobserved ({})",
+                "against the frame: {} template points supported, {} in free space, {} occluded, {} unobserved, {} outside the frame ({})",
                 v.supported,
                 v.violations,
                 v.occluded,
                 v.unobserved,
+                v.outside,
                 if v.passed { "passed" } else { "failed" }
             ),
             None => "not checked against the frame (its intrinsics are unknown)".into(),
@@ -316,7 +317,7 @@ fn candidate_json(c: &Candidate) -> serde_json::Value {
         "registration_reliable": r.reliable,
         "verification": c.verification.map(|v| serde_json::json!({
             "supported": v.supported, "violations": v.violations, "occluded": v.occluded,
-            "unobserved": v.unobserved, "passed": v.passed,
+            "unobserved": v.unobserved, "outside": v.outside, "passed": v.passed,
         })),
         "reliable": c.reliable,
         "ambiguous": r.ambiguity.is_ambiguous(),

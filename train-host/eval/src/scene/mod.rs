@@ -188,6 +188,7 @@ fn run(
                     violations: 0,
                     occluded: 0,
                     unobserved: 0,
+                    outside: 0,
                     passed: false,
                 });
                 (
