@@ -820,6 +820,20 @@ size_t pcrnet_scene_labels_len(size_t width, size_t height, uint32_t step);
 void pcrnet_scene_options_default(PcrnetSceneOptions *out);
 
 /*
+ Writes the default scene options for `model`'s object to `out`: those
+ of `pcrnet_scene_options_default`, with the up axis the blob was
+ exported with (`pcrnet train --up`, format 7) in `up` and `has_up` set
+ when it has one, so that `pcrnet_locate` sweeps the yaw about the plane
+ it finds. `PCRNET_ERROR_NULL_POINTER` or `PCRNET_ERROR_NOT_LOADED`,
+ writing nothing, otherwise.
+
+ # Safety
+ `model` must be null or point to a `PcrnetModel`; `out` null or point
+ to a writable `PcrnetSceneOptions`.
+ */
+PcrnetStatus pcrnet_scene_options_for_model(const PcrnetModel *model, PcrnetSceneOptions *out);
+
+/*
  Finds the model's object in a depth frame and registers it: the
  dominant plane (found, or given in `scene`) taken out, what stands off
  it split into clusters, those the size of the object kept, the largest

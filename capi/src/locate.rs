@@ -207,6 +207,43 @@ pub unsafe extern "C" fn pcrnet_scene_options_default(out: *mut PcrnetSceneOptio
     unsafe { out.write(PcrnetSceneOptions::default()) };
 }
 
+/// Writes the default scene options for `model`'s object to `out`: those
+/// of `pcrnet_scene_options_default`, with the up axis the blob was
+/// exported with (`pcrnet train --up`, format 7) in `up` and `has_up` set
+/// when it has one, so that `pcrnet_locate` sweeps the yaw about the plane
+/// it finds. `PCRNET_ERROR_NULL_POINTER` or `PCRNET_ERROR_NOT_LOADED`,
+/// writing nothing, otherwise.
+///
+/// # Safety
+/// `model` must be null or point to a `PcrnetModel`; `out` null or point
+/// to a writable `PcrnetSceneOptions`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn pcrnet_scene_options_for_model(
+    model: *const PcrnetModel,
+    out: *mut PcrnetSceneOptions,
+) -> PcrnetStatus {
+    if out.is_null() {
+        return PcrnetStatus::PCRNET_ERROR_NULL_POINTER;
+    }
+    match crate::model(model) {
+        Ok(m) => {
+            let defaults = PcrnetSceneOptions::default();
+            let options = match m.up_axis() {
+                Some(up) => PcrnetSceneOptions {
+                    up,
+                    has_up: true,
+                    ..defaults
+                },
+                None => defaults,
+            };
+            // SAFETY: non-null; the caller's contract.
+            unsafe { out.write(options) };
+            PcrnetStatus::PCRNET_OK
+        }
+        Err(status) => status,
+    }
+}
+
 /// Finds the model's object in a depth frame and registers it: the
 /// dominant plane (found, or given in `scene`) taken out, what stands off
 /// it split into clusters, those the size of the object kept, the largest

@@ -300,3 +300,55 @@ fn a_frame_without_depth_is_success_with_nothing_found() {
     assert!(!out.found && !out.reliable && !out.has_plane, "{out:?}");
     assert_eq!((out.clusters_kept, out.candidates_tried), (0, 0));
 }
+
+/// A blob exported with an up axis (format 7): the scene options for the
+/// model carry it (the Rust scene options they give are
+/// `Int8Model::scene_options`); the shipped blob has none, and a null
+/// handle or output is a status.
+#[test]
+fn the_blobs_up_axis_reaches_the_scene_options_for_the_model() {
+    use pcrnet_core::format::{self, ModelKind, Trailer};
+    let shipped = shipped_blob();
+    let rust = Int8Model::from_bytes(&shipped).unwrap();
+    let trailer = Trailer {
+        table: rust.template().table(),
+        up: Some([0.0, 0.0, -1.0]),
+        ..Trailer::default()
+    };
+    let mut blob = vec![0u8; format::blob_len(rust.payload(), &trailer).unwrap()];
+    format::write_blob(ModelKind::Int8, rust.payload(), &trailer, &mut blob).unwrap();
+    let model = loaded(&blob);
+    let mut scene = scene_default();
+    let status = unsafe { pcrnet_scene_options_for_model(&*model, &mut scene) };
+    assert_eq!(status, PCRNET_OK);
+    assert!(scene.has_up);
+    assert_eq!(scene.up, [0.0, 0.0, -1.0]);
+    assert_eq!(
+        PcrnetSceneOptions {
+            up: [0.0, 0.0, 1.0],
+            has_up: false,
+            ..scene
+        },
+        scene_default()
+    );
+    let plain = loaded(&shipped);
+    let status = unsafe { pcrnet_scene_options_for_model(&*plain, &mut scene) };
+    assert_eq!(status, PCRNET_OK);
+    assert_eq!(scene, scene_default());
+    let with_up = Int8Model::from_bytes(&blob).unwrap();
+    let scene_rust = with_up.scene_options();
+    let c_scene = {
+        let mut s = scene_default();
+        unsafe { pcrnet_scene_options_for_model(&*model, &mut s) };
+        s
+    };
+    assert_eq!(c_scene.scene_options(with_up.object_radius()), scene_rust);
+    assert_eq!(
+        unsafe { pcrnet_scene_options_for_model(std::ptr::null(), &mut scene) },
+        PCRNET_ERROR_NULL_POINTER
+    );
+    assert_eq!(
+        unsafe { pcrnet_scene_options_for_model(&*model, std::ptr::null_mut()) },
+        PCRNET_ERROR_NULL_POINTER
+    );
+}

@@ -3,13 +3,14 @@
 //! ```text
 //! offset  size  field
 //! 0       4     magic  b"PCRN"
-//! 4       2     format version, u16 little-endian (currently 6; 3, 4 and 5 are read too)
+//! 4       2     format version, u16 little-endian (currently 7; 3 to 6 are read too)
 //! 6       1     kind: 0 = int8 (device), 1 = f32 (host reference)
 //! 7       4     payload length P, u32 little-endian
 //! 11      P     payload: postcard encoding of Int8Payload or F32Payload,
 //!               then (format 4) of Option<NearestTable>,
 //!               then (format 5) of Option<LkSolver>,
-//!               then (format 6) of Option<f32>, the residual floor
+//!               then (format 6) of Option<f32>, the residual floor,
+//!               then (format 7) of Option<[f32; 3]>, the template's up axis
 //! 11+P    4     CRC-32 (ISO-HDLC, as zlib) of bytes 0 .. 11+P, little-endian
 //! ```
 //!
@@ -31,6 +32,13 @@
 //! recommended options calibrate the verdict with it
 //! ([`crate::registration::max_residual_for`]). Blobs of formats 3 to 5
 //! read as having none.
+//!
+//! Format 7 adds the template's up axis ([`Trailer::up`]): the axis of the
+//! object pointing away from the surface it rests on, given at export
+//! (`pcrnet train --object FILE --up z`), so that finding the object
+//! standing on a table in any yaw ([`crate::sweep`]) needs no more than the
+//! blob (`Int8Model::scene_options`). Blobs of formats 3 to 6 read as
+//! having none.
 //!
 //! The payload starts with the architecture ([`Arch`]), the template's
 //! [`Frame`] and [`TemplateCloud`] and, for int8, the quantization
@@ -193,8 +201,8 @@ pub struct LkSolver<'a> {
 }
 
 /// What follows the payload: the closest-point table (format 4),
-/// PointNetLK's solver (format 5) and the template's residual floor
-/// (format 6), each optional.
+/// PointNetLK's solver (format 5), the template's residual floor (format
+/// 6) and its up axis (format 7), each optional.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Trailer<'a> {
     /// The template's closest-point table.
@@ -209,6 +217,11 @@ pub struct Trailer<'a> {
     /// least 0). The recommended options calibrate the verdict with it
     /// ([`crate::registration::max_residual_for`]).
     pub residual_floor: Option<f32>,
+    /// The template's up axis: a unit vector in the template's frame (its
+    /// file's axes), pointing away from the surface the object rests on,
+    /// when the exporter was given one (format 7). Scene options made for
+    /// the model sweep the yaw about it ([`crate::sweep`]).
+    pub up: Option<[f32; 3]>,
 }
 
 /// One quantized hidden layer (encoder or head).
@@ -325,8 +338,8 @@ pub fn decode_model<'a, T: Deserialize<'a>>(
 }
 
 /// The [`Trailer`] of a blob of format `version`: nothing in format 3, the
-/// table in format 4, the table and the solver in format 5, all three
-/// parts from format 6. Not inlined: its
+/// table in format 4, the table and the solver in format 5, those and the
+/// floor in format 6, all four parts from format 7. Not inlined: its
 /// temporaries stay out of the loaders' frames (the load stack counts on a
 /// 16 KiB device).
 #[inline(never)]
@@ -342,7 +355,16 @@ fn decode_trailer(version: u16, rest: &[u8]) -> Result<Trailer<'_>> {
             Trailer {
                 table,
                 lk,
-                residual_floor: None,
+                ..Trailer::default()
+            }
+        }
+        6 => {
+            let (table, lk, residual_floor) = decode(rest)?;
+            Trailer {
+                table,
+                lk,
+                residual_floor,
+                up: None,
             }
         }
         _ => decode(rest)?,

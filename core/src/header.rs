@@ -4,7 +4,7 @@
 //! re-exports them), so that neither module imports the other's.
 
 /// Format version written and read by this build.
-pub const FORMAT_VERSION: u16 = 6;
+pub const FORMAT_VERSION: u16 = 7;
 /// The oldest format version this build reads (format 3: no closest-point
 /// table; the template's grid is searched instead, with the same results).
 pub const OLDEST_READABLE: u16 = 3;

@@ -80,6 +80,22 @@ impl Sweep {
     }
 }
 
+/// A blob's up axis ([`crate::format::Trailer::up`]) when it is a finite
+/// unit vector (within 1e-3 of unit length, as the exporter writes it).
+///
+/// # Errors
+/// [`Error::InconsistentDimensions`] naming the axis otherwise.
+pub(crate) fn checked_up(up: Option<[f32; 3]>) -> Result<Option<[f32; 3]>> {
+    match up {
+        Some(u) if !(u.iter().all(|v| v.is_finite()) && libm::fabsf(dot(u, u) - 1.0) <= 1e-3) => {
+            Err(Error::InconsistentDimensions {
+                what: "the template's up axis must be a finite unit vector",
+            })
+        }
+        u => Ok(u),
+    }
+}
+
 /// The sweep's up axis at unit length (template frame).
 pub(crate) fn unit_up(sweep: &Sweep) -> [f32; 3] {
     let length = libm::sqrtf(dot(sweep.up, sweep.up));

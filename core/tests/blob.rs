@@ -235,6 +235,7 @@ fn write_then_read_round_trips() {
             table: model.template().table(),
             lk: model.lk_solver().map(|s| s.stored()),
             residual_floor: model.residual_floor(),
+            up: model.up_axis(),
         },
         &mut out,
     )
@@ -301,7 +302,7 @@ fn a_headless_blob_needs_its_solver() {
     );
 }
 
-/// A blob of `payload` with `trailer`, written by this build (format 6).
+/// A blob of `payload` with `trailer`, written by this build.
 fn with_trailer(model: &Int8Model<'_>, trailer: &format::Trailer<'_>) -> Vec<u8> {
     let mut out = vec![0u8; format::blob_len(model.payload(), trailer).unwrap()];
     format::write_blob(ModelKind::Int8, model.payload(), trailer, &mut out).unwrap();
@@ -352,32 +353,44 @@ fn the_residual_floor_calibrates_the_recommended_verdict() {
     }
 }
 
-/// A format-5 blob (the table and the solver, no floor), written by hand
-/// as format 5's exporter did, still reads: no floor, the default verdict.
-#[test]
-fn a_format_5_blob_still_reads() {
-    let good = int8_blob();
-    let model = Int8Model::from_bytes(&good).unwrap();
-    let mut buffer = vec![0u8; good.len() + 64];
+/// A blob of format `version` with `trailer` written after the payload,
+/// by hand as that format's exporter did.
+fn older_blob(model: &Int8Model<'_>, version: u16, trailer: &impl serde::Serialize) -> Vec<u8> {
+    let mut buffer = vec![0u8; 1 << 20];
     let payload = postcard::to_slice(model.payload(), &mut buffer)
         .unwrap()
         .to_vec();
-    let mut rest = vec![0u8; 64];
-    let trailer = postcard::to_slice(
-        &(model.template().table(), None::<format::LkSolver<'_>>),
-        &mut rest,
-    )
-    .unwrap()
-    .to_vec();
+    let mut rest = vec![0u8; 1 << 16];
+    let trailer = postcard::to_slice(trailer, &mut rest).unwrap().to_vec();
     let mut blob = b"PCRN".to_vec();
-    blob.extend_from_slice(&5u16.to_le_bytes());
+    blob.extend_from_slice(&version.to_le_bytes());
     blob.push(ModelKind::Int8 as u8);
     blob.extend_from_slice(&((payload.len() + trailer.len()) as u32).to_le_bytes());
     blob.extend_from_slice(&payload);
     blob.extend_from_slice(&trailer);
     blob.extend_from_slice(&[0; 4]);
     reseal(&mut blob);
+    blob
+}
+
+/// A format-5 blob (the table and the solver, no floor) still reads: no
+/// floor, the default verdict; a format-6 blob (and the floor) reads with
+/// its floor; neither has an up axis.
+#[test]
+fn format_5_and_6_blobs_still_read() {
+    let good = int8_blob();
+    let model = Int8Model::from_bytes(&good).unwrap();
+    let table = model.template().table();
+    let six = older_blob(
+        &model,
+        6,
+        &(table, None::<format::LkSolver<'_>>, Some(0.02f32)),
+    );
+    let old = Int8Model::from_bytes(&six).unwrap();
+    assert_eq!((old.residual_floor(), old.up_axis()), (Some(0.02), None));
+    let blob = older_blob(&model, 5, &(table, None::<format::LkSolver<'_>>));
     let old = Int8Model::from_bytes(&blob).unwrap();
+    assert_eq!(old.up_axis(), None);
     assert_eq!(old.residual_floor(), None);
     assert_eq!(
         old.trained_options().max_residual,
@@ -385,4 +398,43 @@ fn a_format_5_blob_still_reads() {
     );
     assert_eq!(old.payload(), model.payload());
     assert_eq!(old.template().table(), model.template().table());
+}
+
+/// Format 7 carries the template's up axis: the model reports it and its
+/// scene options sweep about it; an axis that is not a finite unit vector
+/// is refused by name.
+#[test]
+fn the_up_axis_reaches_the_scene_options() {
+    let good = int8_blob();
+    let model = Int8Model::from_bytes(&good).unwrap();
+    assert_eq!(model.up_axis(), None);
+    assert_eq!(model.scene_options().up, None);
+    let with_up = |up: [f32; 3]| {
+        with_trailer(
+            &model,
+            &format::Trailer {
+                table: model.template().table(),
+                up: Some(up),
+                ..format::Trailer::default()
+            },
+        )
+    };
+    let blob = with_up([0.0, -1.0, 0.0]);
+    let m = Int8Model::from_bytes(&blob).unwrap();
+    assert_eq!(m.up_axis(), Some([0.0, -1.0, 0.0]));
+    let scene = m.scene_options();
+    assert_eq!(scene.up, Some([0.0, -1.0, 0.0]));
+    assert_eq!(
+        pcrnet_core::scene::SceneOptions { up: None, ..scene },
+        pcrnet_core::scene::SceneOptions::for_object(m.object_radius())
+    );
+    for bad in [[0.0, 0.0, 0.0], [0.0, 2.0, 0.0], [f32::NAN, 1.0, 0.0]] {
+        assert_eq!(
+            Int8Model::from_bytes(&with_up(bad)).err(),
+            Some(Error::InconsistentDimensions {
+                what: "the template's up axis must be a finite unit vector"
+            }),
+            "{bad:?}"
+        );
+    }
 }

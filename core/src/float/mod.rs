@@ -141,6 +141,7 @@ pub struct F32Model<'a> {
     template: Template<'a>,
     lk: Option<Solver<'a>>,
     residual_floor: Option<f32>,
+    up: Option<[f32; 3]>,
 }
 
 impl<'a> F32Model<'a> {
@@ -185,6 +186,11 @@ impl<'a> F32Model<'a> {
     /// [`crate::Int8Model::residual_floor`].
     pub fn residual_floor(&self) -> Option<f32> {
         self.residual_floor
+    }
+
+    /// [`crate::Int8Model::up_axis`].
+    pub fn up_axis(&self) -> Option<[f32; 3]> {
+        self.up
     }
 
     /// Registers a cut single view seen from `viewpoint`, as
@@ -385,6 +391,7 @@ impl<'a> F32Model<'a> {
             .with_centring(p.centre_source);
         let lk = crate::lk::solver(trailer.lk, network.arch.feature_dim(), network.has_head())?;
         let residual_floor = crate::registration::checked_floor(trailer.residual_floor)?;
+        let up = crate::sweep::checked_up(trailer.up)?;
         Ok(F32Model {
             network,
             passes: p.passes,
@@ -392,6 +399,7 @@ impl<'a> F32Model<'a> {
             template: Template::new(p.template, trailer.table)?,
             lk,
             residual_floor,
+            up,
         })
     }
 }

@@ -54,6 +54,7 @@ pub struct Int8Model<'a> {
     template: Template<'a>,
     lk: Option<Solver<'a>>,
     residual_floor: Option<f32>,
+    up: Option<[f32; 3]>,
 }
 
 /// Everything one inference produces besides the pose.
@@ -103,6 +104,7 @@ impl<'a> Int8Model<'a> {
     pub fn from_payload(p: Int8Payload<'a>, trailer: Trailer<'a>) -> Result<Self> {
         let lk = crate::lk::solver(trailer.lk, p.arch.feature_dim(), !check::headless(&p))?;
         let residual_floor = registration::checked_floor(trailer.residual_floor)?;
+        let up = crate::sweep::checked_up(trailer.up)?;
         // Checked by reference, then moved once into the model.
         let template = Self::validate(&p, trailer.table)?;
         Ok(Int8Model {
@@ -110,6 +112,7 @@ impl<'a> Int8Model<'a> {
             template,
             lk,
             residual_floor,
+            up,
         })
     }
 
@@ -136,6 +139,23 @@ impl<'a> Int8Model<'a> {
     /// exporter measured one ([`format::Trailer::residual_floor`]).
     pub fn residual_floor(&self) -> Option<f32> {
         self.residual_floor
+    }
+
+    /// The template's up axis (unit, template frame) when the exporter was
+    /// given one ([`format::Trailer::up`]).
+    pub fn up_axis(&self) -> Option<[f32; 3]> {
+        self.up
+    }
+
+    /// The recommended scene options for this model's object
+    /// ([`crate::scene::SceneOptions::for_object`] of
+    /// [`Self::object_radius`]) with the blob's up axis, if it has one: then
+    /// [`Self::locate`] sweeps the yaw about the plane it finds.
+    pub fn scene_options(&self) -> crate::scene::SceneOptions {
+        crate::scene::SceneOptions {
+            up: self.up,
+            ..crate::scene::SceneOptions::for_object(self.object_radius())
+        }
     }
 
     /// The template's points (model frame) used to check and refine poses.

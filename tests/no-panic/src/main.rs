@@ -302,6 +302,10 @@ unsafe fn c_locate(model: *const capi::PcrnetModel, scratch: *mut i8, scratch_le
     // the C API checks null, alignment and lengths itself.
     unsafe {
         capi::pcrnet_scene_options_default(black_box(scene.as_mut_ptr()));
+        black_box(capi::pcrnet_scene_options_for_model(
+            model,
+            black_box(scene.as_mut_ptr()),
+        ));
         capi::pcrnet_options_default(black_box(options.as_mut_ptr()));
         black_box(capi::pcrnet_scene_labels_len(32, 32, black_box(4)));
         black_box(capi::pcrnet_locate(

@@ -181,10 +181,11 @@ enum Command {
         #[arg(long, default_value_t = 3, requires = "scene")]
         candidates: usize,
         /// With --scene: the template's up axis (x, y, z, -x, -y or -z: the
-        /// axis pointing away from the surface the object rests on). Each
+        /// axis pointing away from the surface the object rests on;
+        /// default: the blob's, when it was exported with --up). Each
         /// candidate is then registered by a sweep of turns about the
         /// plane found in the frame, for a view from one side in any yaw.
-        #[arg(long, requires = "scene", allow_hyphen_values = true, value_parser = scene::parse_axis)]
+        #[arg(long, requires = "scene", allow_hyphen_values = true, value_parser = pcrnet_train::cli::parse_axis)]
         up: Option<[f32; 3]>,
         /// SOURCE is one object as a depth sensor saw it from X,Y,Z (the
         /// sensor's position in the source file's frame; 0,0,0 for points

@@ -35,24 +35,6 @@ pub(crate) struct SceneArgs<'a> {
     pub(crate) up: Option<[f32; 3]>,
 }
 
-/// Parses `--up`: `x`, `y`, `z`, `-x`, `-y` or `-z`.
-pub(crate) fn parse_axis(s: &str) -> Result<[f32; 3], String> {
-    let axis = match s.trim().to_ascii_lowercase().as_str() {
-        "x" | "+x" => [1.0, 0.0, 0.0],
-        "y" | "+y" => [0.0, 1.0, 0.0],
-        "z" | "+z" => [0.0, 0.0, 1.0],
-        "-x" => [-1.0, 0.0, 0.0],
-        "-y" => [0.0, -1.0, 0.0],
-        "-z" => [0.0, 0.0, -1.0],
-        other => {
-            return Err(format!(
-                "`{other}` is not an axis: give x, y, z, -x, -y or -z (the template's axis pointing away from the surface it rests on)"
-            ));
-        }
-    };
-    Ok(axis)
-}
-
 /// Runs `register --scene`.
 pub(crate) fn run(
     args: SceneArgs,
@@ -144,9 +126,10 @@ fn find<F: Organised>(
     aligned: Option<&Path>,
     json: Option<&Path>,
 ) -> anyhow::Result<()> {
+    // `--up`, else the axis the blob was exported with.
     let scene_options = SceneOptions {
-        up: args.up,
-        ..SceneOptions::for_object(model.object_radius())
+        up: args.up.or(model.up_axis()),
+        ..model.scene_options()
     };
     let (width, height) = (frame.width(), frame.height());
     let mut labels = vec![0u16; scene::labels_len(width, height, scene_options.step)];
@@ -177,13 +160,18 @@ fn find<F: Organised>(
         scene_options.step,
         seconds * 1e3
     ));
-    say(match (args.up, located.segmentation.plane) {
+    let given = if args.up.is_some() {
+        "--up"
+    } else {
+        "the blob's"
+    };
+    say(match (scene_options.up, located.segmentation.plane) {
         (Some(up), Some(_)) => format!(
-            "registration: a sweep of {} turns about the plane's normal, the template's up axis {up:?} along it",
+            "registration: a sweep of {} turns about the plane's normal, the template's up axis {up:?} ({given}) along it",
             scene_options.yaws
         ),
-        (Some(_), None) => "registration: the network's hypotheses (--up was given, but no plane was found to sweep about)".into(),
-        (None, _) => "registration: the network's hypotheses (give --up AXIS for an object standing on the plane in any yaw)".into(),
+        (Some(_), None) => format!("registration: the network's hypotheses (an up axis was given ({given}), but no plane was found to sweep about)"),
+        (None, _) => "registration: the network's hypotheses (give --up AXIS, or export the model with --up, for an object standing on the plane in any yaw)".into(),
     });
     for line in report_lines(&located) {
         say(line);
@@ -237,6 +225,7 @@ fn find<F: Organised>(
         let mut v = located_json(&located);
         v["frame"] = serde_json::json!({ "file": args.frame.display().to_string(), "width": width, "height": height });
         v["object_radius"] = model.object_radius().into();
+        v["up"] = scene_options.up.into();
         v["seconds"] = seconds.into();
         v["origin"] = origin.into();
         v["template_floor"] = loaded.floor.map(crate::device::short).into();

@@ -74,6 +74,38 @@ fn the_generated_frame_gives_the_object_s_pose() {
     assert!(v["ambiguity"]["ambiguous"].is_boolean(), "{v}");
     let candidates = v["candidates"].as_array().unwrap();
     assert!(!candidates.is_empty() && candidates.len() <= 3);
+    assert_eq!(v["up"], serde_json::json!([0.0, 0.0, 1.0]), "{v}");
+
+    // The same model exported with the up axis (format 7): no --up needed.
+    use pcrnet_core::format::{self, ModelKind, Trailer};
+    let trailer = Trailer {
+        table: model.template().table(),
+        up: Some([0.0, 0.0, 1.0]),
+        ..Trailer::default()
+    };
+    let mut with_up = vec![0u8; format::blob_len(model.payload(), &trailer).unwrap()];
+    format::write_blob(ModelKind::Int8, model.payload(), &trailer, &mut with_up).unwrap();
+    let blob_path = dir.join("with-up.pcrn");
+    std::fs::write(&blob_path, &with_up).unwrap();
+    let out = pcrnet()
+        .args(["register", "--scene"])
+        .arg(&png)
+        .arg("--intrinsics")
+        .arg(&json)
+        .arg("--model")
+        .arg(&blob_path)
+        .args(["--json", "-"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stored: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(stored["up"], v["up"], "{stored}");
+    assert_eq!(stored["quaternion_wxyz"], v["quaternion_wxyz"], "{stored}");
+    assert_eq!(stored["reliable"], true, "{stored}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

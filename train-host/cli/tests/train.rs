@@ -122,6 +122,7 @@ fn training_for_ones_own_object_end_to_end() {
         .args(["--arch", "8,16:16", "--points", "64", "--batch", "4"])
         .args(["--epochs", "2", "--steps-per-epoch", "2", "--no-progress"])
         .args(["--single-view", "--resample", "--template-points", "64"])
+        .args(["--up", "-y"])
         .arg("--out")
         .arg(&out_dir)
         .output()
@@ -146,6 +147,11 @@ fn training_for_ones_own_object_end_to_end() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         stdout.contains("template: 64 points with normals"),
+        "{stdout}"
+    );
+    // And the up axis given (format 7), for `register --scene`.
+    assert!(
+        stdout.contains("up axis: [0.0, -1.0, 0.0] (template frame)"),
         "{stdout}"
     );
     let out = pcrnet()

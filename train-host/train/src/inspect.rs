@@ -118,6 +118,7 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
         head: m.has_head(),
         lk: m.lk_solver(),
         floor: m.residual_floor(),
+        up: m.up_axis(),
     };
     template_lines(&method, m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "flash (blob, weights used in place): {flash} bytes");
@@ -131,13 +132,14 @@ fn describe_int8(m: &Int8Model<'_>, flash: usize) -> String {
 }
 
 /// How a model was trained to run: its passes, whether it has a head,
-/// PointNetLK's solver and the template's residual floor if the blob has
-/// them.
+/// PointNetLK's solver, the template's residual floor and up axis if the
+/// blob has them.
 struct Method<'m, 'a> {
     passes: usize,
     head: bool,
     lk: Option<&'m pcrnet_core::lk::Solver<'a>>,
     floor: Option<f32>,
+    up: Option<[f32; 3]>,
 }
 
 /// How the model runs and what it records of its template.
@@ -198,6 +200,16 @@ fn template_lines(
             "  residual floor: not measured (the template file had fewer than twice the stored points, or a blob before format 6): the default verdict, max_residual {default}"
         ),
     };
+    let _ = match method.up {
+        Some(up) => writeln!(
+            s,
+            "  up axis: {up:?} (template frame): `register --scene` sweeps the yaw about the plane it finds"
+        ),
+        None => writeln!(
+            s,
+            "  up axis: none (export with --up AXIS, or give register --scene --up AXIS, for an object standing in any yaw)"
+        ),
+    };
     let _ = writeln!(
         s,
         "  frame: p_model = {:e} x (p - {:?}); the template spans about {:.4} user units",
@@ -248,6 +260,7 @@ fn describe_f32(m: &F32Model<'_>, size: usize) -> String {
         head: m.network().has_head(),
         lk: m.lk_solver(),
         floor: m.residual_floor(),
+        up: m.up_axis(),
     };
     template_lines(&method, m.centres_source(), m.frame(), m.template(), &mut s);
     let _ = writeln!(s, "size: {size} bytes");

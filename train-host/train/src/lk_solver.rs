@@ -91,7 +91,7 @@ pub fn trailer<'a>(
     Trailer {
         table,
         lk: rows.map(|r| stored(kind, r)),
-        residual_floor: None,
+        ..Trailer::default()
     }
 }
 

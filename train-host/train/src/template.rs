@@ -66,6 +66,9 @@ pub enum TemplateError {
     /// The point count asked for is outside what a blob holds.
     #[error("--template-points must be between 1 and 65535 (got {0})")]
     PointCount(usize),
+    /// The up axis given is zero or not finite.
+    #[error("the up axis {0:?} is zero or not finite: give x, y, z, -x, -y or -z")]
+    Up([f32; 3]),
     /// `pcrnet-core` refused the result.
     #[error(transparent)]
     Core(#[from] pcrnet_core::Error),
@@ -91,6 +94,8 @@ pub struct Reference {
     /// The template's residual floor over the points not stored
     /// ([`crate::floor::residual_floor`]; `None` when every point was).
     residual_floor: Option<f32>,
+    /// The object's up axis (unit, the template's frame), when given.
+    up: Option<[f32; 3]>,
 }
 
 /// A closest-point table's shape and owned bytes.
@@ -191,6 +196,7 @@ impl Reference {
             table: None,
             stored,
             residual_floor: None,
+            up: None,
         };
         if let Some(layout) = table {
             let t = template::Template::new(reference.cloud(), None)?;
@@ -260,6 +266,26 @@ impl Reference {
     /// nearest the stored ones, and a floor biased low).
     pub fn residual_floor(&self) -> Option<f32> {
         self.residual_floor
+    }
+
+    /// Records the object's up axis (the template's frame: the axis pointing
+    /// away from the surface the object rests on, any length) for the blob
+    /// (format 7), scaled to unit length.
+    ///
+    /// # Errors
+    /// [`TemplateError::Up`] for an axis that is zero or not finite.
+    pub fn set_up(&mut self, up: [f32; 3]) -> Result<(), TemplateError> {
+        let length = (up[0] * up[0] + up[1] * up[1] + up[2] * up[2]).sqrt();
+        if !(length.is_finite() && length > 0.0) {
+            return Err(TemplateError::Up(up));
+        }
+        self.up = Some(up.map(|v| v / length));
+        Ok(())
+    }
+
+    /// The up axis a blob of this template carries ([`Self::set_up`]).
+    pub fn up(&self) -> Option<[f32; 3]> {
+        self.up
     }
 
     /// The closest-point table a blob stores beside the cloud, if any.
@@ -420,6 +446,7 @@ pub fn int8_blob(
     };
     let trailer = Trailer {
         residual_floor: reference.residual_floor(),
+        up: reference.up(),
         ..lk_solver::trailer(ModelKind::Int8, reference.table(), rows.as_deref())
     };
     let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
@@ -461,6 +488,7 @@ pub fn f32_blob(
     };
     let trailer = Trailer {
         residual_floor: reference.residual_floor(),
+        up: reference.up(),
         ..lk_solver::trailer(ModelKind::F32, reference.table(), rows.as_deref())
     };
     let mut out = vec![0u8; format::blob_len(&done, &trailer)?];
@@ -471,7 +499,8 @@ pub fn f32_blob(
 
 /// The same model with another template (user units): for registering
 /// against any cloud with a trained blob of either kind. A blob with
-/// PointNetLK's solver gets one for the new template.
+/// PointNetLK's solver gets one for the new template. The new template has
+/// no up axis (that of [`bind_reference`]'s reference, if set).
 pub fn bind(blob: &[u8], template: &[[f32; 3]], stored: usize) -> Result<Vec<u8>, TemplateError> {
     bind_reference(blob, &Reference::new(template, stored)?)
 }

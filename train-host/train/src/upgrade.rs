@@ -241,7 +241,8 @@ mod tests {
     /// A format-3 blob of either kind gains the default table and nothing
     /// else: the shipped blobs (format 4) are their format-3 forms
     /// upgraded, the same payload and table (the current format adds only
-    /// an empty PointNetLK slot and an empty residual floor).
+    /// an empty PointNetLK slot, an empty residual floor and an empty up
+    /// axis).
     #[test]
     fn format_3_blobs_gain_their_table() {
         let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
@@ -255,10 +256,10 @@ mod tests {
             assert_eq!(found, kind);
             let new = format::open_version(&upgraded, kind, format::FORMAT_VERSION).unwrap();
             let old4 = format::open_version(&shipped, kind, 4).unwrap();
-            // Payload and table byte for byte, then `None` for the solver
-            // and for the residual floor.
+            // Payload and table byte for byte, then `None` for the solver,
+            // the residual floor and the up axis.
             assert!(
-                new[..new.len() - 2] == *old4 && new[new.len() - 2..] == [0, 0],
+                new[..new.len() - 3] == *old4 && new[new.len() - 3..] == [0, 0, 0],
                 "{name}: upgrade differs from the shipped blob"
             );
             assert!(matches!(add_table(&shipped), Err(UpgradeError::Current(4))));

@@ -34,9 +34,38 @@ pub struct ExportArgs {
     /// for a model trained as PointNetLK.
     #[arg(long)]
     pub lk: bool,
+    /// The template's up axis, stored in both blobs (see `train --up`).
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_axis)]
+    pub up: Option<[f32; 3]>,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// Parses an up axis (`--up`): `x`, `y`, `z`, `-x`, `-y` or `-z`.
+pub fn parse_axis(s: &str) -> Result<[f32; 3], String> {
+    let axis = match s.trim().to_ascii_lowercase().as_str() {
+        "x" | "+x" => [1.0, 0.0, 0.0],
+        "y" | "+y" => [0.0, 1.0, 0.0],
+        "z" | "+z" => [0.0, 0.0, 1.0],
+        "-x" => [-1.0, 0.0, 0.0],
+        "-y" => [0.0, -1.0, 0.0],
+        "-z" => [0.0, 0.0, -1.0],
+        other => {
+            return Err(format!(
+                "`{other}` is not an axis: give x, y, z, -x, -y or -z (the template's axis pointing away from the surface it rests on)"
+            ));
+        }
+    };
+    Ok(axis)
+}
+
+/// `reference` with the up axis `up` recorded, if given.
+pub(super) fn with_up(mut reference: Reference, up: Option<[f32; 3]>) -> anyhow::Result<Reference> {
+    if let Some(up) = up {
+        reference.set_up(up)?;
+    }
+    Ok(reference)
 }
 
 /// Reads a template file, reduces it as the training shapes were (farthest
@@ -174,7 +203,10 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ck = Checkpoint::load(&args.checkpoint)?;
     let trained = trained_for(&ck.config, args.lk);
     let points = args.points.unwrap_or(ck.config.points);
-    let reference = load_template(&args.template, points, args.template_points, ck.config.seed)?;
+    let reference = with_up(
+        load_template(&args.template, points, args.template_points, ck.config.seed)?,
+        args.up,
+    )?;
     write_blobs(
         &ck.params(),
         &reference,

@@ -4,8 +4,8 @@
 
 mod blobs;
 mod object;
-pub use blobs::{ExportArgs, UpgradeArgs, export, upgrade};
-use blobs::{load_template, trained_for, write_blobs};
+pub use blobs::{ExportArgs, UpgradeArgs, export, parse_axis, upgrade};
+use blobs::{load_template, trained_for, with_up, write_blobs};
 
 use std::path::PathBuf;
 
@@ -176,6 +176,12 @@ pub struct TrainArgs {
     /// its normal, about 1 for the search grid).
     #[arg(long, default_value_t = DEFAULT_TEMPLATE_POINTS, allow_negative_numbers = true)]
     pub template_points: usize,
+    /// The template's up axis (x, y, z, -x, -y or -z, its file's axes: the
+    /// axis pointing away from the surface the object rests on), stored in
+    /// both blobs: `register --scene` then finds the object standing on
+    /// the plane in any yaw without `--up`.
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_axis)]
+    pub up: Option<[f32; 3]>,
     /// No progress bars.
     #[arg(long)]
     pub no_progress: bool,
@@ -545,6 +551,7 @@ pub fn train(args: TrainArgs) -> anyhow::Result<()> {
         Some(p) => load_template(p, trainer.train_data().points, args.template_points, seed)?,
         None => Reference::new(&trainer.train_data().clouds[0], args.template_points)?,
     };
+    let reference = with_up(reference, args.up)?;
     // Both blobs, as `pcrnet export` writes them.
     write_blobs(
         &trainer.params,
