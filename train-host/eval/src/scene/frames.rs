@@ -11,6 +11,8 @@ use pcrnet_train::dataset::Dataset;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::sensor::Artifacts;
+
 /// A simulated depth camera.
 #[derive(Debug, Clone, Copy)]
 pub struct Camera {
@@ -24,10 +26,14 @@ pub struct Camera {
     pub intrinsics: Intrinsics,
     /// Distance to the table along the optical axis, metres: U[lo, hi].
     pub distance: [f32; 2],
+    /// What it does at depth edges.
+    pub artifacts: Artifacts,
 }
 
 /// The cameras: a 224 x 172 time-of-flight sensor (about 60 x 48 degrees)
-/// and a 640 x 480 RGB-D camera (about 63 x 49 degrees, a Kinect's).
+/// with flying pixels at depth edges, and a 640 x 480 structured-light
+/// RGB-D camera (about 63 x 49 degrees, a Kinect's) with missing pixels
+/// there ([`super::sensor`]).
 pub const CAMERAS: [Camera; 2] = [
     Camera {
         name: "ToF 224 x 172",
@@ -40,6 +46,10 @@ pub const CAMERAS: [Camera; 2] = [
             cy: 85.5,
         },
         distance: [0.7, 1.1],
+        artifacts: Artifacts::TimeOfFlight {
+            flying: 0.5,
+            dropped: 0.2,
+        },
     },
     Camera {
         name: "RGB-D 640 x 480",
@@ -52,6 +62,12 @@ pub const CAMERAS: [Camera; 2] = [
             cy: 239.5,
         },
         distance: [1.0, 1.6],
+        // A Kinect's projector 7.5 cm beside its camera: an edge 10 cm in
+        // front of what is behind it, at 1.2 m, shadows about 3 pixels.
+        artifacts: Artifacts::StructuredLight {
+            dropped: 0.5,
+            shadow: 3,
+        },
     },
 ];
 
@@ -178,6 +194,8 @@ pub fn generate(
             ..t
         }
         .render(camera.width, camera.height, &mut depth)?;
+        let (w, h) = (camera.width, camera.height);
+        super::sensor::apply(&mut depth, w, h, DEPTH_SCALE, camera.artifacts, seed);
         Ok(depth)
     };
     let absent = render(&clouds)?;

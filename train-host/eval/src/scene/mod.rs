@@ -11,6 +11,7 @@
 //! sweep) and without it (the network's hypotheses).
 
 pub mod frames;
+pub mod sensor;
 
 use std::time::Instant;
 
@@ -101,7 +102,7 @@ pub fn scene(ctx: &Context) -> anyhow::Result<Report> {
         "Finding the object in a cluttered depth frame",
         vec![
             format!("{SHAPES} seeded ModelNet10 test shapes per camera, each scaled to a radius of {RADIUS} m and bound as the template of the shipped model (`{SHIPPED_INT8}`, 512 stored points), standing upright on a table (its z axis up) in a yaw U[0, 360°) within ±0.1 m of where the optical axis meets the table, among 2 to 5 distractors (boxes 5 to 20 cm, other classes' shapes of radius 8 to 18 cm) that do not touch it."),
-            format!("Cameras: {}; pitched 35 to 65° down at the table; depth in millimetres with uniform noise of ±0.4% of the depth squared (m), rendered by ray casting (table, boxes) and z-buffered splats of the shapes' points (`pcrnet_core::testing::scene`). No missing pixels at edges and no flying pixels yet.", CAMERAS.iter().map(|c| format!("{}, {:.0} m", c.name, c.distance[0])).collect::<Vec<_>>().join("; ")),
+            format!("Cameras: {}; pitched 35 to 65° down at the table; depth in millimetres with uniform noise of ±0.4% of the depth squared (m), rendered by ray casting (table, boxes) and z-buffered splats of the shapes' points (`pcrnet_core::testing::scene`), then what each sensor does at depth edges (a step over {} m + {:.0}% of the depth between neighbouring pixels; `pcrnet_eval::scene::sensor`).", CAMERAS.iter().map(|c| format!("{}, {:.1} to {:.1} m, {}", c.name, c.distance[0], c.distance[1], c.artifacts.describe())).collect::<Vec<_>>().join("; "), sensor::EDGE_JUMP, 100.0 * sensor::EDGE_SHARE),
             format!("`Int8Model::locate` with `SceneOptions::for_object(radius)` (4-pixel grid, RANSAC plane, clusters by radius, poses verified against the frame) and `Options::default()`, {CANDIDATES} candidates. Sweep: the template's up axis given (`--up z`), 12 yaws about the plane's normal, ICP. Network hypotheses: without it."),
             format!("Success: the winning pose within {SUCCESS_DEG}° and {SUCCESS_SHARE} of the template's size (2 radii) of the truth, whatever the verdict. Reliable-but-wrong: reported reliable and more than {SUCCESS_DEG}° off. A symmetric shape turned about its axis counts as wrong (issue 36 adds the symmetry-aware error). Absent: the same scene without the object. Times: host, one thread."),
         ],
