@@ -197,7 +197,7 @@ static void locate(void) {
         printf("  rotation (w x y z): %.6f %.6f %.6f %.6f, translation %.4f %.4f %.4f\n", (double)r->rotation[0],
                (double)r->rotation[1], (double)r->rotation[2], (double)r->rotation[3], (double)r->translation[0],
                (double)r->translation[1], (double)r->translation[2]);
-        printf("  checked against the frame: %lu points seen, %lu in free space; %s%s\n",
+        printf("  checked against the frame: %lu points seen, %lu in free space or beneath the plane; %s%s\n",
                (unsigned long)found.supported, (unsigned long)found.violations,
                found.reliable ? "reliable" : "not reliable",
                r->has_turn || r->has_free_axis ? " (ambiguous: a symmetric object)" : "");

@@ -553,7 +553,8 @@ typedef struct {
    */
   uint32_t supported;
   /*
-   ... in front of what the sensor saw (free space) ...
+   ... in front of what the sensor saw (free space) or beneath the
+   plane ...
    */
   uint32_t violations;
   /*
@@ -561,14 +562,10 @@ typedef struct {
    */
   uint32_t occluded;
   /*
-   ... at a pixel without depth ...
+   ... and at a pixel without depth (for those outside the frame see
+   `outside`, the last field).
    */
   uint32_t unobserved;
-  /*
-   ... and outside the frame or behind the sensor (a winner with more
-   than 5% of its points here is not reliable: out of view).
-   */
-  uint32_t outside;
   /*
    The winner's place among the kept clusters (largest first).
    */
@@ -598,6 +595,13 @@ typedef struct {
    A plane was found or given.
    */
   bool has_plane;
+  /*
+   With `verified`: the winner's template points outside the frame or
+   behind the sensor (a winner with more than 5% of its points there
+   is not reliable: out of view). Last, so that the fields before it
+   keep the places they had before it was added.
+   */
+  uint32_t outside;
 } PcrnetLocated;
 
 /*

@@ -88,15 +88,14 @@ pub struct PcrnetLocated {
     pub plane_offset: f32,
     /// With `verified`: the winner's template points seen at their place ...
     pub supported: u32,
-    /// ... in front of what the sensor saw (free space) ...
+    /// ... in front of what the sensor saw (free space) or beneath the
+    /// plane ...
     pub violations: u32,
     /// ... behind it ...
     pub occluded: u32,
-    /// ... at a pixel without depth ...
+    /// ... and at a pixel without depth (for those outside the frame see
+    /// `outside`, the last field).
     pub unobserved: u32,
-    /// ... and outside the frame or behind the sensor (a winner with more
-    /// than 5% of its points here is not reliable: out of view).
-    pub outside: u32,
     /// The winner's place among the kept clusters (largest first).
     pub cluster: u32,
     /// Clusters kept by their size.
@@ -112,6 +111,11 @@ pub struct PcrnetLocated {
     pub verified: bool,
     /// A plane was found or given.
     pub has_plane: bool,
+    /// With `verified`: the winner's template points outside the frame or
+    /// behind the sensor (a winner with more than 5% of its points there
+    /// is not reliable: out of view). Last, so that the fields before it
+    /// keep the places they had before it was added.
+    pub outside: u32,
 }
 
 impl Default for PcrnetSceneOptions {

@@ -324,7 +324,7 @@ pub struct F32Payload<'a> {
 /// Checks a model blob's envelope (magic, a version this build reads, kind,
 /// length, CRC) and decodes its payload and [`Trailer`] (from format 4 the
 /// template's closest-point table, from format 5 PointNetLK's solver, from
-/// format 6 the template's residual floor). The
+/// format 6 the template's residual floor, from format 7 its up axis). The
 /// payload and trailer must use every payload byte.
 pub fn decode_model<'a, T: Deserialize<'a>>(
     blob: &'a [u8],

@@ -53,8 +53,9 @@ pub struct Candidate {
     pub verification: Option<Verification>,
     /// The verdict. Checked against the frame: the check passed, the
     /// source is not degenerate and the relative plane residual is within
-    /// [`crate::scene::VerifySettings::max_residual`]; else the
-    /// registration's own verdict.
+    /// the candidate's bound (the larger of
+    /// [`crate::scene::VerifySettings::max_residual`] and the options'
+    /// `max_residual`); else the registration's own verdict.
     pub reliable: bool,
 }
 
@@ -190,8 +191,9 @@ pub fn locate<F: Organised>(
 
 /// `registration` and its check, or the other pose of its reported turn
 /// when the frame explains that one better: registered from the turned pose
-/// (ICP alone), checked, and kept when its share of violations is strictly
-/// smaller; its turn then points back to `registration`'s pose. Unchanged
+/// (ICP alone), checked, and kept when its share of violations is smaller
+/// by [`TURN_MARGIN`] and it does not fail a check `registration` passes;
+/// its turn then points back to `registration`'s pose. Unchanged
 /// without a turn, without a check, or when the other pose fails.
 fn settle_turn<F: Organised>(
     frame: &F,
@@ -211,7 +213,10 @@ fn settle_turn<F: Organised>(
     let Some(other_checked) = verify(frame, &other) else {
         return (registration, checked);
     };
-    if violation_share(other_checked.0) + TURN_MARGIN > violation_share(v) {
+    // A pose the check passes is not given up for one it fails (the share
+    // of violations does not count the points outside the frame).
+    let worse = v.passed && !other_checked.0.passed;
+    if worse || violation_share(other_checked.0) + TURN_MARGIN > violation_share(v) {
         return (registration, checked);
     }
     other.ambiguity.turn = Some(crate::ambiguity::Turn {
@@ -342,6 +347,36 @@ mod tests {
                 assert_eq!(checked.unwrap().0.violations, 20);
             }
         }
+        // A pose the check passes (9 of 109 in free space) stays against one
+        // with none in free space that fails it (its points off the frame).
+        let mut register = |_: &[[f32; 3]], start: Start<'_>| match start {
+            Start::Pose(p) => Ok(registration(*p, None)),
+            _ => Err(crate::Error::EmptyCloud),
+        };
+        let mut verify = |_: &OrganisedPoints<'_>, r: &Registration| {
+            Some(if r.pose == Pose::IDENTITY {
+                check(9)
+            } else {
+                let (v, bound) = check(0);
+                (
+                    Verification {
+                        outside: 300,
+                        passed: false,
+                        ..v
+                    },
+                    bound,
+                )
+            })
+        };
+        let (kept, _) = settle_turn(
+            &frame,
+            &points,
+            first,
+            Some(check(9)),
+            &mut register,
+            &mut verify,
+        );
+        assert_eq!(kept, first);
         // No turn, or no check: nothing to settle.
         let plain = registration(Pose::IDENTITY, None);
         let mut register = |_: &[[f32; 3]], _: Start<'_>| Ok(registration(half, None));

@@ -10,7 +10,7 @@ use std::time::Instant;
 use anyhow::Context;
 use pcrnet_core::Int8Model;
 use pcrnet_core::locate::{Candidate, Located};
-use pcrnet_core::scene::{self, DepthImage, Organised, OrganisedPoints, SceneOptions};
+use pcrnet_core::scene::{self, DepthImage, Organised, OrganisedPoints};
 use pcrnet_eval::cli::MethodOptions;
 use pcrnet_io::depth;
 
@@ -126,11 +126,12 @@ fn find<F: Organised>(
     aligned: Option<&Path>,
     json: Option<&Path>,
 ) -> anyhow::Result<()> {
-    // `--up`, else the axis the blob was exported with.
-    let scene_options = SceneOptions {
-        up: args.up.or(model.up_axis()),
-        ..model.scene_options()
-    };
+    // `--up`, else the axis the blob was exported with (none once a
+    // TEMPLATE file is bound in: the axis was its template's).
+    let mut scene_options = model.scene_options();
+    if args.up.is_some() {
+        scene_options.up = args.up;
+    }
     let (width, height) = (frame.width(), frame.height());
     let mut labels = vec![0u16; scene::labels_len(width, height, scene_options.step)];
     let mut points = vec![[0f32; 3]; CANDIDATE_POINTS];
@@ -160,6 +161,19 @@ fn find<F: Organised>(
         scene_options.step,
         seconds * 1e3
     ));
+    // Checked against the frame, a candidate's residual bound is the larger
+    // of the options' and the check's (`Int8Model::locate`).
+    let checked = scene_options
+        .verify
+        .filter(|_| frame.intrinsics().is_some());
+    let bound = checked.map_or(loaded.options.max_residual, |s| {
+        s.max_residual.max(loaded.options.max_residual)
+    });
+    if checked.is_some() {
+        say(format!(
+            "verdict: the check against the frame, and a relative plane residual of at most {bound:.4}"
+        ));
+    }
     let given = if args.up.is_some() {
         "--up"
     } else {
@@ -171,6 +185,7 @@ fn find<F: Organised>(
             scene_options.yaws
         ),
         (Some(_), None) => format!("registration: the network's hypotheses (an up axis was given ({given}), but no plane was found to sweep about)"),
+        (None, _) if loaded.template_points > 0 => "registration: the network's hypotheses (a TEMPLATE file was bound in, which has no up axis: give --up AXIS for an object standing on the plane in any yaw)".into(),
         (None, _) => "registration: the network's hypotheses (give --up AXIS, or export the model with --up, for an object standing on the plane in any yaw)".into(),
     });
     for line in report_lines(&located) {
@@ -229,7 +244,7 @@ fn find<F: Organised>(
         v["seconds"] = seconds.into();
         v["origin"] = origin.into();
         v["template_floor"] = loaded.floor.map(crate::device::short).into();
-        v["verdict_max_residual"] = crate::device::short(loaded.options.max_residual).into();
+        v["verdict_max_residual"] = crate::device::short(bound).into();
         if let Some(best) = &located.best {
             v["translation"] = file_translation(best.registration.pose.translation).into();
             v["ambiguity"] = crate::ambiguity::json(&best.registration.ambiguity, origin);
@@ -270,7 +285,7 @@ fn report_lines(located: &Located) -> Vec<String> {
     for (i, t) in located.tried.iter().enumerate() {
         let check = match t.verification {
             Some(v) => format!(
-                "against the frame: {} template points supported, {} in free space, {} occluded, {} unobserved, {} outside the frame ({})",
+                "against the frame: {} template points supported, {} in free space or beneath the plane, {} occluded, {} unobserved, {} outside the frame ({})",
                 v.supported,
                 v.violations,
                 v.occluded,

@@ -3,10 +3,11 @@
 //! A format-3 blob of either kind differs from format 4 only in lacking
 //! the template's closest-point table ([`add_table`]): its payload is kept
 //! byte for byte and the table is built from its stored template, and it
-//! is written in the current format (6: no PointNetLK solver, `pcrnet
+//! is written in the current format (7: no PointNetLK solver, `pcrnet
 //! export --lk` makes one from a checkpoint; no residual floor, which needs
-//! the object's other points). Blobs of formats 4 and 5 need nothing: this
-//! build reads them as they are.
+//! the object's other points; no up axis, `pcrnet export --up` records
+//! one). Blobs of formats 4 to 6 need nothing: this build reads them as
+//! they are.
 //!
 //! A format-2 f32 blob (before frames and template points) needs its
 //! template recorded afresh.

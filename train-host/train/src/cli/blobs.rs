@@ -34,7 +34,8 @@ pub struct ExportArgs {
     /// for a model trained as PointNetLK.
     #[arg(long)]
     pub lk: bool,
-    /// The template's up axis, stored in both blobs (see `train --up`).
+    /// The template's up axis, stored in both blobs (see `train --up`; a
+    /// checkpoint does not keep the one `train` was given: give it again).
     #[arg(long, allow_hyphen_values = true, value_parser = parse_axis)]
     pub up: Option<[f32; 3]>,
     /// Output folder.
