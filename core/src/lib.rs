@@ -91,6 +91,7 @@ pub mod eigen;
 mod error;
 pub mod fixed;
 pub mod float;
+pub mod follow;
 pub mod format;
 mod header;
 pub mod int8;

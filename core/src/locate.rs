@@ -89,8 +89,20 @@ pub enum Start<'a> {
     Pose(&'a crate::pose::Pose),
 }
 
+/// Where the object was (a tracked object's last pose, [`crate::follow`]):
+/// every candidate is registered from `pose` ([`Start::Pose`]) and the
+/// clusters are tried nearest `centre` first.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior<'a> {
+    /// The last pose (sensor frame onto template, user units).
+    pub pose: &'a crate::pose::Pose,
+    /// Where it put the template's centre (sensor frame).
+    pub centre: [f32; 3],
+}
+
 /// Segments `frame` and registers up to `candidates` (at most
-/// [`MAX_CANDIDATES`]) of the largest kept clusters with `register`, each
+/// [`MAX_CANDIDATES`]) of the largest kept clusters with `register` (with
+/// a `prior`, the nearest its centre, each from its pose), each
 /// from at most `points.len()` of its points, and checks each registration
 /// with `check` (given the plane the segmentation took out, if any, for
 /// [`crate::scene::verify::verify`]'s test beneath the surface; `None`: not
@@ -109,10 +121,12 @@ pub enum Start<'a> {
 /// What [`scene::segment`] or `register` returns; a candidate whose
 /// registration fails with an error is not a reason to give up on the
 /// others: only when every tried candidate fails is the first error returned.
+#[allow(clippy::too_many_arguments)]
 pub fn locate<F: Organised>(
     frame: &F,
     scene: &SceneOptions,
     candidates: usize,
+    prior: Option<Prior<'_>>,
     labels: &mut [u16],
     points: &mut [[f32; 3]],
     mut register: impl FnMut(&[[f32; 3]], Start<'_>) -> Result<Registration>,
@@ -132,14 +146,20 @@ pub fn locate<F: Organised>(
     let mut tried = heapless::Vec::new();
     let mut first_error = None;
     let kept = &segmentation.clusters.kept;
-    for (index, cluster) in kept.iter().enumerate().take(candidates.min(MAX_CANDIDATES)) {
+    let order = try_order(kept, prior.map(|p| p.centre));
+    let clusters = order
+        .iter()
+        .filter_map(|&i| Some((i, kept.get(i)?)))
+        .take(candidates.min(MAX_CANDIDATES));
+    for (index, cluster) in clusters {
         let n = segmentation.gather(frame, scene, labels, cluster, points);
         let Some(source) = points.get(..n) else {
             continue;
         };
-        let start = match &sweep {
-            Some(sweep) => Start::Sweep(sweep),
-            None => Start::Network,
+        let start = match (prior, &sweep) {
+            (Some(prior), _) => Start::Pose(prior.pose),
+            (None, Some(sweep)) => Start::Sweep(sweep),
+            (None, None) => Start::Network,
         };
         match register(source, start) {
             Ok(registration) => {
@@ -187,6 +207,38 @@ pub fn locate<F: Organised>(
         tried,
         segmentation,
     })
+}
+
+/// The kept clusters' indices in the order they are tried: as kept
+/// (largest first), or nearest `centre` first (an insertion sort: the
+/// slice sorts keep a panic path).
+fn try_order(
+    kept: &[scene::Cluster],
+    centre: Option<[f32; 3]>,
+) -> heapless::Vec<usize, { scene::cluster::MAX_CLUSTERS }> {
+    let mut order: heapless::Vec<usize, { scene::cluster::MAX_CLUSTERS }> =
+        (0..kept.len()).collect();
+    let Some(c) = centre else {
+        return order;
+    };
+    let distance = |i: usize| {
+        kept.get(i).map_or(f32::INFINITY, |k| {
+            let d = [
+                k.centroid[0] - c[0],
+                k.centroid[1] - c[1],
+                k.centroid[2] - c[2],
+            ];
+            d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+        })
+    };
+    for i in 1..order.len() {
+        let mut j = i;
+        while j > 0 && distance(order[j]) < distance(order[j - 1]) {
+            order.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+    order
 }
 
 /// `registration` and its check, or the other pose of its reported turn
@@ -299,6 +351,32 @@ mod tests {
             passed: violations < 10,
         };
         (v, 0.025)
+    }
+
+    /// With a prior the clusters are tried nearest its centre first, not
+    /// largest first (the box about a followed object may hold a larger
+    /// neighbour); without one, as kept.
+    #[test]
+    fn clusters_are_tried_nearest_the_prior_first() {
+        let cluster = |cells: u32, x: f32| scene::Cluster {
+            label: 0,
+            cells,
+            min: [x; 3],
+            max: [x; 3],
+            centroid: [x, 0.0, 2.0],
+            radius: 0.1,
+            span: [0; 4],
+        };
+        let kept = [cluster(300, 1.0), cluster(200, 0.1), cluster(100, -0.5)];
+        assert_eq!(try_order(&kept, None).as_slice(), &[0, 1, 2]);
+        assert_eq!(
+            try_order(&kept, Some([0.0, 0.0, 2.0])).as_slice(),
+            &[1, 2, 0]
+        );
+        assert_eq!(
+            try_order(&kept, Some([2.0, 0.0, 2.0])).as_slice(),
+            &[0, 1, 2]
+        );
     }
 
     #[test]

@@ -336,3 +336,83 @@ fn a_pose_out_of_view_or_inside_the_table_fails_the_check() {
     assert!(with.violations > without.violations, "{with:?} {without:?}");
     assert!(with.occluded < without.occluded, "{with:?} {without:?}");
 }
+
+/// Following the object into the next frame: moved and turned 6°, among
+/// blocks that reach into the box about it, it is found again by ICP from
+/// the last pose (the cluster nearest where it was), reliable and within
+/// 2° of where it now stands; in a frame
+/// without it nothing reliable is found; a pose that is not a unit
+/// rotation is refused.
+#[test]
+fn the_next_frame_is_followed_from_the_last_pose() {
+    let model = Int8Model::from_bytes(MODEL).unwrap();
+    let points = template();
+    let first = placed(&points, -25.0, -0.2, 0.1);
+    let splat = |pose| Placed {
+        points: &points,
+        pose,
+        splat: 0.03,
+    };
+    let block = [
+        Block {
+            at: [0.9, 0.3],
+            size: [0.3, 0.5, 0.4],
+            yaw: 0.4,
+        },
+        Block {
+            at: [0.6, -0.6],
+            size: [0.5, 0.5, 0.5],
+            yaw: 0.0,
+        },
+    ];
+    let found = find(&render(&[splat(first)], &block));
+    let best = found.located.best.unwrap();
+    assert!(best.reliable);
+    let plane = found.located.segmentation.plane;
+    assert!(plane.is_some());
+
+    let moved = placed(&points, -19.0, -0.17, 0.1);
+    let depth = render(&[splat(moved)], &block);
+    let scene_options = SceneOptions::for_object(model.object_radius());
+    let mut labels = vec![0u16; scene::labels_len(W, H, scene_options.step)];
+    let mut cloud = vec![[0f32; 3]; 512];
+    let mut scratch = vec![0i8; model.scratch_len(1)];
+    let options = Options::default();
+    let mut follow = |depth: &[u16], previous: &Pose| {
+        let frame =
+            DepthImage::new(depth, W, H, W, Tabletop::tof_intrinsics(), DEPTH_SCALE, 0).unwrap();
+        model.follow(
+            &frame,
+            &scene_options,
+            previous,
+            plane,
+            &options,
+            &mut labels,
+            &mut cloud,
+            &mut scratch,
+        )
+    };
+    let followed = follow(&depth, &best.registration.pose).unwrap();
+    let next = followed.best.unwrap();
+    assert_eq!(followed.tried.len(), 1);
+    assert!(next.reliable, "{next:?}");
+    let error = angle_deg(&next.registration.pose, &moved.inverse());
+    assert!(error < 2.0, "{error} deg off: {next:?}");
+    // The box about the last pose held pieces of the blocks too.
+    let kept = &followed.segmentation.clusters.kept;
+    assert!(kept.len() >= 2, "{kept:?}");
+
+    // The object gone: nothing reliable.
+    let empty = render(&[], &block);
+    let gone = follow(&empty, &next.registration.pose).unwrap();
+    assert!(!gone.best.is_some_and(|b| b.reliable), "{gone:?}");
+    // A pose that is not a rotation.
+    let bad = Pose {
+        rotation: [2.0, 0.0, 0.0, 0.0],
+        ..next.registration.pose
+    };
+    assert_eq!(
+        follow(&depth, &bad).err(),
+        Some(pcrnet_core::Error::InvalidPose)
+    );
+}

@@ -158,6 +158,12 @@ fn shipped(models: &[TestModel], cases: &[Case], device: &DeviceRun) {
                 );
             }
         }
+        if let Some(run) = s.runs.get("follow") {
+            println!(
+                "follow (the next frame from the last pose and plane: the box about the object, ICP, verified), {w} x {h} frame: {} instructions, peak stack {} B",
+                run.instructions, run.stack
+            );
+        }
     }
     println!(
         "\nlatency of the shipped model on its demo source (instructions, and ms at 168 MHz (M4) / 480 MHz (M7) \

@@ -18,8 +18,9 @@ use crate::vectors::{SCRATCH_LEN, error_text};
 /// Sampling step of the harness's grid (the default of `SceneOptions::for_object`).
 const STEP: usize = 4;
 
-/// The runs per model, in the device's order.
-pub const RUNS: [&str; 2] = ["locate", "sweep"];
+/// The runs per model, in the device's order: the last follows the frame
+/// from the sweep's result ([`pcrnet_core::testing::scene::follow_start`]).
+pub const RUNS: [&str; 3] = ["locate", "sweep", "follow"];
 
 /// What a run found, as words, or the error's text.
 pub type SceneResult = Result<String, String>;
@@ -74,27 +75,41 @@ pub fn expected(blob: &[u8]) -> Option<Vec<SceneResult>> {
         up: Some(harness::HARNESS_UP),
         ..plain
     };
-    let results = [plain, swept]
-        .iter()
-        .map(|o| {
-            let located = model.locate(
-                &image,
-                o,
-                harness::HARNESS_CANDIDATES,
-                &Options::default(),
-                &mut labels,
-                &mut points,
-                &mut scratch,
-            );
-            located
-                .map(|l| {
-                    let mut words = String::new();
-                    harness::describe(&l, &mut words).expect("writing to a String");
-                    words
-                })
-                .map_err(|e| error_text(&e))
-        })
-        .collect();
+    let words = |located: &pcrnet_core::locate::Located| {
+        let mut words = String::new();
+        harness::describe(located, &mut words).expect("writing to a String");
+        words
+    };
+    let mut results = Vec::new();
+    let mut last = (pcrnet_core::Pose::IDENTITY, None);
+    for (i, o) in [plain, swept].iter().enumerate() {
+        let located = model.locate(
+            &image,
+            o,
+            harness::HARNESS_CANDIDATES,
+            &Options::default(),
+            &mut labels,
+            &mut points,
+            &mut scratch,
+        );
+        if i == 1
+            && let Ok(l) = &located
+        {
+            last = harness::follow_start(l);
+        }
+        results.push(located.map(|l| words(&l)).map_err(|e| error_text(&e)));
+    }
+    let followed = model.follow(
+        &image,
+        &plain,
+        &last.0,
+        last.1,
+        &Options::default(),
+        &mut labels,
+        &mut points,
+        &mut scratch,
+    );
+    results.push(followed.map(|l| words(&l)).map_err(|e| error_text(&e)));
     Some(results)
 }
 
@@ -243,5 +258,8 @@ mod tests {
         let results = expected(blob).unwrap();
         let sweep = results[1].as_ref().unwrap();
         assert!(winner_is_reliable(sweep), "{sweep}");
+        // Followed from the sweep's pose on the same frame: found again.
+        let follow = results[2].as_ref().unwrap();
+        assert!(winner_is_reliable(follow), "{follow}");
     }
 }

@@ -332,6 +332,73 @@ impl<'a> Int8Model<'a> {
         points: &mut [[f32; 3]],
         scratch: &mut [i8],
     ) -> Result<crate::locate::Located> {
+        self.locate_from(
+            frame, scene, candidates, None, options, labels, points, scratch,
+        )
+    }
+
+    /// Follows the object into the next frame of a stream (see
+    /// [`crate::follow`]): with `previous` the pose of the last frame (user
+    /// units, as a registration returns it) and `plane` the plane that
+    /// frame's segmentation found (`located.segmentation.plane`), the
+    /// largest cluster in the box about where `previous` puts the object
+    /// ([`crate::follow::near`]) is registered by ICP from `previous` and
+    /// checked against the frame. Buffers as [`Self::locate`]'s. Act on the
+    /// result only when its best candidate is reliable; otherwise locate
+    /// the object afresh.
+    ///
+    /// # Errors
+    /// A non-finite `previous` or one whose rotation is not a unit
+    /// quaternion is [`crate::Error::InvalidPose`]; else as
+    /// [`Self::locate`].
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn follow<F: crate::scene::Organised>(
+        &self,
+        frame: &F,
+        scene: &crate::scene::SceneOptions,
+        previous: &Pose,
+        plane: Option<crate::scene::Plane>,
+        options: &Options,
+        labels: &mut [u16],
+        points: &mut [[f32; 3]],
+        scratch: &mut [i8],
+    ) -> Result<crate::locate::Located> {
+        let previous = previous.checked_unit()?;
+        let radius = self.object_radius();
+        let near = crate::follow::near(scene, &self.p.frame, &previous, plane, radius);
+        let prior = crate::locate::Prior {
+            pose: &previous,
+            centre: crate::follow::centre(&self.p.frame, &previous),
+        };
+        self.locate_from(
+            frame,
+            &near,
+            1,
+            Some(prior),
+            options,
+            labels,
+            points,
+            scratch,
+        )
+    }
+
+    /// [`Self::locate`], with a `prior` each candidate registered from its
+    /// pose by ICP alone, the clusters nearest its centre first
+    /// ([`crate::follow`]).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn locate_from<F: crate::scene::Organised>(
+        &self,
+        frame: &F,
+        scene: &crate::scene::SceneOptions,
+        candidates: usize,
+        prior: Option<crate::locate::Prior<'_>>,
+        options: &Options,
+        labels: &mut [u16],
+        points: &mut [[f32; 3]],
+        scratch: &mut [i8],
+    ) -> Result<crate::locate::Located> {
         let tile = self.tile_for(scratch.len())?;
         // Checked against the frame, a candidate is judged at the looser of
         // the two residual bounds, and so is the turn its registration
@@ -361,6 +428,7 @@ impl<'a> Int8Model<'a> {
             frame,
             scene,
             candidates,
+            prior,
             labels,
             points,
             |source, start| match start {

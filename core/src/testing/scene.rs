@@ -258,6 +258,16 @@ fn to_raw(z: f32) -> u16 {
     }
 }
 
+/// Where the harness's `follow` run starts: the winner's pose and the
+/// plane of `located` (the sweep's), or the identity and no plane when it
+/// found nothing.
+pub fn follow_start(located: &crate::locate::Located) -> (Pose, Option<Plane>) {
+    (
+        located.best.map_or(Pose::IDENTITY, |b| b.registration.pose),
+        located.segmentation.plane,
+    )
+}
+
 /// The QEMU harness's frame: 224 x 172 pixels (the time-of-flight camera).
 pub const HARNESS_WIDTH: usize = 224;
 /// Rows of the harness's frame.

@@ -464,9 +464,11 @@ fn view_buffer() -> &'static mut [f32] {
 /// The scene path on the harness frame ([`pcrnet_core::testing::scene`]):
 /// `model M scene segment INSTR` (the scene stages alone), then `model M
 /// scene RUN INSTR STACK WORDS...` for RUN `locate` (the network's
-/// hypotheses) and `sweep` (the template's up axis given), each the whole
-/// path described word by word, or `model M scene RUN error E`; a frame
-/// that cannot be made is `model M scene error E`.
+/// hypotheses), `sweep` (the template's up axis given) and `follow` (the
+/// next frame followed from the sweep's pose and plane: the same frame,
+/// the object where it was), each the whole path described word by word,
+/// or `model M scene RUN error E`; a frame that cannot be made is `model M
+/// scene error E`.
 #[cfg(not(feature = "microbit"))]
 fn run_scene(
     m: usize,
@@ -519,23 +521,40 @@ fn run_scene(
         up: Some(harness::HARNESS_UP),
         ..scene_options
     };
-    for (name, run_options) in [("locate", &scene_options), ("sweep", &swept)] {
+    // Where the sweep left the object: the follow run's start.
+    let mut last = (pcrnet_core::Pose::IDENTITY, None);
+    for name in ["locate", "sweep", "follow"] {
         let baseline = stack::paint();
         let l0 = counter.instructions();
-        let located = model.locate(
-            &image,
-            run_options,
-            harness::HARNESS_CANDIDATES,
-            &options,
-            labels,
-            points,
-            scratch,
-        );
+        let located = match name {
+            "follow" => model.follow(
+                &image,
+                &scene_options,
+                &last.0,
+                last.1,
+                &options,
+                labels,
+                points,
+                scratch,
+            ),
+            _ => model.locate(
+                &image,
+                if name == "sweep" { &swept } else { &scene_options },
+                harness::HARNESS_CANDIDATES,
+                &options,
+                labels,
+                points,
+                scratch,
+            ),
+        };
         let l1 = counter.instructions();
         let peak = stack::used_below(baseline);
         line.clear();
         match located {
             Ok(located) => {
+                if name == "sweep" {
+                    last = harness::follow_start(&located);
+                }
                 let _ = write!(line, "model {m} scene {name} {} {peak} ", l1 - l0);
                 let _ = harness::describe(&located, line);
             }

@@ -84,7 +84,18 @@ pub struct Generated {
     pub present: Vec<u16>,
     /// The same scene without it.
     pub absent: Vec<u16>,
+    /// The next frame: the object moved a little ([`MOVE_METRES`],
+    /// [`MOVE_DEGREES`]).
+    pub moved: Vec<u16>,
+    /// The pose a registration of `moved` should return.
+    pub moved_truth: Pose,
 }
+
+/// How far the object slides along the table between two frames, at most
+/// (metres): 2 cm, 0.6 m/s at 30 frames a second.
+pub const MOVE_METRES: f32 = 0.02;
+/// How far it turns about the table's normal, at most (degrees).
+pub const MOVE_DEGREES: f32 = 5.0;
 
 /// `points` scaled by `s`.
 fn scaled(points: &[[f32; 3]], s: f32) -> Vec<[f32; 3]> {
@@ -130,12 +141,8 @@ pub fn generate(
     };
     let up = [0.0, 0.0, 1.0];
     let at = [rng.random_range(-0.1..0.1), rng.random_range(-0.1..0.1)];
-    let pose = t.stand(
-        &object,
-        up,
-        at,
-        rng.random_range(0.0..std::f32::consts::TAU),
-    );
+    let yaw = rng.random_range(0.0..std::f32::consts::TAU);
+    let pose = t.stand(&object, up, at, yaw);
     // Distractors: (where, radius), boxes and other classes' shapes.
     let mut taken: Vec<([f32; 2], f32)> = vec![(at, radius)];
     let mut blocks = Vec::new();
@@ -205,12 +212,27 @@ pub fn generate(
         splat: splat(radius),
     });
     let present = render(&clouds)?;
+    // The next frame of a stream: the object slid up to MOVE_METRES along
+    // the table and turned up to MOVE_DEGREES about its normal.
+    let (angle, reach) = (
+        rng.random_range(0.0..std::f32::consts::TAU),
+        rng.random_range(0.0..MOVE_METRES),
+    );
+    let turn = rng.random_range(-MOVE_DEGREES..MOVE_DEGREES).to_radians();
+    let later = [at[0] + reach * angle.cos(), at[1] + reach * angle.sin()];
+    let moved_pose = t.stand(&object, up, later, yaw + turn);
+    if let Some(last) = clouds.last_mut() {
+        last.pose = moved_pose;
+    }
+    let moved = render(&clouds)?;
     Ok(Generated {
         shape: shapes.names[i].clone(),
         template,
         truth: pose.inverse(),
         present,
         absent,
+        moved,
+        moved_truth: moved_pose.inverse(),
     })
 }
 

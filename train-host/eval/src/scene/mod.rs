@@ -77,12 +77,23 @@ pub fn scene(ctx: &Context) -> anyhow::Result<Report> {
             let bound = pcrnet_train::template::bind(&blob, &g.template, 512)
                 .with_context(|| format!("binding {}", g.shape))?;
             let model = Int8Model::from_bytes(&bound)?;
-            for (method, up) in [
-                ("sweep (--up z)", Some([0.0, 0.0, 1.0])),
-                ("network hypotheses", None),
-            ] {
+            let mut swept = None;
+            for (method, up) in [(SWEEP, Some([0.0, 0.0, 1.0])), (NETWORK, None)] {
                 for (present, depth) in [(true, &g.present), (false, &g.absent)] {
-                    results.push(run(&model, camera, &g, depth, present, method, up)?);
+                    let how = How::Locate(up);
+                    let (result, located) = run(&model, camera, &g, depth, present, method, how)?;
+                    if present && method == SWEEP {
+                        swept = located;
+                    }
+                    results.push(result);
+                }
+            }
+            // The next frame, followed from the sweep's pose and plane; and
+            // a next frame without the object.
+            if let Some(start) = swept {
+                let how = How::Follow(start);
+                for (present, depth) in [(true, &g.moved), (false, &g.absent)] {
+                    results.push(run(&model, camera, &g, depth, present, FOLLOW, how)?.0);
                 }
             }
             if n == 0 {
@@ -104,6 +115,7 @@ pub fn scene(ctx: &Context) -> anyhow::Result<Report> {
             format!("{SHAPES} seeded ModelNet10 test shapes per camera, each scaled to a radius of {RADIUS} m and bound as the template of the shipped model (`{SHIPPED_INT8}`, 512 stored points), standing upright on a table (its z axis up) in a yaw U[0, 360°) within ±0.1 m of where the optical axis meets the table, among 2 to 5 distractors (boxes 5 to 20 cm, other classes' shapes of radius 8 to 18 cm) that do not touch it."),
             format!("Cameras: {}; pitched 35 to 65° down at the table; depth in millimetres with uniform noise of ±0.4% of the depth squared (m), rendered by ray casting (table, boxes) and z-buffered splats of the shapes' points (`pcrnet_core::testing::scene`), then what each sensor does at depth edges (a step over {} m + {:.0}% of the depth between neighbouring pixels; `pcrnet_eval::scene::sensor`).", CAMERAS.iter().map(|c| format!("{}, {:.1} to {:.1} m, {}", c.name, c.distance[0], c.distance[1], c.artifacts.describe())).collect::<Vec<_>>().join("; "), sensor::EDGE_JUMP, 100.0 * sensor::EDGE_SHARE),
             format!("`Int8Model::locate` with `SceneOptions::for_object(radius)` (4-pixel grid, RANSAC plane, clusters by radius, poses verified against the frame) and `Options::default()`, {CANDIDATES} candidates. Sweep: the template's up axis given (`--up z`), 12 yaws about the plane's normal, ICP. Network hypotheses: without it."),
+            format!("Follow: the next frame of a stream (the object slid up to {:.0} cm along the table and turned up to {:.0}° about its normal, `frames::MOVE_METRES`, `MOVE_DEGREES`), followed by `Int8Model::follow` from the sweep's pose and plane when the sweep's winner was reliable (the box about the last pose, its nearest cluster, ICP from the last pose, the check against the frame; no network, no sweep); absent: the next frame without the object. Its frames are those the sweep was reliable on; its time is all in `ms locate`.", 100.0 * frames::MOVE_METRES, frames::MOVE_DEGREES),
             format!("Success: the winning pose within {SUCCESS_DEG}° and {SUCCESS_SHARE} of the template's size (2 radii) of the truth, whatever the verdict. Reliable-but-wrong: reported reliable and more than {SUCCESS_DEG}° off. A symmetric shape turned about its axis counts as wrong (issue 36 adds the symmetry-aware error). Absent: the same scene without the object. Times: host, one thread."),
         ],
         vec![table(&results)],
@@ -111,7 +123,24 @@ pub fn scene(ctx: &Context) -> anyhow::Result<Report> {
     )
 }
 
-/// Locates the object in one frame.
+/// The registrations compared.
+const SWEEP: &str = "sweep (--up z)";
+const NETWORK: &str = "network hypotheses";
+const FOLLOW: &str = "follow the next frame (from the sweep's pose)";
+
+/// How a frame is searched: located afresh (with the up axis, the sweep),
+/// or followed from the last frame's pose and plane.
+#[derive(Debug, Clone, Copy)]
+enum How {
+    Locate(Option<[f32; 3]>),
+    Follow(Start),
+}
+
+/// Where a frame is followed from: the last pose and plane.
+type Start = (pcrnet_core::Pose, Option<pcrnet_core::scene::Plane>);
+
+/// Locates (or follows) the object in one frame: the result and, when the
+/// winner is reliable, its pose and the plane to follow it from.
 fn run(
     model: &Int8Model,
     camera: &Camera,
@@ -119,8 +148,8 @@ fn run(
     depth: &[u16],
     present: bool,
     method: &'static str,
-    up: Option<[f32; 3]>,
-) -> anyhow::Result<FrameResult> {
+    how: How,
+) -> anyhow::Result<(FrameResult, Option<Start>)> {
     let image = DepthImage::new(
         depth,
         camera.width,
@@ -130,6 +159,10 @@ fn run(
         pcrnet_core::testing::scene::DEPTH_SCALE,
         0,
     )?;
+    let up = match how {
+        How::Locate(up) => up,
+        How::Follow(_) => None,
+    };
     let scene_options = SceneOptions {
         up,
         ..SceneOptions::for_object(model.object_radius())
@@ -138,28 +171,53 @@ fn run(
     let mut points = vec![[0f32; 3]; 512];
     let mut scratch = vec![0i8; model.host_scratch_len()];
     let t0 = Instant::now();
-    scene::segment(&image, &scene_options, &mut labels)?;
-    let t1 = Instant::now();
-    let located = model.locate(
-        &image,
-        &scene_options,
-        CANDIDATES,
-        &Options::default(),
-        &mut labels,
-        &mut points,
-        &mut scratch,
-    )?;
+    let t1 = match how {
+        How::Locate(_) => {
+            scene::segment(&image, &scene_options, &mut labels)?;
+            Instant::now()
+        }
+        How::Follow(_) => t0,
+    };
+    let located = match how {
+        How::Locate(_) => model.locate(
+            &image,
+            &scene_options,
+            CANDIDATES,
+            &Options::default(),
+            &mut labels,
+            &mut points,
+            &mut scratch,
+        )?,
+        How::Follow((previous, plane)) => model.follow(
+            &image,
+            &scene_options,
+            &previous,
+            plane,
+            &Options::default(),
+            &mut labels,
+            &mut points,
+            &mut scratch,
+        )?,
+    };
     let t2 = Instant::now();
+    let truth = match how {
+        How::Follow(_) => &g.moved_truth,
+        How::Locate(_) => &g.truth,
+    };
     let size = 2.0 * f64::from(RADIUS);
     let (mut rotation_deg, mut translation, mut adds) =
         (f64::INFINITY, f64::INFINITY, f64::INFINITY);
     if let Some(best) = &located.best {
-        let (r, t) = pose_errors(&best.registration.pose, &g.truth);
+        let (r, t) = pose_errors(&best.registration.pose, truth);
         rotation_deg = r;
         translation = t / size;
-        adds = crate::symmetry::add_s(&best.registration.pose, &g.truth, &g.template) / size;
+        adds = crate::symmetry::add_s(&best.registration.pose, truth, &g.template) / size;
     }
-    Ok(FrameResult {
+    let start = located
+        .best
+        .filter(|b| b.reliable)
+        .map(|b| (b.registration.pose, located.segmentation.plane));
+    let result = FrameResult {
         camera: camera.name,
         method,
         shape: g.shape.clone(),
@@ -175,7 +233,7 @@ fn run(
             .filter(|b| b.registration.ambiguity.is_ambiguous())
             .map(|b| {
                 let r = &b.registration;
-                crate::symmetry::explains(&r.ambiguity, &r.pose, &g.truth.rotation_matrix())
+                crate::symmetry::explains(&r.ambiguity, &r.pose, &truth.rotation_matrix())
             }),
         verified: located.best.and_then(|b| b.verification).map(|v| v.passed),
         clusters: located.segmentation.clusters.kept.len(),
@@ -193,7 +251,7 @@ fn run(
                     passed: false,
                 });
                 (
-                    crate::symmetry::add_s(&c.registration.pose, &g.truth, &g.template) / size,
+                    crate::symmetry::add_s(&c.registration.pose, truth, &g.template) / size,
                     c.registration.relative_plane_residual,
                     v.supported,
                     v.violations,
@@ -204,7 +262,8 @@ fn run(
             .collect(),
         segment_ms: (t1 - t0).as_secs_f64() * 1e3,
         locate_ms: (t2 - t1).as_secs_f64() * 1e3,
-    })
+    };
+    Ok((result, start))
 }
 
 /// Rotation error (degrees) and translation error (user units) of `est`
@@ -235,7 +294,7 @@ fn pose_errors(est: &pcrnet_core::Pose, truth: &pcrnet_core::Pose) -> (f64, f64)
 fn table(all: &[FrameResult]) -> Table {
     let mut rows = Vec::new();
     for camera in &CAMERAS {
-        for method in ["sweep (--up z)", "network hypotheses"] {
+        for method in [SWEEP, NETWORK, FOLLOW] {
             let of = |present: bool| -> Vec<&FrameResult> {
                 all.iter()
                     .filter(|f| {
