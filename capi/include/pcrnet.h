@@ -873,6 +873,39 @@ PcrnetStatus pcrnet_locate(const PcrnetModel *model,
                            PcrnetLocated *out);
 
 /*
+ Follows the model's object into the next frame of a stream
+ (`Int8Model::follow`): `previous` is the pose of the last frame (7
+ floats, `qw qx qy qz tx ty tz`, as `pcrnet_locate` or this call wrote it
+ in `out->registration`), and `scene` should carry the plane the last
+ result found (`has_plane`, `plane_normal`, `plane_offset` copied from
+ it: no plane search then). The cluster nearest where `previous` put the
+ object, in a box of 1.5 object radii about it, is registered by ICP
+ from `previous` and checked against the frame; `out` as
+ `pcrnet_locate` writes it (`candidates_tried` 1 at most). Act on it only
+ when `reliable`; otherwise call `pcrnet_locate` again (the object moved
+ more than half its radius, left the box or is hidden). A `previous`
+ that is not finite or not a unit rotation is
+ `PCRNET_ERROR_INVALID_POSE`; buffers and other statuses as
+ `pcrnet_locate`.
+
+ # Safety
+ As `pcrnet_locate`; `previous` must point to 7 readable floats (or be
+ null, which is a status).
+ */
+PcrnetStatus pcrnet_follow(const PcrnetModel *model,
+                           const PcrnetDepthImage *image,
+                           const PcrnetSceneOptions *scene,
+                           const float *previous,
+                           const PcrnetOptions *options,
+                           uint16_t *labels,
+                           size_t labels_len,
+                           float *points,
+                           size_t points_capacity,
+                           int8_t *scratch,
+                           size_t scratch_len,
+                           PcrnetLocated *out);
+
+/*
  Makes `scratch` ready for many calls of `model` and fills `prepared`.
  `pcrnet_model_host_scratch_len` bytes let a host prepare everything;
  at least `pcrnet_model_scratch_len(model, 1)` are needed. Until the

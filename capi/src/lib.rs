@@ -57,8 +57,8 @@ mod types;
 mod view;
 pub use feature::pcrnet_feature_distance;
 pub use locate::{
-    PcrnetDepthImage, PcrnetLocated, PcrnetSceneOptions, pcrnet_locate, pcrnet_scene_labels_len,
-    pcrnet_scene_options_default, pcrnet_scene_options_for_model,
+    PcrnetDepthImage, PcrnetLocated, PcrnetSceneOptions, pcrnet_follow, pcrnet_locate,
+    pcrnet_scene_labels_len, pcrnet_scene_options_default, pcrnet_scene_options_for_model,
 };
 pub use prepared::{
     PCRNET_PREPARED_SIZE, PCRNET_PREPARED_WORDS, PcrnetPrepared, pcrnet_prepare,

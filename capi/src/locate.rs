@@ -4,6 +4,7 @@
 //! against the frame, the best verified one reported.
 
 use PcrnetStatus::*;
+use pcrnet_core::Int8Model;
 use pcrnet_core::locate::{Located, MAX_CANDIDATES};
 use pcrnet_core::scene::{self, DepthImage, Intrinsics, PlaneChoice, SceneOptions};
 
@@ -284,6 +285,149 @@ pub unsafe extern "C" fn pcrnet_locate(
     scratch_len: usize,
     out: *mut PcrnetLocated,
 ) -> PcrnetStatus {
+    let buffers = Buffers {
+        labels,
+        labels_len,
+        points,
+        points_capacity,
+        scratch,
+        scratch_len,
+    };
+    // SAFETY: the caller's contract, passed on.
+    unsafe {
+        on_frame(
+            model,
+            image,
+            scene,
+            options,
+            buffers,
+            out,
+            |m, frame, scene, options, b| {
+                let candidates = (scene.candidates as usize).min(MAX_CANDIDATES);
+                let scene_options = scene.scene_options(m.object_radius());
+                let (labels, points, scratch) = b;
+                Ok(m.locate(
+                    frame,
+                    &scene_options,
+                    candidates,
+                    options,
+                    labels,
+                    points,
+                    scratch,
+                )?)
+            },
+        )
+    }
+}
+
+/// Follows the model's object into the next frame of a stream
+/// (`Int8Model::follow`): `previous` is the pose of the last frame (7
+/// floats, `qw qx qy qz tx ty tz`, as `pcrnet_locate` or this call wrote it
+/// in `out->registration`), and `scene` should carry the plane the last
+/// result found (`has_plane`, `plane_normal`, `plane_offset` copied from
+/// it: no plane search then). The cluster nearest where `previous` put the
+/// object, in a box of 1.5 object radii about it, is registered by ICP
+/// from `previous` and checked against the frame; `out` as
+/// `pcrnet_locate` writes it (`candidates_tried` 1 at most). Act on it only
+/// when `reliable`; otherwise call `pcrnet_locate` again (the object moved
+/// more than half its radius, left the box or is hidden). A `previous`
+/// that is not finite or not a unit rotation is
+/// `PCRNET_ERROR_INVALID_POSE`; buffers and other statuses as
+/// `pcrnet_locate`.
+///
+/// # Safety
+/// As `pcrnet_locate`; `previous` must point to 7 readable floats (or be
+/// null, which is a status).
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments, reason = "a flat C signature")]
+pub unsafe extern "C" fn pcrnet_follow(
+    model: *const PcrnetModel,
+    image: *const PcrnetDepthImage,
+    scene: *const PcrnetSceneOptions,
+    previous: *const f32,
+    options: *const PcrnetOptions,
+    labels: *mut u16,
+    labels_len: usize,
+    points: *mut f32,
+    points_capacity: usize,
+    scratch: *mut i8,
+    scratch_len: usize,
+    out: *mut PcrnetLocated,
+) -> PcrnetStatus {
+    // SAFETY: the caller's contract: 7 floats or null.
+    let previous = match unsafe { crate::pose_at(previous) } {
+        Ok(p) => p,
+        Err(s) => return s,
+    };
+    let buffers = Buffers {
+        labels,
+        labels_len,
+        points,
+        points_capacity,
+        scratch,
+        scratch_len,
+    };
+    // SAFETY: the caller's contract, passed on.
+    unsafe {
+        on_frame(
+            model,
+            image,
+            scene,
+            options,
+            buffers,
+            out,
+            |m, frame, scene, options, b| {
+                let scene_options = scene.scene_options(m.object_radius());
+                let (labels, points, scratch) = b;
+                Ok(m.follow(
+                    frame,
+                    &scene_options,
+                    &previous,
+                    None,
+                    options,
+                    labels,
+                    points,
+                    scratch,
+                )?)
+            },
+        )
+    }
+}
+
+/// The caller's buffers of one scene call, as passed.
+struct Buffers {
+    labels: *mut u16,
+    labels_len: usize,
+    points: *mut f32,
+    points_capacity: usize,
+    scratch: *mut i8,
+    scratch_len: usize,
+}
+
+/// The buffers as slices: labels, points, scratch.
+type Slices<'b> = (&'b mut [u16], &'b mut [[f32; 3]], &'b mut [i8]);
+
+/// What `pcrnet_locate` and `pcrnet_follow` share: the model, the frame
+/// and the options checked and read, the buffers as slices, `call` run on
+/// them, its result written to `out`.
+///
+/// # Safety
+/// As `pcrnet_locate`.
+unsafe fn on_frame(
+    model: *const PcrnetModel,
+    image: *const PcrnetDepthImage,
+    scene: *const PcrnetSceneOptions,
+    options: *const PcrnetOptions,
+    buffers: Buffers,
+    out: *mut PcrnetLocated,
+    call: impl FnOnce(
+        &Int8Model<'static>,
+        &DepthImage<'_>,
+        &PcrnetSceneOptions,
+        &pcrnet_core::Options,
+        Slices<'_>,
+    ) -> Result<Located, PcrnetStatus>,
+) -> PcrnetStatus {
     let run = || -> Result<PcrnetLocated, PcrnetStatus> {
         let m = crate::model(model)?;
         if image.is_null() || scene.is_null() || options.is_null() || out.is_null() {
@@ -313,25 +457,16 @@ pub unsafe extern "C" fn pcrnet_locate(
             image.depth_scale,
             image.invalid,
         )?;
-        let scene_options = scene.scene_options(m.object_radius());
+        let b = &buffers;
         // SAFETY: the caller's contract for `labels`, `points` and `scratch`.
-        let (labels, points, scratch) = unsafe {
+        let slices = unsafe {
             (
-                slice_mut(labels, labels_len)?,
-                slice_mut(points as *mut [f32; 3], points_capacity)?,
-                scratch_mut(scratch, scratch_len)?,
+                slice_mut(b.labels, b.labels_len)?,
+                slice_mut(b.points as *mut [f32; 3], b.points_capacity)?,
+                scratch_mut(b.scratch, b.scratch_len)?,
             )
         };
-        let candidates = (scene.candidates as usize).min(MAX_CANDIDATES);
-        let located = m.locate(
-            &frame,
-            &scene_options,
-            candidates,
-            &options,
-            labels,
-            points,
-            scratch,
-        )?;
+        let located = call(m, &frame, scene, &options, slices)?;
         Ok(PcrnetLocated::from(&located))
     };
     match run() {

@@ -352,3 +352,97 @@ fn the_blobs_up_axis_reaches_the_scene_options_for_the_model() {
         PCRNET_ERROR_NULL_POINTER
     );
 }
+
+/// `pcrnet_follow` from the sweep's result (its pose, and its plane copied
+/// into the scene options) finds what the Rust API's `Int8Model::follow`
+/// finds, bit for bit, reliable; a null or non-unit pose is a status with
+/// nothing written.
+#[test]
+fn the_next_frame_is_followed_as_the_rust_api_follows_it() {
+    let blob = shipped_blob();
+    let (handle, rust) = (loaded(&blob), Int8Model::from_bytes(&blob).unwrap());
+    let depth = frame(&rust);
+    let image = image(&depth);
+    let swept = PcrnetSceneOptions {
+        has_up: true,
+        up: harness::HARNESS_UP,
+        ..scene_default()
+    };
+    let mut b = Buffers::for_model(&rust);
+    let len = b.labels.len();
+    let (status, found) = locate(&handle, &image, &swept, &mut b, len);
+    assert_eq!(status, PCRNET_OK);
+    let found = found.unwrap();
+    assert!(found.reliable && found.has_plane);
+    let r = &found.registration;
+    let previous = [
+        r.rotation[0],
+        r.rotation[1],
+        r.rotation[2],
+        r.rotation[3],
+        r.translation[0],
+        r.translation[1],
+        r.translation[2],
+    ];
+    let scene = PcrnetSceneOptions {
+        has_plane: true,
+        plane_normal: found.plane_normal,
+        plane_offset: found.plane_offset,
+        ..scene_default()
+    };
+    let follow = |previous: *const f32, b: &mut Buffers| {
+        let mut out = untouched();
+        let options = options_default();
+        let status = unsafe {
+            pcrnet_follow(
+                &*handle,
+                &image,
+                &scene,
+                previous,
+                &options,
+                b.labels.as_mut_ptr(),
+                b.labels.len(),
+                b.points.as_mut_ptr() as *mut f32,
+                b.points.len(),
+                b.scratch.as_mut_ptr(),
+                b.scratch.len(),
+                &mut out,
+            )
+        };
+        (status, out)
+    };
+    let (status, followed) = follow(previous.as_ptr(), &mut b);
+    assert_eq!(status, PCRNET_OK);
+    assert!(followed.reliable && followed.found, "{followed:?}");
+    assert_eq!(followed.candidates_tried, 1);
+    // The Rust API from the same pose and plane.
+    let frame = harness::harness_image(&depth).unwrap();
+    let pose = pcrnet_core::Pose {
+        rotation: [previous[0], previous[1], previous[2], previous[3]],
+        translation: [previous[4], previous[5], previous[6]],
+    };
+    let plane = pcrnet_core::scene::Plane {
+        normal: found.plane_normal,
+        offset: found.plane_offset,
+    };
+    let mut rb = Buffers::for_model(&rust);
+    let want = rust
+        .follow(
+            &frame,
+            &SceneOptions::for_object(rust.object_radius()),
+            &pose,
+            Some(plane),
+            &Options::default(),
+            &mut rb.labels,
+            &mut rb.points,
+            &mut rb.scratch,
+        )
+        .unwrap();
+    assert_eq!(followed, PcrnetLocated::from(&want));
+    // Bad poses: nothing written.
+    let (status, out) = follow(std::ptr::null(), &mut b);
+    assert_eq!((status, out), (PCRNET_ERROR_NULL_POINTER, untouched()));
+    let skewed = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0f32];
+    let (status, out) = follow(skewed.as_ptr(), &mut b);
+    assert_eq!((status, out), (PCRNET_ERROR_INVALID_POSE, untouched()));
+}

@@ -146,12 +146,14 @@ pub fn locate<F: Organised>(
     let mut tried = heapless::Vec::new();
     let mut first_error = None;
     let kept = &segmentation.clusters.kept;
-    let order = try_order(kept, prior.map(|p| p.centre));
-    let clusters = order
-        .iter()
-        .filter_map(|&i| Some((i, kept.get(i)?)))
-        .take(candidates.min(MAX_CANDIDATES));
-    for (index, cluster) in clusters {
+    let mut used = 0u32;
+    for _ in 0..candidates.min(MAX_CANDIDATES) {
+        let Some((index, cluster)) =
+            next_cluster(kept, prior.map(|p| p.centre), used).and_then(|i| Some((i, kept.get(i)?)))
+        else {
+            break;
+        };
+        used |= 1 << index;
         let n = segmentation.gather(frame, scene, labels, cluster, points);
         let Some(source) = points.get(..n) else {
             continue;
@@ -209,20 +211,12 @@ pub fn locate<F: Organised>(
     })
 }
 
-/// The kept clusters' indices in the order they are tried: as kept
-/// (largest first), or nearest `centre` first (an insertion sort: the
-/// slice sorts keep a panic path).
-fn try_order(
-    kept: &[scene::Cluster],
-    centre: Option<[f32; 3]>,
-) -> heapless::Vec<usize, { scene::cluster::MAX_CLUSTERS }> {
-    let mut order: heapless::Vec<usize, { scene::cluster::MAX_CLUSTERS }> =
-        (0..kept.len()).collect();
-    let Some(c) = centre else {
-        return order;
-    };
-    let distance = |i: usize| {
-        kept.get(i).map_or(f32::INFINITY, |k| {
+/// The next kept cluster to try among those not in `used` (bit `i` for
+/// cluster `i`): the first (the largest) without `centre`, else the one
+/// whose centroid is nearest it (the first on a tie).
+fn next_cluster(kept: &[scene::Cluster], centre: Option<[f32; 3]>, used: u32) -> Option<usize> {
+    let distance = |k: &scene::Cluster| {
+        centre.map_or(0.0, |c| {
             let d = [
                 k.centroid[0] - c[0],
                 k.centroid[1] - c[1],
@@ -231,14 +225,17 @@ fn try_order(
             d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
         })
     };
-    for i in 1..order.len() {
-        let mut j = i;
-        while j > 0 && distance(order[j]) < distance(order[j - 1]) {
-            order.swap(j - 1, j);
-            j -= 1;
-        }
-    }
-    order
+    kept.iter()
+        .enumerate()
+        .filter(|&(i, _)| i < 32 && used & (1 << i) == 0)
+        .fold(None, |best: Option<(usize, f32)>, (i, k)| {
+            let d = distance(k);
+            match best {
+                Some((_, b)) if b <= d => best,
+                _ => Some((i, d)),
+            }
+        })
+        .map(|(i, _)| i)
 }
 
 /// `registration` and its check, or the other pose of its reported turn
@@ -368,15 +365,18 @@ mod tests {
             span: [0; 4],
         };
         let kept = [cluster(300, 1.0), cluster(200, 0.1), cluster(100, -0.5)];
-        assert_eq!(try_order(&kept, None).as_slice(), &[0, 1, 2]);
-        assert_eq!(
-            try_order(&kept, Some([0.0, 0.0, 2.0])).as_slice(),
-            &[1, 2, 0]
-        );
-        assert_eq!(
-            try_order(&kept, Some([2.0, 0.0, 2.0])).as_slice(),
-            &[0, 1, 2]
-        );
+        let order = |centre| {
+            let mut used = 0u32;
+            core::iter::from_fn(|| {
+                let i = next_cluster(&kept, centre, used)?;
+                used |= 1 << i;
+                Some(i)
+            })
+            .collect::<heapless::Vec<usize, 4>>()
+        };
+        assert_eq!(order(None).as_slice(), &[0, 1, 2]);
+        assert_eq!(order(Some([0.0, 0.0, 2.0])).as_slice(), &[1, 2, 0]);
+        assert_eq!(order(Some([2.0, 0.0, 2.0])).as_slice(), &[0, 1, 2]);
     }
 
     #[test]

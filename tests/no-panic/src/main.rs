@@ -321,5 +321,20 @@ unsafe fn c_locate(model: *const capi::PcrnetModel, scratch: *mut i8, scratch_le
             scratch_len,
             black_box(out.as_mut_ptr()),
         ));
+        let previous = black_box([1.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        black_box(capi::pcrnet_follow(
+            model,
+            &image,
+            black_box(scene.as_ptr()),
+            black_box(previous.as_ptr()),
+            black_box(options.as_ptr()),
+            black_box(core::ptr::addr_of_mut!(LABELS) as *mut u16),
+            black_box(512),
+            black_box(core::ptr::addr_of_mut!(POINTS) as *mut f32),
+            black_box(128),
+            scratch,
+            scratch_len,
+            black_box(out.as_mut_ptr()),
+        ));
     }
 }
