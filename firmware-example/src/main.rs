@@ -14,7 +14,9 @@
 //! driver would fill the buffer) and registers it with `Int8Model::locate`:
 //! the plane taken out, clusters of the object's size registered by a yaw
 //! sweep about the plane's normal and checked against the frame. The QEMU
-//! harness checks that very call bit for bit against the host.
+//! harness checks that very call bit for bit against the host. Then it
+//! follows the object into the next frame (`Int8Model::follow`: here the
+//! same frame) from the pose and plane it found, as a stream would.
 //!
 //! Memory (embedded default architecture, tile 8): model blob in flash
 //! (~230 KB), scratch 4,355 B and the cloud 12 B/point in RAM; for the
@@ -211,6 +213,27 @@ fn locate(model: &Int8Model, counter: &Counter, scratch: &mut [i8]) {
                 );
                 report(&best.registration);
                 log!("object in the frame reliable: {}", best.reliable);
+                let (pose, plane) = (best.registration.pose, l.segmentation.plane);
+                let start = counter.instructions();
+                let next = model.follow(
+                    &image,
+                    &options,
+                    &pose,
+                    plane,
+                    &Options::default(),
+                    labels,
+                    points,
+                    scratch,
+                );
+                let spent = counter.instructions() - start;
+                match next.map(|n| n.best.is_some_and(|b| b.reliable)) {
+                    Ok(reliable) => log!(
+                        "followed into the next frame: {} instructions, reliable: {}",
+                        spent,
+                        reliable
+                    ),
+                    Err(e) => log!("follow failed: {:?}", e),
+                }
             }
             None => log!("no cluster of the object's size in the frame"),
         },
