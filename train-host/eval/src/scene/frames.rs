@@ -89,7 +89,20 @@ pub struct Generated {
     pub moved: Vec<u16>,
     /// The pose a registration of `moved` should return.
     pub moved_truth: Pose,
+    /// The frames after `present` in a stream ([`STREAM_FRAMES`]): the
+    /// object turning in place, each with the pose a registration should
+    /// return.
+    pub stream: Vec<(Vec<u16>, Pose)>,
 }
+
+/// Frames of a stream after the first.
+pub const STREAM_FRAMES: usize = 8;
+/// How far the object turns between two frames of a stream (degrees,
+/// uniform): a turntable at 30 to 75 degrees a second at 15 frames a second.
+pub const STREAM_DEGREES: [f32; 2] = [2.0, 5.0];
+/// How far each frame of a stream puts it from where it first stood
+/// along the table, at most (metres, uniform in each axis).
+pub const STREAM_JITTER: f32 = 0.005;
 
 /// How far the object slides along the table between two frames, at most
 /// (metres): 2 cm, 0.6 m/s at 30 frames a second.
@@ -225,6 +238,25 @@ pub fn generate(
         last.pose = moved_pose;
     }
     let moved = render(&clouds)?;
+    // A stream from the first frame on: the object turning in place, as on
+    // a turntable, with a few millimetres of jitter along the table.
+    let mut stream = Vec::with_capacity(STREAM_FRAMES);
+    let mut turned = yaw;
+    for _ in 0..STREAM_FRAMES {
+        turned += rng
+            .random_range(STREAM_DEGREES[0]..STREAM_DEGREES[1])
+            .to_radians();
+        let j = STREAM_JITTER;
+        let place = [
+            at[0] + rng.random_range(-j..j),
+            at[1] + rng.random_range(-j..j),
+        ];
+        let pose = t.stand(&object, up, place, turned);
+        if let Some(last) = clouds.last_mut() {
+            last.pose = pose;
+        }
+        stream.push((render(&clouds)?, pose.inverse()));
+    }
     Ok(Generated {
         shape: shapes.names[i].clone(),
         template,
@@ -233,6 +265,7 @@ pub fn generate(
         absent,
         moved,
         moved_truth: moved_pose.inverse(),
+        stream,
     })
 }
 
