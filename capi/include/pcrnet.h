@@ -881,9 +881,11 @@ PcrnetStatus pcrnet_locate(const PcrnetModel *model,
  it: no plane search then). The cluster nearest where `previous` put the
  object, in a box of 1.5 object radii about it, is registered by ICP
  from `previous` and checked against the frame; `out` as
- `pcrnet_locate` writes it (`candidates_tried` 1 at most). Act on it only
- when `reliable`; otherwise call `pcrnet_locate` again (the object moved
- more than half its radius, left the box or is hidden). A `previous`
+ `pcrnet_locate` writes it (`candidates_tried` 1 at most; no turn
+ reported: keep the last `pcrnet_locate`'s). Act on it only when the
+ status is `PCRNET_OK` and `reliable`; otherwise call `pcrnet_locate`
+ again (the object moved too far, left the box or is hidden). Without
+ `has_plane` the plane is searched for in the box. A `previous`
  that is not finite or not a unit rotation is
  `PCRNET_ERROR_INVALID_POSE`; buffers and other statuses as
  `pcrnet_locate`.

@@ -1,7 +1,8 @@
 //! `pcrnet_locate`: the object found in a raw depth frame and registered
 //! (the Rust API's `Int8Model::locate`): the dominant plane taken out,
 //! clusters kept by their size, the largest few registered and checked
-//! against the frame, the best verified one reported.
+//! against the frame, the best verified one reported; and `pcrnet_follow`:
+//! the next frame of a stream from the last result (`Int8Model::follow`).
 
 use PcrnetStatus::*;
 use pcrnet_core::Int8Model;
@@ -328,9 +329,11 @@ pub unsafe extern "C" fn pcrnet_locate(
 /// it: no plane search then). The cluster nearest where `previous` put the
 /// object, in a box of 1.5 object radii about it, is registered by ICP
 /// from `previous` and checked against the frame; `out` as
-/// `pcrnet_locate` writes it (`candidates_tried` 1 at most). Act on it only
-/// when `reliable`; otherwise call `pcrnet_locate` again (the object moved
-/// more than half its radius, left the box or is hidden). A `previous`
+/// `pcrnet_locate` writes it (`candidates_tried` 1 at most; no turn
+/// reported: keep the last `pcrnet_locate`'s). Act on it only when the
+/// status is `PCRNET_OK` and `reliable`; otherwise call `pcrnet_locate`
+/// again (the object moved too far, left the box or is hidden). Without
+/// `has_plane` the plane is searched for in the box. A `previous`
 /// that is not finite or not a unit rotation is
 /// `PCRNET_ERROR_INVALID_POSE`; buffers and other statuses as
 /// `pcrnet_locate`.
@@ -354,6 +357,10 @@ pub unsafe extern "C" fn pcrnet_follow(
     scratch_len: usize,
     out: *mut PcrnetLocated,
 ) -> PcrnetStatus {
+    // The model first, as the other calls check it.
+    if let Err(s) = crate::model(model) {
+        return s;
+    }
     // SAFETY: the caller's contract: 7 floats or null.
     let previous = match unsafe { crate::pose_at(previous) } {
         Ok(p) => p,

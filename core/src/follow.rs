@@ -10,8 +10,17 @@
 //! cluster in the box nearest where the object was ([`centre`]; the box
 //! may hold a neighbour too) by ICP from the last pose alone (no network,
 //! no other start), and checks the pose against the frame as `locate`
-//! does. A result that is not reliable means the object moved too far,
-//! left the box, or is hidden: locate it afresh.
+//! does. A result that is not reliable (or an error: a cluster cut to too
+//! few points) means the object moved too far, left the box, or is hidden:
+//! locate it afresh.
+//!
+//! Limits: the plane is the last frame's, not searched again (a fixed
+//! sensor; a moving one should locate now and then); the box replaces the
+//! scene options' region of interest; a followed registration starts from
+//! one pose only, so it reports no turn (keep the one the last `locate`
+//! reported). Tested (the `scene` experiment): motions up to 2 cm and 5
+//! degrees between frames, and streams turning 2 to 5 degrees a frame; the
+//! box's margin allows more, ICP's reach may not.
 //!
 //! ```text
 //! frame -> box about the last pose -> grid -> (last plane) -> clusters

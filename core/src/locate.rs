@@ -211,6 +211,9 @@ pub fn locate<F: Organised>(
     })
 }
 
+// Every kept cluster has a bit in `next_cluster`'s `used`.
+const _: () = assert!(scene::cluster::MAX_CLUSTERS <= u32::BITS as usize);
+
 /// The next kept cluster to try among those not in `used` (bit `i` for
 /// cluster `i`): the first (the largest) without `centre`, else the one
 /// whose centroid is nearest it (the first on a tie).
@@ -227,7 +230,7 @@ fn next_cluster(kept: &[scene::Cluster], centre: Option<[f32; 3]>, used: u32) ->
     };
     kept.iter()
         .enumerate()
-        .filter(|&(i, _)| i < 32 && used & (1 << i) == 0)
+        .filter(|&(i, _)| i < u32::BITS as usize && used & (1 << i) == 0)
         .fold(None, |best: Option<(usize, f32)>, (i, k)| {
             let d = distance(k);
             match best {

@@ -341,11 +341,14 @@ impl<'a> Int8Model<'a> {
     /// [`crate::follow`]): with `previous` the pose of the last frame (user
     /// units, as a registration returns it) and `plane` the plane that
     /// frame's segmentation found (`located.segmentation.plane`), the
-    /// largest cluster in the box about where `previous` puts the object
-    /// ([`crate::follow::near`]) is registered by ICP from `previous` and
-    /// checked against the frame. Buffers as [`Self::locate`]'s. Act on the
-    /// result only when its best candidate is reliable; otherwise locate
-    /// the object afresh.
+    /// cluster in the box about where `previous` puts the object
+    /// ([`crate::follow::near`]) nearest that place is registered by ICP
+    /// from `previous` and checked against the frame. Buffers as
+    /// [`Self::locate`]'s. Act on the result only when its best candidate is
+    /// reliable; otherwise (or on an error) locate the object afresh. A
+    /// followed registration reports no turn (it has no other start to
+    /// compare with): keep the turn the last `locate` reported, which still
+    /// holds for a symmetric object.
     ///
     /// # Errors
     /// A non-finite `previous` or one whose rotation is not a unit

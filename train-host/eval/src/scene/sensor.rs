@@ -40,7 +40,8 @@ pub enum Artifacts {
         /// drawn uniformly between its own and its most different
         /// neighbour's.
         flying: f32,
-        /// Probability that an edge pixel (not flying) is invalidated.
+        /// Probability that an edge pixel is invalidated instead (one draw:
+        /// below `flying` it flies, below `flying + dropped` it is dropped).
         dropped: f32,
     },
     /// Structured light.
@@ -48,7 +49,9 @@ pub enum Artifacts {
         /// Probability that an edge pixel is invalidated.
         dropped: f32,
         /// Pixels invalidated beside a near surface's edge on the far side
-        /// (towards +x, away from the projector): its shadow.
+        /// (towards +x, away from the projector): its shadow, of a fixed
+        /// width whatever the depth step (a simplification: a real
+        /// shadow widens with the step and narrows with distance).
         shadow: usize,
     },
 }
