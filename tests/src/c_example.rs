@@ -148,10 +148,11 @@ fn registration_words(r: &PcrnetRegistration) -> String {
     line
 }
 
-/// The `@ locate` line the example prints for `pcrnet_locate` on its
-/// frame, computed on the host with `Int8Model::locate` and the C API's own
-/// conversions (scene options in, `PcrnetLocated` out).
-fn locate_line(model: &Int8Model<'_>, depth: &[u16], scratch: &mut [i8]) -> String {
+/// The `@ locate LABEL` line the example prints for `pcrnet_locate` on its
+/// frame (`sweep`), or for `pcrnet_follow` from that result (`follow`),
+/// computed on the host with `Int8Model::locate` and `Int8Model::follow`
+/// and the C API's own conversions (scene options in, `PcrnetLocated` out).
+fn locate_line(model: &Int8Model<'_>, depth: &[u16], scratch: &mut [i8], label: &str) -> String {
     use pcrnet::{PcrnetLocated, PcrnetSceneOptions};
     use pcrnet_core::testing::scene as harness;
     // As firmware-c/main.c sets them: the defaults, up z.
@@ -163,20 +164,49 @@ fn locate_line(model: &Int8Model<'_>, depth: &[u16], scratch: &mut [i8]) -> Stri
     let options = scene.scene_options(model.object_radius());
     let mut labels = vec![0u16; pcrnet_core::scene::labels_len(FRAME.0, FRAME.1, options.step)];
     let mut points = vec![[0f32; 3]; 512];
-    let located = harness::harness_image(depth).and_then(|image| {
-        model.locate(
-            &image,
-            &options,
-            scene.candidates as usize,
-            &Options::default(),
-            &mut labels,
-            &mut points,
-            scratch,
-        )
-    });
-    let out = match located {
+    let image = match harness::harness_image(depth) {
+        Ok(image) => image,
+        Err(e) => return format!("@ locate {label} {}", PcrnetStatus::from(e) as i32),
+    };
+    let located = model.locate(
+        &image,
+        &options,
+        scene.candidates as usize,
+        &Options::default(),
+        &mut labels,
+        &mut points,
+        scratch,
+    );
+    // `follow`: the C example follows a reliable sweep into the same frame,
+    // its plane copied into the scene options (`pcrnet_follow` passes no
+    // plane of its own).
+    let result = match (label, located) {
+        ("follow", Ok(l)) => {
+            let Some(best) = l.best.filter(|b| b.reliable) else {
+                return "@ locate follow (no reliable sweep to follow)".into();
+            };
+            let next = PcrnetSceneOptions {
+                has_plane: l.segmentation.plane.is_some(),
+                plane_normal: l.segmentation.plane.map_or([0.0; 3], |p| p.normal),
+                plane_offset: l.segmentation.plane.map_or(0.0, |p| p.offset),
+                ..scene
+            };
+            model.follow(
+                &image,
+                &next.scene_options(model.object_radius()),
+                &best.registration.pose,
+                None,
+                &Options::default(),
+                &mut labels,
+                &mut points,
+                scratch,
+            )
+        }
+        (_, located) => located,
+    };
+    let out = match result {
         Ok(l) => PcrnetLocated::from(&l),
-        Err(e) => return format!("@ locate sweep {}", PcrnetStatus::from(e) as i32),
+        Err(e) => return format!("@ locate {label} {}", PcrnetStatus::from(e) as i32),
     };
     let counts = [
         u32::from(out.found),
@@ -194,7 +224,7 @@ fn locate_line(model: &Int8Model<'_>, depth: &[u16], scratch: &mut [i8]) -> Stri
     ];
     let counts: String = counts.iter().map(|c| format!(" {c}")).collect();
     format!(
-        "@ locate sweep 0{counts}{}{}{}",
+        "@ locate {label} 0{counts}{}{}{}",
         hex(&out.plane_normal),
         hex(&[out.plane_offset]),
         registration_words(&out.registration)
@@ -254,7 +284,7 @@ fn expected_line(
             ),
             Err(e) => format!("@ pose {label} {}", PcrnetStatus::from(e) as i32),
         },
-        ("locate", "sweep") => locate_line(model, depth, scratch),
+        ("locate", label @ ("sweep" | "follow")) => locate_line(model, depth, scratch, label),
         ("view", "above") => {
             let mut view = vec![0f32; pcrnet_core::scene::view::buffer_len(32)];
             match model.register_view(source, VIEWPOINT, &Options::default(), scratch, &mut view) {
