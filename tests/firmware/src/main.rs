@@ -539,7 +539,11 @@ fn run_scene(
             ),
             _ => model.locate(
                 &image,
-                if name == "sweep" { &swept } else { &scene_options },
+                if name == "sweep" {
+                    &swept
+                } else {
+                    &scene_options
+                },
                 harness::HARNESS_CANDIDATES,
                 &options,
                 labels,
