@@ -279,6 +279,21 @@ fn settle_turn<F: Organised>(
     (other, Some(other_checked))
 }
 
+/// The relative plane residual a candidate of `frame` is judged at when it
+/// is checked against the frame (the scene options' `verify` and a frame
+/// with intrinsics): the larger of the check's and `options`' bound. `None`
+/// when candidates are not checked (their registrations' own verdicts
+/// stand). `Int8Model::locate` runs each registration with it, so that
+/// its turn is judged at the same bound.
+pub fn checked_bound<F: Organised>(
+    frame: &F,
+    scene: &SceneOptions,
+    options: &crate::Options,
+) -> Option<f32> {
+    let settings = scene.verify.filter(|_| frame.intrinsics().is_some())?;
+    Some(settings.max_residual.max(options.max_residual))
+}
+
 /// The other pose of a turn replaces a registration's only when its share
 /// of violations is smaller by at least this much.
 ///

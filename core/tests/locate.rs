@@ -112,11 +112,9 @@ fn the_object_alone_on_a_table_gives_the_same_pose_as_registering_its_points() {
     assert!(best.registration.reliable);
 }
 
-#[test]
-fn among_blocks_the_object_wins() {
-    let points = template();
-    let truth = placed(&points, -25.0, -0.2, 0.1);
-    let blocks = [
+/// Two blocks about the object's size beside where the tests put it.
+fn blocks_beside() -> [Block; 2] {
+    [
         Block {
             at: [0.9, 0.3],
             size: [0.3, 0.5, 0.4],
@@ -127,7 +125,14 @@ fn among_blocks_the_object_wins() {
             size: [0.5, 0.5, 0.5],
             yaw: 0.0,
         },
-    ];
+    ]
+}
+
+#[test]
+fn among_blocks_the_object_wins() {
+    let points = template();
+    let truth = placed(&points, -25.0, -0.2, 0.1);
+    let blocks = blocks_beside();
     let depth = render(
         &[Placed {
             points: &points,
@@ -353,18 +358,7 @@ fn the_next_frame_is_followed_from_the_last_pose() {
         pose,
         splat: 0.03,
     };
-    let block = [
-        Block {
-            at: [0.9, 0.3],
-            size: [0.3, 0.5, 0.4],
-            yaw: 0.4,
-        },
-        Block {
-            at: [0.6, -0.6],
-            size: [0.5, 0.5, 0.5],
-            yaw: 0.0,
-        },
-    ];
+    let block = blocks_beside();
     let found = find(&render(&[splat(first)], &block));
     let best = found.located.best.unwrap();
     assert!(best.reliable);

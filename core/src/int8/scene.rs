@@ -141,7 +141,7 @@ impl<'a> Int8Model<'a> {
         // the two residual bounds, and so is the turn its registration
         // reports (a rival within that bound is one the frame has to settle).
         let check = scene.verify.zip(frame.intrinsics());
-        let bound = check.map(|(s, _)| s.max_residual.max(options.max_residual));
+        let bound = crate::locate::checked_bound(frame, scene, options);
         let checked;
         let options = match bound {
             Some(max_residual) => {

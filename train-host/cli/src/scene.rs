@@ -161,14 +161,9 @@ fn find<F: Organised>(
         scene_options.step,
         seconds * 1e3
     ));
-    // Checked against the frame, a candidate's residual bound is the larger
-    // of the options' and the check's (`Int8Model::locate`).
-    let checked = scene_options
-        .verify
-        .filter(|_| frame.intrinsics().is_some());
-    let bound = checked.map_or(loaded.options.max_residual, |s| {
-        s.max_residual.max(loaded.options.max_residual)
-    });
+    // The bound a checked candidate is judged at (`Int8Model::locate`).
+    let checked = pcrnet_core::locate::checked_bound(frame, &scene_options, &loaded.options);
+    let bound = checked.unwrap_or(loaded.options.max_residual);
     if checked.is_some() {
         say(format!(
             "verdict: the check against the frame, and a relative plane residual of at most {bound:.4}"

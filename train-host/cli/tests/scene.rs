@@ -26,20 +26,25 @@ fn the_generated_frame_gives_the_object_s_pose() {
     let json = dir.join("frame.json");
     assert!(json.is_file());
 
-    let out = pcrnet()
-        .args(["register", "--scene"])
-        .arg(&png)
-        .arg("--intrinsics")
-        .arg(&json)
-        .args(["--up", "z", "--json", "-"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // `register --scene` on the frame with `extra` flags, its JSON result.
+    let register = |extra: &[&std::ffi::OsStr]| -> serde_json::Value {
+        let out = pcrnet()
+            .args(["register", "--scene"])
+            .arg(&png)
+            .arg("--intrinsics")
+            .arg(&json)
+            .args(extra)
+            .args(["--json", "-"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let v = register(&["--up".as_ref(), "z".as_ref()]);
     assert_eq!(v["reliable"], true, "{v}");
     let q: Vec<f64> = v["quaternion_wxyz"]
         .as_array()
@@ -87,22 +92,7 @@ fn the_generated_frame_gives_the_object_s_pose() {
     format::write_blob(ModelKind::Int8, model.payload(), &trailer, &mut with_up).unwrap();
     let blob_path = dir.join("with-up.pcrn");
     std::fs::write(&blob_path, &with_up).unwrap();
-    let out = pcrnet()
-        .args(["register", "--scene"])
-        .arg(&png)
-        .arg("--intrinsics")
-        .arg(&json)
-        .arg("--model")
-        .arg(&blob_path)
-        .args(["--json", "-"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stored: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stored = register(&["--model".as_ref(), blob_path.as_os_str()]);
     assert_eq!(stored["up"], v["up"], "{stored}");
     assert_eq!(stored["quaternion_wxyz"], v["quaternion_wxyz"], "{stored}");
     assert_eq!(stored["reliable"], true, "{stored}");
